@@ -1,0 +1,128 @@
+//! The expensive model being calibrated.
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// Why a model run failed. A failed run is a value: it is journaled and the loop goes on.
+#[derive(Debug, Clone, Error, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum ModelError {
+    /// The run failed (solver diverged, program exited non-zero, ...).
+    #[error("model run failed: {reason}")]
+    Failed {
+        /// What went wrong, in words.
+        reason: String,
+        /// The end of the run's log, when there is one.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        log_tail: Option<String>,
+    },
+    /// The run exceeded its wall-clock limit and was killed.
+    #[error("model run timed out after {seconds} s")]
+    Timeout {
+        /// The limit that was exceeded.
+        seconds: f64,
+        /// The end of the run's log, when there is one.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        log_tail: Option<String>,
+    },
+    /// An output is NaN or infinite.
+    #[error("model output {index} (`{name}`) is not finite: {value}")]
+    NonFinite {
+        /// Output index.
+        index: usize,
+        /// Output name.
+        name: String,
+        /// The value as text (`NaN`, `inf`).
+        value: String,
+    },
+    /// The model returned the wrong number of outputs.
+    #[error("model returned {got} outputs, expected {expected}")]
+    WrongOutputCount {
+        /// Outputs expected.
+        expected: usize,
+        /// Outputs returned.
+        got: usize,
+    },
+    /// The model refused the parameters (e.g. out of its valid range).
+    #[error("model refused the parameters: {0}")]
+    InvalidParams(String),
+}
+
+impl ModelError {
+    /// A [`ModelError::Failed`] without a log.
+    pub fn failed(reason: impl Into<String>) -> Self {
+        ModelError::Failed {
+            reason: reason.into(),
+            log_tail: None,
+        }
+    }
+}
+
+/// What one successful model run returns: one value per output (sensor).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Outputs {
+    /// One value per output, in the order of the observation's outputs.
+    pub values: Vec<f64>,
+    /// Optional per-output spread of the run itself (e.g. the oscillation of a CFD probe),
+    /// kept as the run's noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spread: Option<Vec<f64>>,
+}
+
+impl From<Vec<f64>> for Outputs {
+    fn from(values: Vec<f64>) -> Self {
+        Outputs {
+            values,
+            spread: None,
+        }
+    }
+}
+
+/// An expensive simulation model.
+///
+/// A *scenario* is one operating condition (for a data hall: setpoints, fan speeds and
+/// server powers of one snapshot). Parameters are physical values in the order of the
+/// calibration's [`crate::ParamSpace`].
+pub trait Model: Sync {
+    /// One operating condition.
+    type Scenario: Sync;
+
+    /// A fingerprint of everything that determines the model's answers apart from the
+    /// scenario and the parameters (geometry, grid, solver settings). Journaled runs with
+    /// another fingerprint are never reused.
+    fn fingerprint(&self) -> String;
+
+    /// Runs the model. Failure is a value, never a panic.
+    fn evaluate(
+        &self,
+        scenario: &Self::Scenario,
+        params: &[f64],
+    ) -> std::result::Result<Outputs, ModelError>;
+}
+
+/// Checks a model's answer: the output count and that every value is finite.
+pub fn check_outputs(
+    outputs: Outputs,
+    names: &[String],
+) -> std::result::Result<Outputs, ModelError> {
+    if outputs.values.len() != names.len() {
+        return Err(ModelError::WrongOutputCount {
+            expected: names.len(),
+            got: outputs.values.len(),
+        });
+    }
+    if let Some((index, v)) = outputs
+        .values
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !v.is_finite())
+    {
+        return Err(ModelError::NonFinite {
+            index,
+            name: names[index].clone(),
+            value: v.to_string(),
+        });
+    }
+    Ok(outputs)
+}

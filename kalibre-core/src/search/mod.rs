@@ -1,0 +1,59 @@
+//! Step 2 of the loop: search the parameters on the surrogate against the measurements.
+//!
+//! Searchers minimise an [`Objective`] over the unit box `[0, 1]^d` and never leave it.
+//! They are argmin solvers ([`DifferentialEvolution`], [`Adam`]) driven by argmin's
+//! `Executor`; [`Hybrid`] runs differential evolution, then Adam from its best point,
+//! as the paper does.
+
+mod objective;
+
+pub use objective::{Regularizer, SurrogateObjective};
+
+use serde::{Deserialize, Serialize};
+
+use crate::Result;
+
+/// A cost over the unit box, with its gradient. Implementations must be deterministic.
+pub trait Objective: Sync {
+    /// Number of coordinates.
+    fn dim(&self) -> usize;
+    /// Cost at a point of the unit box.
+    fn cost(&self, x_unit: &[f64]) -> f64;
+    /// Cost and gradient (with respect to unit coordinates) at a point of the unit box.
+    fn cost_and_gradient(&self, x_unit: &[f64]) -> (f64, Vec<f64>);
+}
+
+/// One point of a search's trace, for convergence plots (the paper's Fig. 8).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TracePoint {
+    /// Searcher iteration (DE generation or Adam step), counted across phases.
+    pub iteration: usize,
+    /// `de` or `adam`.
+    pub phase: String,
+    /// Best cost so far.
+    pub best_cost: f64,
+    /// Cost at this iteration (DE: population mean; Adam: current point).
+    pub cost: f64,
+    /// Gradient norm at this iteration, when the phase computes it.
+    pub grad_norm: Option<f64>,
+}
+
+/// What a search returns.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SearchOutcome {
+    /// The best point found, in the unit box.
+    pub best_unit: Vec<f64>,
+    /// Its cost.
+    pub best_cost: f64,
+    /// Objective evaluations (cost or cost-and-gradient calls).
+    pub evaluations: usize,
+    /// Per-iteration trace.
+    pub trace: Vec<TracePoint>,
+}
+
+/// Minimises an objective in the unit box, starting from (or seeded with) `start`.
+pub trait Searcher: Sync {
+    /// Runs the search. Deterministic for a given `seed`, at any thread count.
+    fn search(&self, objective: &dyn Objective, start: &[f64], seed: u64)
+        -> Result<SearchOutcome>;
+}

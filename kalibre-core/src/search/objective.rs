@@ -1,0 +1,116 @@
+//! The paper's search loss: surrogate against measurements, plus an optional regulariser.
+
+use crate::{Observations, ParamSpace, Surrogate};
+
+use super::Objective;
+
+/// A domain prior on physical parameters (e.g. the paper's penalty on server temperature
+/// rises outside a plausible range).
+pub trait Regularizer: Sync {
+    /// Value and gradient with respect to physical parameters.
+    fn value_and_gradient(&self, params: &[f64]) -> (f64, Vec<f64>);
+}
+
+/// Mean squared error of the surrogate against every measured value of every snapshot,
+/// plus `weight * regularizer`, as a function of unit-box coordinates.
+pub struct SurrogateObjective<'a, Su: Surrogate> {
+    surrogate: &'a Su,
+    observations: &'a Observations<Su::Scenario>,
+    space: &'a ParamSpace,
+    regularizer: Option<(&'a dyn Regularizer, f64)>,
+    measured_count: f64,
+}
+
+impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
+    /// The data term only.
+    pub fn new(
+        surrogate: &'a Su,
+        observations: &'a Observations<Su::Scenario>,
+        space: &'a ParamSpace,
+    ) -> Self {
+        let measured_count = observations.measured_count().max(1) as f64;
+        SurrogateObjective {
+            surrogate,
+            observations,
+            space,
+            regularizer: None,
+            measured_count,
+        }
+    }
+
+    /// Adds `weight * regularizer(params)`.
+    pub fn with_regularizer(mut self, regularizer: &'a dyn Regularizer, weight: f64) -> Self {
+        self.regularizer = Some((regularizer, weight));
+        self
+    }
+
+    /// The data term (mean squared error) alone, at physical parameters.
+    pub fn data_mse(&self, params: &[f64]) -> f64 {
+        let mut sum = 0.0;
+        for snap in self.observations.snapshots() {
+            let pred = self.surrogate.predict(&snap.scenario, params);
+            for (p, m) in pred.iter().zip(&snap.measured) {
+                if let Some(m) = m {
+                    sum += (p - m) * (p - m);
+                }
+            }
+        }
+        sum / self.measured_count
+    }
+}
+
+impl<Su: Surrogate> Objective for SurrogateObjective<'_, Su>
+where
+    Su: Sync,
+    Su::Scenario: Sync,
+{
+    fn dim(&self) -> usize {
+        self.space.dim()
+    }
+
+    fn cost(&self, x_unit: &[f64]) -> f64 {
+        let params = match self.space.from_unit(x_unit) {
+            Ok(p) => p,
+            Err(_) => return f64::INFINITY,
+        };
+        let mut cost = self.data_mse(&params);
+        if let Some((reg, w)) = self.regularizer {
+            cost += w * reg.value_and_gradient(&params).0;
+        }
+        cost
+    }
+
+    fn cost_and_gradient(&self, x_unit: &[f64]) -> (f64, Vec<f64>) {
+        let params = match self.space.from_unit(x_unit) {
+            Ok(p) => p,
+            Err(_) => return (f64::INFINITY, vec![0.0; x_unit.len()]),
+        };
+        let mut cost = 0.0;
+        let mut grad_phys = vec![0.0; params.len()];
+        for snap in self.observations.snapshots() {
+            let pred = self.surrogate.predict(&snap.scenario, &params);
+            let mut cotangent = vec![0.0; pred.len()];
+            for ((c, p), m) in cotangent.iter_mut().zip(&pred).zip(&snap.measured) {
+                if let Some(m) = m {
+                    cost += (p - m) * (p - m);
+                    *c = 2.0 * (p - m) / self.measured_count;
+                }
+            }
+            let g = self.surrogate.vjp(&snap.scenario, &params, &cotangent);
+            for (acc, gi) in grad_phys.iter_mut().zip(g) {
+                *acc += gi;
+            }
+        }
+        cost /= self.measured_count;
+        if let Some((reg, w)) = self.regularizer {
+            let (v, g) = reg.value_and_gradient(&params);
+            cost += w * v;
+            for (acc, gi) in grad_phys.iter_mut().zip(g) {
+                *acc += w * gi;
+            }
+        }
+        let scale = self.space.dphys_dunit(x_unit);
+        let grad_unit = grad_phys.iter().zip(scale).map(|(g, s)| g * s).collect();
+        (cost, grad_unit)
+    }
+}

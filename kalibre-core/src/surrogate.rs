@@ -1,0 +1,55 @@
+//! The cheap surrogate trained on model runs (step 1 of the loop).
+
+use serde::{Deserialize, Serialize};
+
+use crate::Result;
+
+/// One training sample: the outputs of a model run (or an augmented copy of one).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Index of the snapshot (scenario) in [`TrainingSet::scenarios`].
+    pub snapshot: usize,
+    /// Physical parameter values.
+    pub params: Vec<f64>,
+    /// Model outputs.
+    pub outputs: Vec<f64>,
+}
+
+/// Everything a surrogate is fitted on: the scenarios and the samples that refer to them.
+#[derive(Debug, Clone, Copy)]
+pub struct TrainingSet<'a, S> {
+    /// Scenarios by snapshot index.
+    pub scenarios: &'a [S],
+    /// Samples; `sample.snapshot` indexes `scenarios`.
+    pub samples: &'a [Sample],
+}
+
+/// What a fit reports.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct FitSummary {
+    /// Mean squared error on the training samples after fitting.
+    pub train_mse: f64,
+    /// Epochs (or iterations) run.
+    pub epochs: usize,
+}
+
+/// A cheap, differentiable stand-in for the model.
+///
+/// `predict` and `vjp` take physical parameter values. `vjp` is the vector-Jacobian
+/// product: for a cotangent `g` over outputs it returns `d(sum_k g_k * out_k) / d params`,
+/// which is what gradient searchers need.
+pub trait Surrogate {
+    /// The scenario type, shared with the [`crate::Model`].
+    type Scenario;
+
+    /// Trains on all samples. Deterministic for a given `seed`.
+    fn fit(&mut self, data: TrainingSet<'_, Self::Scenario>, seed: u64) -> Result<FitSummary>;
+
+    /// Predicted outputs at a scenario and physical parameters.
+    fn predict(&self, scenario: &Self::Scenario, params: &[f64]) -> Vec<f64>;
+
+    /// The vector-Jacobian product at a scenario and physical parameters: for a cotangent
+    /// `g` (one value per output) the gradient `d(sum_k g_k * out_k) / d params`, one value
+    /// per parameter.
+    fn vjp(&self, scenario: &Self::Scenario, params: &[f64], cotangent: &[f64]) -> Vec<f64>;
+}

@@ -1,0 +1,72 @@
+//! The crate's error type.
+
+use thiserror::Error;
+
+/// Errors of the data-hall domain.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A file breaks its format: names the file, the field (JSON pointer, or CSV line and
+    /// column) and what was expected.
+    #[error("{file}: {field}: {message}")]
+    Format {
+        /// The file (path or name).
+        file: String,
+        /// JSON pointer (`/racks/3/servers/0/u`) or CSV position (`line 12, column value`).
+        field: String,
+        /// What is wrong and what was expected.
+        message: String,
+    },
+    /// An I/O error with the file it concerns.
+    #[error("{path}: {source}")]
+    Io {
+        /// File or directory concerned.
+        path: String,
+        /// Underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An effect entry or effect parameter is invalid.
+    #[error("effect `{kind}`: {message}")]
+    Effect {
+        /// Effect kind.
+        kind: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The simulator could not solve (no convergence, inconsistent setup).
+    #[error("simulator: {0}")]
+    Simulation(String),
+    /// Inputs that do not fit together (lengths, ids).
+    #[error("{0}")]
+    Mismatch(String),
+    /// An error of the calibration core.
+    #[error(transparent)]
+    Core(#[from] kalibre_core::Error),
+}
+
+impl Error {
+    /// Shorthand for [`Error::Format`].
+    pub fn format(
+        file: impl Into<String>,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Format {
+            file: file.into(),
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+
+    /// Shorthand for an [`Error::Io`] naming its path.
+    pub fn io(path: impl AsRef<std::path::Path>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.as_ref().display().to_string(),
+            source,
+        }
+    }
+}
+
+/// The crate's result type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

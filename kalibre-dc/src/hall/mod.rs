@@ -1,0 +1,9 @@
+//! The hall: its description (`hall.json`), loading with every rule of `formats.md`
+//! enforced, and the geometry the simulator, the surrogate and the generators share.
+
+mod geometry;
+mod read;
+mod types;
+
+pub use geometry::{distance, face_centre, Aabb, ServerRef};
+pub use types::*;
