@@ -9,8 +9,12 @@
 pub mod effects;
 mod error;
 pub mod hall;
+mod model;
 mod params;
+pub mod sim;
 pub mod snapshots;
+pub mod surrogate;
+pub mod synth;
 
 pub use error::{Error, Result};
 pub use params::ParamLayout;

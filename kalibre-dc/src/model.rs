@@ -1,0 +1,1 @@
+//! The built-in simulator as a kalibre [`kalibre_core::Model`].

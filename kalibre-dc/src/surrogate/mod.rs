@@ -1,0 +1,1 @@
+//! The thermal graph surrogate of the Kalibre paper, and its search regulariser.

@@ -1,0 +1,1 @@
+//! Synthetic halls with a hidden truth: presets `demo`, `hall-a`, `hall-b`.
