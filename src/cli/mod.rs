@@ -1,0 +1,43 @@
+//! Subcommands of the `kalibre` tool.
+
+mod error;
+mod simulate;
+mod synth;
+
+use clap::{Parser, Subcommand};
+
+pub use error::{io_err, CliError, CliResult};
+
+/// kalibre: calibrate a slow simulation model against measurements, with a physics-aware
+/// surrogate doing the searching.
+#[derive(Debug, Parser)]
+#[command(name = "kalibre", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Generate a synthetic hall with a hidden truth (hall.json, snapshots.csv, truth.json).
+    Synth(synth::SynthArgs),
+    /// Run the built-in simulator on a hall's snapshots and write the predicted sensor readings.
+    Simulate(simulate::SimulateArgs),
+}
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> CliResult {
+    match cli.command {
+        Command::Synth(a) => synth::run(a),
+        Command::Simulate(a) => simulate::run(a),
+    }
+}
+
+/// Builds the rayon pool for `--threads` (0 = all cores) and runs `f` in it.
+pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> CliResult<T> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| CliError::Run(format!("cannot start {threads} threads: {e}")))?;
+    Ok(pool.install(f))
+}

@@ -1,0 +1,75 @@
+//! `kalibre synth`: synthetic halls with a hidden truth.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use kalibre_dc::synth::{self, Preset, SynthOptions};
+
+use super::{CliError, CliResult};
+
+/// Options of `kalibre synth`.
+#[derive(Debug, Args)]
+pub struct SynthArgs {
+    /// Hall preset: `demo` (~300 servers, 4 CRACs, 24 sensors), `hall-a` or `hall-b`
+    /// (thousands of servers, 8-10 CRACs, 50-70 sensors, hot-aisle containment).
+    #[arg(long, default_value = "demo")]
+    preset: String,
+    /// Seed of every random choice (geometry, true alphas, powers, noise).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    out: PathBuf,
+    /// Hide an effect in the truth: `KIND[:key=value,...]`, e.g. `bypass:fraction=0.1`.
+    /// Repeatable. Kinds: containment_leakage, bypass, crac_supply_offset, rack_recirculation.
+    #[arg(long = "effect", value_name = "KIND[:key=value,...]")]
+    effects: Vec<String>,
+    /// Standard deviation of the Gaussian sensor noise (C).
+    #[arg(long = "noise-c", default_value_t = 0.2)]
+    noise_c: f64,
+    /// Number of snapshots (operating states varying fan speeds, setpoints and powers).
+    #[arg(long, default_value_t = 3)]
+    snapshots: usize,
+}
+
+/// Runs `kalibre synth`.
+pub fn run(args: SynthArgs) -> CliResult {
+    let preset: Preset = args
+        .preset
+        .parse()
+        .map_err(|e| CliError::Input(format!("--preset: {e}")))?;
+    if !(args.noise_c.is_finite() && args.noise_c >= 0.0) {
+        return Err(CliError::Input(format!(
+            "--noise-c: expected a finite value >= 0, got {}",
+            args.noise_c
+        )));
+    }
+    if args.snapshots == 0 {
+        return Err(CliError::Input("--snapshots: expected at least 1".into()));
+    }
+    let effects = args
+        .effects
+        .iter()
+        .map(|e| synth::parse_effect_arg(e))
+        .collect::<Result<Vec<_>, _>>()?;
+    let options = SynthOptions {
+        preset,
+        seed: args.seed,
+        effects,
+        noise_c: args.noise_c,
+        snapshots: args.snapshots,
+        ..SynthOptions::default()
+    };
+    let out = synth::generate(&options)?;
+    synth::write_dir(&args.out, &out)?;
+    println!(
+        "wrote {}: hall `{}` ({} servers, {} CRACs, {} sensors), {} snapshots, truth.json",
+        args.out.display(),
+        out.hall.name,
+        out.hall.server_count(),
+        out.hall.cracs.len(),
+        out.hall.sensors.len(),
+        out.snapshots.len()
+    );
+    Ok(())
+}
