@@ -36,11 +36,16 @@ impl<S> Observations<S> {
     /// every measured value finite, every snapshot with at least one measurement.
     pub fn new(outputs: Vec<OutputInfo>, snapshots: Vec<Snapshot<S>>) -> Result<Self> {
         if snapshots.is_empty() {
-            return Err(Error::Mismatch("observations need at least one snapshot".into()));
+            return Err(Error::Mismatch(
+                "observations need at least one snapshot".into(),
+            ));
         }
         for (i, s) in snapshots.iter().enumerate() {
             if snapshots[..i].iter().any(|o| o.label == s.label) {
-                return Err(Error::Mismatch(format!("duplicate snapshot label `{}`", s.label)));
+                return Err(Error::Mismatch(format!(
+                    "duplicate snapshot label `{}`",
+                    s.label
+                )));
             }
             if s.measured.len() != outputs.len() {
                 return Err(Error::Mismatch(format!(

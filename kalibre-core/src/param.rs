@@ -54,7 +54,9 @@ impl Param {
             )));
         }
         if lower > upper {
-            return Err(bad(format!("inverted bounds: lower {lower} > upper {upper}")));
+            return Err(bad(format!(
+                "inverted bounds: lower {lower} > upper {upper}"
+            )));
         }
         if initial < lower || initial > upper {
             return Err(bad(format!(
@@ -62,7 +64,9 @@ impl Param {
             )));
         }
         if scale == Scale::Log && lower <= 0.0 {
-            return Err(bad(format!("log scale needs a positive lower bound, got {lower}")));
+            return Err(bad(format!(
+                "log scale needs a positive lower bound, got {lower}"
+            )));
         }
         Ok(Param {
             name,

@@ -106,7 +106,10 @@ impl Validator for ErrorMetrics {
                     acc.add(r);
                     overall.add(r);
                     per_output[k].add(r);
-                    per_group.entry(outputs[k].group.clone()).or_default().add(r);
+                    per_group
+                        .entry(outputs[k].group.clone())
+                        .or_default()
+                        .add(r);
                 }
             }
             per_snapshot.push((snap.label.clone(), acc.stats()));

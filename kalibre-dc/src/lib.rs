@@ -17,4 +17,5 @@ pub mod surrogate;
 pub mod synth;
 
 pub use error::{Error, Result};
+pub use model::HallModel;
 pub use params::ParamLayout;

@@ -1,1 +1,138 @@
 //! The built-in simulator as a kalibre [`kalibre_core::Model`].
+
+use kalibre_core::{check_outputs, Model, ModelError, Outputs};
+
+use crate::effects::{Effect, EffectRegistry};
+use crate::hall::Hall;
+use crate::sim::{SimConfig, Simulator, Solution};
+use crate::snapshots::OperatingState;
+use crate::{Error, ParamLayout, Result};
+
+/// A hall's thermal model: the simulator, the hall's effects and the parameter layout.
+///
+/// Parameters (in [`Self::layout`] order) are alpha per type or server, then each
+/// effect's parameters; outputs are the sensor temperatures in hall order.
+#[derive(Debug)]
+pub struct HallModel {
+    sim: Simulator,
+    effects: Vec<Box<dyn Effect>>,
+    layout: ParamLayout,
+    fingerprint: String,
+    sensor_names: Vec<String>,
+}
+
+impl HallModel {
+    /// The model of `hall` with the built-in effect kinds for `hall.effects`.
+    pub fn new(hall: &Hall, config: SimConfig) -> Result<Self> {
+        Self::with_registry(hall, config, &EffectRegistry::builtin())
+    }
+
+    /// The model with `hall.effects` built by `registry` (for downstream effect kinds).
+    pub fn with_registry(
+        hall: &Hall,
+        config: SimConfig,
+        registry: &EffectRegistry,
+    ) -> Result<Self> {
+        let effects = registry.build_all(hall)?;
+        Self::with_effects(hall, config, effects)
+    }
+
+    /// The model with explicit effects (in place of `hall.effects`).
+    pub fn with_effects(
+        hall: &Hall,
+        config: SimConfig,
+        effects: Vec<Box<dyn Effect>>,
+    ) -> Result<Self> {
+        let layout = ParamLayout::new(hall, &effects)?;
+        let hall_json =
+            serde_json::to_string(hall).map_err(|e| Error::Mismatch(format!("hall: {e}")))?;
+        let config_json =
+            serde_json::to_string(&config).map_err(|e| Error::Mismatch(format!("config: {e}")))?;
+        let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
+        let effects_json =
+            serde_json::to_string(&specs).map_err(|e| Error::Mismatch(format!("effects: {e}")))?;
+        let fingerprint = format!(
+            "kalibre-dc-sim/1:{:016x}",
+            fnv1a(&[
+                hall_json.as_bytes(),
+                config_json.as_bytes(),
+                effects_json.as_bytes()
+            ])
+        );
+        let sim = Simulator::new(hall, config)?;
+        let sensor_names = hall.sensors.iter().map(|s| s.id.clone()).collect();
+        Ok(HallModel {
+            sim,
+            effects,
+            layout,
+            fingerprint,
+            sensor_names,
+        })
+    }
+
+    /// Where each parameter sits.
+    pub fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+
+    /// The simulator.
+    pub fn simulator(&self) -> &Simulator {
+        &self.sim
+    }
+
+    /// The effects, in layout order.
+    pub fn effects(&self) -> &[Box<dyn Effect>] {
+        &self.effects
+    }
+
+    /// Solves one state at `params` (layout order) and returns every field (for VTK and
+    /// reports).
+    pub fn solve(&self, state: &OperatingState, params: &[f64]) -> Result<Solution> {
+        self.layout.space().check_physical(params)?;
+        let alpha = self.layout.alpha_per_server(params);
+        let values: Vec<&[f64]> = (0..self.effects.len())
+            .map(|e| self.layout.effect_values(params, e))
+            .collect();
+        let effects: Vec<(&dyn Effect, &[f64])> = self
+            .effects
+            .iter()
+            .zip(values)
+            .map(|(e, v)| (e.as_ref(), v))
+            .collect();
+        self.sim.solve(state, &alpha, &effects)
+    }
+}
+
+impl Model for HallModel {
+    type Scenario = OperatingState;
+
+    fn fingerprint(&self) -> String {
+        self.fingerprint.clone()
+    }
+
+    fn evaluate(
+        &self,
+        scenario: &OperatingState,
+        params: &[f64],
+    ) -> std::result::Result<Outputs, ModelError> {
+        if let Err(e) = self.layout.space().check_physical(params) {
+            return Err(ModelError::InvalidParams(e.to_string()));
+        }
+        let sol = self
+            .solve(scenario, params)
+            .map_err(|e| ModelError::failed(e.to_string()))?;
+        check_outputs(Outputs::from(sol.sensor_c().to_vec()), &self.sensor_names)
+    }
+}
+
+/// 64-bit FNV-1a: a hash that is stable across builds and platforms.
+fn fnv1a(parts: &[&[u8]]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for p in parts {
+        for b in p.iter().chain(b"\x00") {
+            h ^= *b as u64;
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    h
+}

@@ -5,9 +5,21 @@
 //! `Executor`; [`Hybrid`] runs differential evolution, then Adam from its best point,
 //! as the paper does.
 
+mod adam;
+mod de;
+mod hybrid;
+mod kernels;
 mod objective;
+mod problem;
 
+pub use adam::{Adam, AdamBuilder, AdamSolver};
+pub use de::{
+    DeSolver, DifferentialEvolution, DifferentialEvolutionBuilder, PopulationEval,
+    AUTO_PARALLEL_MIN_EVAL_US,
+};
+pub use hybrid::{Hybrid, HYBRID_DE_GIVE_UP_AFTER};
 pub use objective::{Regularizer, SurrogateObjective};
+pub use problem::{BoxState, UnitBoxProblem};
 
 use serde::{Deserialize, Serialize};
 
@@ -54,6 +66,5 @@ pub struct SearchOutcome {
 /// Minimises an objective in the unit box, starting from (or seeded with) `start`.
 pub trait Searcher: Sync {
     /// Runs the search. Deterministic for a given `seed`, at any thread count.
-    fn search(&self, objective: &dyn Objective, start: &[f64], seed: u64)
-        -> Result<SearchOutcome>;
+    fn search(&self, objective: &dyn Objective, start: &[f64], seed: u64) -> Result<SearchOutcome>;
 }

@@ -1,12 +1,45 @@
 //! Physical effects a model may lack, each with its own calibrated parameters.
 //!
-//! An [`Effect`] names its parameters and changes the simulation. `hall.json` `effects`
-//! turns effects on; [`from_spec`] builds one from an entry.
+//! An [`Effect`] names its parameters (with bounds) and changes a simulator run by adding
+//! entries to a [`SimMods`]. `hall.json` `effects` turns effects on; an
+//! [`EffectRegistry`] builds them from their entries ([`from_spec`] uses the built-in
+//! registry). A downstream crate adds a kind by implementing [`Effect`] and
+//! [`EffectFactory`] and registering the factory.
+//!
+//! Built-in kinds (fields documented in each module):
+//! [`containment_leakage`](leakage), [`bypass`](bypass), [`crac_supply_offset`](offset),
+//! [`rack_recirculation`](recirculation).
+//!
+//! Every parameter field takes the same shape: `"<name>": initial value` (optional, with
+//! a default) and `"<name>_bounds": [lower, upper]` (optional, with default bounds that
+//! the given bounds must lie within).
+
+mod bypass;
+mod fields;
+mod leakage;
+mod offset;
+mod recirculation;
+
+pub use bypass::{Bypass, BypassFactory};
+pub use fields::Fields;
+pub use leakage::{ContainmentLeakage, ContainmentLeakageFactory};
+pub use offset::{CracSupplyOffset, CracSupplyOffsetFactory};
+pub use recirculation::{RackRecirculationEffect, RackRecirculationFactory};
 
 use kalibre_core::Param;
 
 use crate::hall::{EffectSpec, Hall};
-use crate::Result;
+use crate::sim::SimMods;
+use crate::{Error, Result};
+
+/// How a surrogate represents an effect's parameters (completed with diagnosis).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SurrogateTerm {
+    /// A linear term in the effect's parameters, learned from model runs that vary them
+    /// (the default for every kind until a knowledge-based block exists).
+    LearnedLinear,
+}
 
 /// A physical effect added to the model.
 pub trait Effect: Send + Sync + std::fmt::Debug {
@@ -19,12 +52,151 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
 
     /// The `hall.json` `effects` entry that recreates this effect.
     fn to_spec(&self) -> EffectSpec;
+
+    /// Adds this effect's modifications of one simulator run, for parameter values in the
+    /// order of [`Self::parameters`].
+    fn modify(&self, values: &[f64], hall: &Hall, mods: &mut SimMods) -> Result<()>;
+
+    /// The surrogate's term for this effect (hook for diagnosis, issue 6).
+    fn surrogate_term(&self) -> SurrogateTerm {
+        SurrogateTerm::LearnedLinear
+    }
 }
 
-/// Builds an effect from its `hall.json` entry, checking its fields against the hall.
-pub fn from_spec(spec: &EffectSpec, _hall: &Hall) -> Result<Box<dyn Effect>> {
-    Err(crate::Error::Effect {
-        kind: spec.kind.clone(),
-        message: "unknown effect kind (known: containment_leakage, bypass, crac_supply_offset, rack_recirculation)".into(),
-    })
+/// Builds effects of one kind from `hall.json` entries.
+pub trait EffectFactory: Send + Sync {
+    /// The kind this factory builds.
+    fn kind(&self) -> &str;
+
+    /// Builds an effect from its entry, checking every field against the hall.
+    fn build(&self, spec: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>>;
+
+    /// Candidate placements of this kind in a hall, as `effects` entries: the hypotheses
+    /// a diagnosis tries (e.g. one per CRAC, per rack, per containment side). Hook for
+    /// issue 6; the default has none.
+    fn candidates(&self, _hall: &Hall) -> Vec<EffectSpec> {
+        Vec::new()
+    }
+}
+
+/// The set of known effect kinds.
+pub struct EffectRegistry {
+    factories: Vec<Box<dyn EffectFactory>>,
+}
+
+impl std::fmt::Debug for EffectRegistry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EffectRegistry")
+            .field("kinds", &self.kinds())
+            .finish()
+    }
+}
+
+impl Default for EffectRegistry {
+    fn default() -> Self {
+        Self::builtin()
+    }
+}
+
+impl EffectRegistry {
+    /// A registry with no kind.
+    pub fn empty() -> Self {
+        EffectRegistry {
+            factories: Vec::new(),
+        }
+    }
+
+    /// The four built-in kinds.
+    pub fn builtin() -> Self {
+        EffectRegistry {
+            factories: vec![
+                Box::new(ContainmentLeakageFactory),
+                Box::new(BypassFactory),
+                Box::new(CracSupplyOffsetFactory),
+                Box::new(RackRecirculationFactory),
+            ],
+        }
+    }
+
+    /// Adds a kind; a kind already known is an error.
+    pub fn register(&mut self, factory: Box<dyn EffectFactory>) -> Result<()> {
+        if self.get(factory.kind()).is_some() {
+            return Err(Error::Effect {
+                kind: factory.kind().to_string(),
+                message: "kind is already registered".into(),
+            });
+        }
+        self.factories.push(factory);
+        Ok(())
+    }
+
+    /// Builder form of [`Self::register`].
+    pub fn with(mut self, factory: Box<dyn EffectFactory>) -> Result<Self> {
+        self.register(factory)?;
+        Ok(self)
+    }
+
+    /// Known kinds, in registration order.
+    pub fn kinds(&self) -> Vec<&str> {
+        self.factories.iter().map(|f| f.kind()).collect()
+    }
+
+    /// The factory of a kind.
+    pub fn get(&self, kind: &str) -> Option<&dyn EffectFactory> {
+        self.factories
+            .iter()
+            .find(|f| f.kind() == kind)
+            .map(|f| f.as_ref())
+    }
+
+    /// Builds an effect from its entry.
+    pub fn build(&self, spec: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
+        match self.get(&spec.kind) {
+            Some(f) => f.build(spec, hall),
+            None => Err(Error::Effect {
+                kind: spec.kind.clone(),
+                message: format!("unknown effect kind (known: {})", self.kinds().join(", ")),
+            }),
+        }
+    }
+
+    /// Builds every entry of `hall.effects`, naming the entry index on error.
+    pub fn build_all(&self, hall: &Hall) -> Result<Vec<Box<dyn Effect>>> {
+        hall.effects
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                self.build(s, hall).map_err(|e| match e {
+                    Error::Effect { kind, message } => Error::Effect {
+                        kind,
+                        message: format!("effects/{i}: {message}"),
+                    },
+                    other => other,
+                })
+            })
+            .collect()
+    }
+}
+
+/// Builds an effect from its `hall.json` entry with the built-in registry, checking its
+/// fields against the hall.
+pub fn from_spec(spec: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
+    EffectRegistry::builtin().build(spec, hall)
+}
+
+/// Checks the number of parameter values an effect receives.
+pub(crate) fn check_values(kind: &str, values: &[f64], want: usize) -> Result<()> {
+    if values.len() != want {
+        return Err(Error::Effect {
+            kind: kind.to_string(),
+            message: format!("expected {want} parameter values, got {}", values.len()),
+        });
+    }
+    if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+        return Err(Error::Effect {
+            kind: kind.to_string(),
+            message: format!("parameter value {v} is not finite"),
+        });
+    }
+    Ok(())
 }

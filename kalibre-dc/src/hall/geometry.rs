@@ -76,7 +76,11 @@ impl ServerRef<'_> {
         let z1 = z0 + self.server.height_u as f64 * unit_h;
         Aabb {
             min: [r.position_m[0], r.position_m[1], z0],
-            max: [r.position_m[0] + r.size_m[0], r.position_m[1] + r.size_m[1], z1],
+            max: [
+                r.position_m[0] + r.size_m[0],
+                r.position_m[1] + r.size_m[1],
+                z1,
+            ],
         }
     }
 

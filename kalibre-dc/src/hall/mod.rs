@@ -4,6 +4,9 @@
 mod geometry;
 mod read;
 mod types;
+mod validate;
+mod write;
 
 pub use geometry::{distance, face_centre, Aabb, ServerRef};
 pub use types::*;
+pub use validate::GEOMETRY_TOL_M;

@@ -1,0 +1,201 @@
+//! Reading `hall.json`: JSON syntax and structure with the JSON pointer of the first problem,
+//! then every rule of `formats.md` section 1 ([`Hall::validate`]).
+
+use std::path::Path;
+
+use serde::Deserialize;
+use serde_path_to_error::Segment;
+
+use super::types::{Hall, HALL_SCHEMA};
+use crate::{Error, Result};
+
+/// Just the schema tag: read first so that a file of another schema (or version) is
+/// reported as such, not as a list of unknown fields.
+#[derive(Deserialize)]
+struct SchemaTag {
+    schema: Option<serde_json::Value>,
+}
+
+impl Hall {
+    /// Parses `hall.json` text and checks every rule of the format; `file` names the source
+    /// in errors.
+    pub fn from_json_str(text: &str, file: &str) -> Result<Hall> {
+        check_schema_tag(text, file)?;
+        let mut de = serde_json::Deserializer::from_str(text);
+        let hall: Hall = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let pointer = json_pointer(e.path());
+            let inner = e.into_inner();
+            structural_error(text, file, pointer, &inner)
+        })?;
+        de.end()
+            .map_err(|e| Error::format(file, "", format!("expected the end of the file: {e}")))?;
+        hall.validate(file)?;
+        Ok(hall)
+    }
+
+    /// Like [`Hall::from_json_str`] for raw bytes, which must be UTF-8.
+    pub fn from_json_bytes(bytes: &[u8], file: &str) -> Result<Hall> {
+        let text = utf8(bytes, file)?;
+        Hall::from_json_str(text, file)
+    }
+
+    /// Reads and checks a `hall.json` file.
+    pub fn load(path: &Path) -> Result<Hall> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Hall::from_json_bytes(&bytes, &path.display().to_string())
+    }
+}
+
+/// The text of `bytes`, or an error naming the line of the first byte that is not UTF-8.
+pub(crate) fn utf8<'a>(bytes: &'a [u8], file: &str) -> Result<&'a str> {
+    std::str::from_utf8(bytes).map_err(|e| {
+        let good = &bytes[..e.valid_up_to()];
+        let line = good.iter().filter(|&&b| b == b'\n').count() + 1;
+        let column = good.len() - good.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1) + 1;
+        Error::format(
+            file,
+            format!("line {line}"),
+            format!(
+                "expected UTF-8 text; invalid byte at column {column} (byte offset {})",
+                e.valid_up_to()
+            ),
+        )
+    })
+}
+
+fn check_schema_tag(text: &str, file: &str) -> Result<()> {
+    // A syntax error here is left to the full parse, which reports it with its path.
+    let Ok(tag) = serde_json::from_str::<SchemaTag>(text) else {
+        return Ok(());
+    };
+    match tag.schema {
+        Some(serde_json::Value::String(s)) if s == HALL_SCHEMA => Ok(()),
+        Some(other) => Err(Error::format(
+            file,
+            "/schema",
+            format!("expected \"{HALL_SCHEMA}\", found {other}"),
+        )),
+        None => Err(Error::format(
+            file,
+            "/schema",
+            format!("missing field `schema`; expected \"{HALL_SCHEMA}\""),
+        )),
+    }
+}
+
+/// Maps a serde error to [`Error::Format`]: a missing field gets the pointer of the field
+/// itself, so that the pointer says where to add it.
+fn structural_error(
+    text_in: &str,
+    file: &str,
+    mut pointer: String,
+    e: &serde_json::Error,
+) -> Error {
+    let text = e.to_string();
+    if e.classify() == serde_json::error::Category::Data {
+        if let Some(name) = text
+            .strip_prefix("missing field `")
+            .and_then(|rest| rest.split('`').next())
+        {
+            pointer.push('/');
+            pointer.push_str(&escape_pointer_token(name));
+        }
+        return Error::format(file, pointer, text);
+    }
+    let hint = if starts_non_finite(text_in, e.line(), e.column()) {
+        "; numbers must be finite (NaN and Infinity are not JSON)"
+    } else {
+        ""
+    };
+    Error::format(file, pointer, format!("invalid JSON: {text}{hint}"))
+}
+
+/// True when the text at a serde_json error position (1-based line and column) spells a
+/// non-finite number, which some writers emit.
+fn starts_non_finite(text: &str, line: usize, column: usize) -> bool {
+    let at = text
+        .lines()
+        .nth(line.saturating_sub(1))
+        .and_then(|l| l.get(column.saturating_sub(1)..))
+        .unwrap_or("");
+    let at = at.strip_prefix('-').unwrap_or(at);
+    ["NaN", "nan", "Infinity", "inf"]
+        .iter()
+        .any(|w| at.starts_with(w))
+}
+
+/// RFC 6901 JSON pointer of a serde path (`/racks/3/servers/0/u`).
+pub(crate) fn json_pointer(path: &serde_path_to_error::Path) -> String {
+    let mut out = String::new();
+    for segment in path {
+        match segment {
+            Segment::Seq { index } => {
+                out.push('/');
+                out.push_str(&index.to_string());
+            }
+            Segment::Map { key } => {
+                out.push('/');
+                out.push_str(&escape_pointer_token(key));
+            }
+            // Enum variants and unknown segments are not keys of the document.
+            Segment::Enum { .. } | Segment::Unknown => {}
+        }
+    }
+    out
+}
+
+/// Escapes `~` and `/` in a pointer token (RFC 6901).
+pub(crate) fn escape_pointer_token(token: &str) -> String {
+    token.replace('~', "~0").replace('/', "~1")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pointer_escapes_tilde_and_slash() {
+        assert_eq!(escape_pointer_token("a/b~c"), "a~1b~0c");
+    }
+
+    #[test]
+    fn unknown_field_points_at_the_field() {
+        let err = Hall::from_json_str(
+            r#"{"schema":"kalibre.hall/1","name":"x","room":{"size_m":[1,1,1],"colour":1}}"#,
+            "h.json",
+        )
+        .unwrap_err();
+        match err {
+            Error::Format { field, message, .. } => {
+                assert_eq!(field, "/room/colour");
+                assert!(message.contains("unknown field `colour`"), "{message}");
+            }
+            other => panic!("unexpected error {other:?}"),
+        }
+    }
+
+    #[test]
+    fn missing_field_points_where_it_belongs() {
+        let err = Hall::from_json_str(
+            r#"{"schema":"kalibre.hall/1","name":"x","room":{}}"#,
+            "h.json",
+        )
+        .unwrap_err();
+        match err {
+            Error::Format { field, message, .. } => {
+                assert_eq!(field, "/room/size_m");
+                assert!(message.contains("missing field"), "{message}");
+            }
+            other => panic!("unexpected error {other:?}"),
+        }
+    }
+
+    #[test]
+    fn utf8_error_names_the_line() {
+        let err = utf8(b"{\n\"a\": \"\xff\"}", "h.json").unwrap_err();
+        match err {
+            Error::Format { field, .. } => assert_eq!(field, "line 2"),
+            other => panic!("unexpected error {other:?}"),
+        }
+    }
+}

@@ -1,1 +1,120 @@
-//! The built-in thermal simulator (reduced-order 3-D flow and heat on a structured grid).
+//! The built-in thermal simulator: a reduced-order 3-D model of a data hall on a
+//! structured grid.
+//!
+//! * **Air** follows Darcy / potential flow: `div(g grad p) = sources` with conservative
+//!   face fluxes. Tiles (or CRAC front faces) inject the CRAC flow (fan speed x rated
+//!   flow; tiles share it by area x open fraction); ceiling returns are fixed-pressure
+//!   outlets (without returns, CRAC tops take each CRAC's flow back); each server takes
+//!   `Q = alpha * P * 4.71947e-4` m3/s from the cells at its intake face and releases it
+//!   at its exhaust face. Racks, CRACs and containment panels are walls. Recirculation and
+//!   bypass follow from mass balance.
+//! * **Heat** is steady first-order upwind advection-diffusion on those fluxes with an
+//!   effective turbulent diffusivity; supply enters at setpoint (+ effect offsets); each
+//!   server's exhaust is its flow-weighted mean intake plus `P / (rho cp Q)`, coupled
+//!   inside the linear operator. Sensors read trilinear interpolation of cell centres.
+//! * The grid topology is built once in [`Simulator::new`]; each [`Simulator::solve`]
+//!   assembles sources and coefficients and runs Jacobi-preconditioned CG (pressure) and
+//!   BiCGSTAB (temperature), matrix-free, bit-identical at any thread count.
+//!
+//! Effects ([`crate::effects::Effect`]) change a run through [`SimMods`].
+
+mod config;
+mod flow;
+mod grid;
+mod heat;
+mod linalg;
+mod mods;
+mod run;
+mod solution;
+mod topology;
+mod vtk;
+
+pub use config::SimConfig;
+pub use grid::Grid;
+pub use linalg::SolveStats;
+pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
+pub use solution::Solution;
+pub use vtk::write_vtk;
+
+use crate::effects::Effect;
+use crate::hall::Hall;
+use crate::snapshots::OperatingState;
+use crate::Result;
+
+/// One cfm in m3/s.
+pub const M3_S_PER_CFM: f64 = 4.71947e-4;
+
+/// The simulator for one hall and grid: topology built once, solved per operating state.
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    hall: Hall,
+    config: SimConfig,
+    topo: topology::Topology,
+}
+
+impl Simulator {
+    /// Builds the grid topology of `hall` (checks the configuration first).
+    pub fn new(hall: &Hall, config: SimConfig) -> Result<Self> {
+        config.check()?;
+        let topo = topology::Topology::build(hall, &config)?;
+        Ok(Simulator {
+            hall: hall.clone(),
+            config,
+            topo,
+        })
+    }
+
+    /// The hall.
+    pub fn hall(&self) -> &Hall {
+        &self.hall
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// The grid.
+    pub fn grid(&self) -> &Grid {
+        &self.topo.grid
+    }
+
+    /// Solid (rack, CRAC, enclosed) flag per cell.
+    pub fn solid(&self) -> &[bool] {
+        &self.topo.solid
+    }
+
+    /// Number of fluid (active) cells.
+    pub fn fluid_cells(&self) -> usize {
+        self.topo.solid.iter().filter(|s| !**s).count()
+    }
+
+    /// Solves one operating state with per-server alpha (cfm/W, hall order) and effects
+    /// with their parameter values.
+    pub fn solve(
+        &self,
+        state: &OperatingState,
+        alpha_per_server: &[f64],
+        effects: &[(&dyn Effect, &[f64])],
+    ) -> Result<Solution> {
+        let mut mods = SimMods::new(self.hall.cracs.len());
+        for (e, values) in effects {
+            e.modify(values, &self.hall, &mut mods)?;
+        }
+        self.solve_with_mods(state, alpha_per_server, &mods)
+    }
+
+    /// Solves with explicit modifications (what [`Self::solve`] builds from effects).
+    pub fn solve_with_mods(
+        &self,
+        state: &OperatingState,
+        alpha_per_server: &[f64],
+        mods: &SimMods,
+    ) -> Result<Solution> {
+        run::solve(self, state, alpha_per_server, mods)
+    }
+
+    pub(crate) fn topo(&self) -> &topology::Topology {
+        &self.topo
+    }
+}

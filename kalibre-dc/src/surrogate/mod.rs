@@ -1,1 +1,28 @@
 //! The thermal graph surrogate of the Kalibre paper, and its search regulariser.
+//!
+//! - [`ThermalGraph`]: the knowledge-based neural surrogate (cooling block, heating block,
+//!   adjacency from the hall's geometry), a [`kalibre_core::Surrogate`] over the hall's
+//!   [`crate::ParamLayout`] (alpha per type or per server);
+//! - [`Adjacency`]: the sparse CRAC-to-sensor and server-to-sensor weights;
+//! - training ([`ThermalGraphSettings`]): least-squares start, then full-batch Adam;
+//! - [`TemperatureRisePenalty`]: the paper's power-weighted ReLU prior on server
+//!   temperature rises, with a report of where it binds;
+//! - [`ThermalGraphObjective`]: the search loss on a fitted graph, precomputed for speed;
+//! - [`SurrogateTerm`]: the extension point for effect terms.
+
+mod adjacency;
+mod fastexp;
+mod graph;
+mod objective;
+mod penalty;
+mod term;
+mod train;
+
+pub use adjacency::{Adjacency, AdjacencySettings, Csr};
+pub use graph::{ThermalGraph, ThermalGraphSettings};
+pub use objective::ThermalGraphObjective;
+pub use penalty::{
+    PenaltyReport, PenaltySettings, RiseBound, RiseViolation, TemperatureRisePenalty,
+    M3_S_PER_CFM,
+};
+pub use term::SurrogateTerm;

@@ -1,0 +1,524 @@
+//! The four-step calibration loop: fit, search, run, validate.
+//!
+//! The [`Calibrator`] reads like argmin's `Executor`: a builder with `with_*` setters,
+//! settings checked once, and [`Calibrator::run`] returning a serialisable [`Report`].
+
+mod design;
+mod report;
+mod runner;
+mod settings;
+mod state;
+
+pub use report::{
+    Best, Errors, Initial, IterationRecord, NamedValues, Report, Residual, RunCounts,
+    SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
+};
+pub use settings::Settings;
+
+use std::time::Instant;
+
+use crate::observe::{Event, Observe};
+use crate::{
+    Error, ErrorMetrics, Model, Observations, ParamSpace, Regularizer, Result, RunStore, Sample,
+    Searcher, Surrogate, SurrogateObjective, TrainingSet, Validation, Validator,
+};
+use design::{derive_seed, Stream};
+use runner::Runner;
+use state::State;
+
+/// The calibration loop over a model, a surrogate, a searcher and a validator.
+///
+/// See the crate documentation for a complete example.
+pub struct Calibrator<'a, M: Model, Su, V = ErrorMetrics> {
+    model: &'a M,
+    surrogate: Su,
+    observations: &'a Observations<M::Scenario>,
+    space: &'a ParamSpace,
+    searcher: Box<dyn Searcher + 'a>,
+    validator: V,
+    regularizer: Option<&'a dyn Regularizer>,
+    store: Option<RunStore>,
+    observers: Vec<Box<dyn Observe + 'a>>,
+    settings: Settings,
+}
+
+impl<'a, M, Su> Calibrator<'a, M, Su, ErrorMetrics>
+where
+    M: Model,
+    M::Scenario: Clone,
+    Su: Surrogate<Scenario = M::Scenario> + Sync,
+{
+    /// A calibrator with default settings, the paper's hybrid searcher
+    /// (differential evolution, then Adam), [`ErrorMetrics`] and an in-memory journal.
+    pub fn new(
+        model: &'a M,
+        surrogate: Su,
+        observations: &'a Observations<M::Scenario>,
+        space: &'a ParamSpace,
+    ) -> Self {
+        Calibrator {
+            model,
+            surrogate,
+            observations,
+            space,
+            searcher: Box::new(crate::search::Hybrid::default()),
+            validator: ErrorMetrics,
+            regularizer: None,
+            store: None,
+            observers: Vec::new(),
+            settings: Settings::default(),
+        }
+    }
+}
+
+impl<'a, M, Su, V> Calibrator<'a, M, Su, V>
+where
+    M: Model,
+    M::Scenario: Clone,
+    Su: Surrogate<Scenario = M::Scenario> + Sync,
+    V: Validator,
+{
+    /// Replaces every setting at once.
+    pub fn with_settings(mut self, settings: Settings) -> Self {
+        self.settings = settings;
+        self
+    }
+
+    /// The calibration seed.
+    pub fn with_seed(mut self, seed: u64) -> Self {
+        self.settings.seed = seed;
+        self
+    }
+
+    /// Four-step iterations after the initial design.
+    pub fn with_max_iterations(mut self, n: usize) -> Self {
+        self.settings.max_iterations = n;
+        self
+    }
+
+    /// Stop once the best score (by default the MAE) is at most `target`.
+    pub fn with_target_score(mut self, target: f64) -> Self {
+        self.settings.target_score = Some(target);
+        self
+    }
+
+    /// Budget of model runs, initial design included.
+    pub fn with_max_model_runs(mut self, n: usize) -> Self {
+        self.settings.max_model_runs = Some(n);
+        self
+    }
+
+    /// Budget of wall-clock time, seconds.
+    pub fn with_max_wall_s(mut self, seconds: f64) -> Self {
+        self.settings.max_wall_s = Some(seconds);
+        self
+    }
+
+    /// At most this many model runs at once (a dedicated rayon pool).
+    pub fn with_max_parallel_runs(mut self, n: usize) -> Self {
+        self.settings.max_parallel_runs = Some(n);
+        self
+    }
+
+    /// First-fit augmentation: samples per design run and noise sigma (unit box).
+    pub fn with_augmentation(mut self, copies: usize, sigma: f64) -> Self {
+        self.settings.augment_copies = copies;
+        self.settings.augment_sigma = sigma;
+        self
+    }
+
+    /// Adds `weight * regularizer` to the search loss.
+    pub fn with_regularizer(mut self, regularizer: &'a dyn Regularizer, weight: f64) -> Self {
+        self.regularizer = Some(regularizer);
+        self.settings.regularizer_weight = weight;
+        self
+    }
+
+    /// The searcher of step 2.
+    pub fn with_searcher(mut self, searcher: impl Searcher + 'a) -> Self {
+        self.searcher = Box::new(searcher);
+        self
+    }
+
+    /// The validator of step 4.
+    pub fn with_validator<V2: Validator>(self, validator: V2) -> Calibrator<'a, M, Su, V2> {
+        Calibrator {
+            model: self.model,
+            surrogate: self.surrogate,
+            observations: self.observations,
+            space: self.space,
+            searcher: self.searcher,
+            validator,
+            regularizer: self.regularizer,
+            store: self.store,
+            observers: self.observers,
+            settings: self.settings,
+        }
+    }
+
+    /// The run journal (its fingerprint must be the model's).
+    pub fn with_store(mut self, store: RunStore) -> Self {
+        self.store = Some(store);
+        self
+    }
+
+    /// Adds an observer.
+    pub fn with_observer(mut self, observer: impl Observe + 'a) -> Self {
+        self.observers.push(Box::new(observer));
+        self
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The surrogate (fitted, after [`Self::run`]).
+    pub fn surrogate(&self) -> &Su {
+        &self.surrogate
+    }
+
+    /// The run journal (after [`Self::run`], always present).
+    pub fn store(&self) -> Option<&RunStore> {
+        self.store.as_ref()
+    }
+
+    fn emit(&self, event: Event<'_>) {
+        for o in &self.observers {
+            o.observe(&event);
+        }
+    }
+
+    /// Runs the loop: initial design, then fit, search, run, validate until a stop rule fires.
+    pub fn run(&mut self) -> Result<Report> {
+        let t_start = Instant::now();
+        let st = self.settings.clone();
+        st.check()?;
+        if self.space.is_empty() {
+            return Err(Error::Mismatch("the parameter space is empty".into()));
+        }
+        let fingerprint = self.model.fingerprint();
+        let store = self
+            .store
+            .take()
+            .unwrap_or_else(|| RunStore::in_memory(fingerprint.clone()));
+        if store.fingerprint() != fingerprint {
+            return Err(Error::Mismatch(format!(
+                "run journal is for model fingerprint `{}`, the model's is `{fingerprint}`",
+                store.fingerprint()
+            )));
+        }
+        let result = self.run_with(&store, &st, t_start);
+        self.store = Some(store);
+        result
+    }
+
+    fn run_with(&mut self, store: &RunStore, st: &Settings, t_start: Instant) -> Result<Report> {
+        let space = self.space;
+        let obs = self.observations;
+        let names = space.names();
+        let output_names = obs.output_names();
+        let n_snap = obs.snapshots().len();
+        let (design_units, initial_idx) = design::initial_design(space)?;
+        let design_runs = design_units.len() * n_snap;
+        if let Some(budget) = st.max_model_runs {
+            if budget < design_runs {
+                return Err(Error::InvalidSetting {
+                    name: "max_model_runs".into(),
+                    reason: format!(
+                        "{budget} is smaller than the initial design ({} points x {n_snap} snapshots)",
+                        design_units.len()
+                    ),
+                });
+            }
+        }
+        let pool = match st.max_parallel_runs {
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|e| Error::InvalidSetting {
+                        name: "max_parallel_runs".into(),
+                        reason: e.to_string(),
+                    })?,
+            ),
+            None => None,
+        };
+        let runner = Runner {
+            model: self.model,
+            observations: obs,
+            store,
+            param_names: &names,
+            output_names: &output_names,
+            observers: &self.observers,
+            pool: pool.as_ref(),
+        };
+        let mut state = State::default();
+
+        // The initial design.
+        let design_phys: Vec<Vec<f64>> = design_units
+            .iter()
+            .map(|u| space.from_unit(u))
+            .collect::<Result<_>>()?;
+        let t_design = Instant::now();
+        let design_results = runner.run(0, &design_phys)?;
+        let design_s = t_design.elapsed().as_secs_f64();
+        let mut design_samples = Vec::new();
+        let mut initial_eval = None;
+        for (i, results) in design_results.into_iter().enumerate() {
+            let eval = state.absorb(
+                &self.validator,
+                obs,
+                0,
+                &design_units[i],
+                &design_phys[i],
+                results,
+            );
+            for s in state.samples[state.samples.len() - eval.ok_runs..].iter() {
+                design_samples.push((design_units[i].clone(), s.clone()));
+            }
+            if i == initial_idx {
+                initial_eval = Some(eval);
+            }
+        }
+        let design_failed = state.counts.failed;
+        self.emit(Event::DesignDone {
+            points: design_units.len(),
+            model_runs: design_runs,
+            failed: design_failed,
+        });
+        if state.samples.is_empty() {
+            return Err(Error::NoSuccessfulRun(format!(
+                "all {design_runs} runs of the initial design failed"
+            )));
+        }
+        let augmented = design::augment(
+            space,
+            &design_samples,
+            st.augment_copies,
+            st.augment_sigma,
+            derive_seed(st.seed, 0, Stream::Augment),
+        )?;
+        let initial_eval = initial_eval.expect("the design contains the initial point");
+        let stat = |f: fn(&Validation) -> f64| initial_eval.validation.as_ref().map(f);
+        let initial = Initial {
+            mae_c: stat(|v| v.overall.mae),
+            rmse_c: stat(|v| v.overall.rmse),
+            max_abs_c: stat(|v| v.overall.max_abs),
+            params: NamedValues::new(&names, &space.initial()),
+            design_points: design_units.len(),
+            design_runs,
+            failed_runs: design_failed,
+            wall_s: design_s,
+        };
+
+        // Fits take the scenarios as one slice; they are cloned once per calibration.
+        let scenarios: Vec<M::Scenario> =
+            obs.snapshots().iter().map(|s| s.scenario.clone()).collect();
+        let mut history = Vec::new();
+        let mut iteration = 0;
+        let stop = loop {
+            let best_score = state.best.as_ref().map(|b| b.score);
+            if let (Some(t), Some(b)) = (st.target_score, best_score) {
+                if b <= t {
+                    break StopReason::TargetError;
+                }
+            }
+            if iteration >= st.max_iterations {
+                break StopReason::MaxIterations;
+            }
+            if st
+                .max_model_runs
+                .is_some_and(|b| state.counts.total + n_snap > b)
+            {
+                break StopReason::ModelRunBudget;
+            }
+            if st
+                .max_wall_s
+                .is_some_and(|w| t_start.elapsed().as_secs_f64() >= w)
+            {
+                break StopReason::WallClockBudget;
+            }
+            iteration += 1;
+            let t_iter = Instant::now();
+
+            // Step 1: fit.
+            let samples: &[Sample] = if iteration == 1 {
+                &augmented
+            } else {
+                &state.samples
+            };
+            let t = Instant::now();
+            let fit = self.surrogate.fit(
+                TrainingSet {
+                    scenarios: &scenarios,
+                    samples,
+                },
+                derive_seed(st.seed, iteration, Stream::Fit),
+            )?;
+            let training_samples = samples.len();
+            let fit_s = t.elapsed().as_secs_f64();
+            self.emit(Event::FitDone {
+                iteration,
+                samples: training_samples,
+                summary: &fit,
+                wall_s: fit_s,
+            });
+
+            // Step 2: search from the best point so far.
+            let t = Instant::now();
+            let start = match &state.best {
+                Some(b) => b.unit.clone(),
+                None => design_units[initial_idx].clone(),
+            };
+            let mut objective = SurrogateObjective::new(&self.surrogate, obs, space);
+            if let Some(reg) = self.regularizer {
+                objective = objective.with_regularizer(reg, st.regularizer_weight);
+            }
+            let outcome = self.searcher.search(
+                &objective,
+                &start,
+                derive_seed(st.seed, iteration, Stream::Search),
+            )?;
+            let search_s = t.elapsed().as_secs_f64();
+            // The data term alone: the rest of the loss is the regulariser's (a prior that
+            // binds at the optimum shows as a gap between the two).
+            let search_data_mse = space
+                .from_unit(&outcome.best_unit)
+                .map_or(f64::NAN, |p| objective.data_mse(&p));
+            self.emit(Event::SearchDone {
+                iteration,
+                outcome: &outcome,
+                wall_s: search_s,
+            });
+            if outcome.best_unit.len() != space.dim()
+                || outcome.best_unit.iter().any(|u| !u.is_finite())
+            {
+                return Err(Error::Search(format!(
+                    "the searcher returned an invalid point {:?}",
+                    outcome.best_unit
+                )));
+            }
+            let mut unit: Vec<f64> = outcome
+                .best_unit
+                .iter()
+                .map(|u| u.clamp(0.0, 1.0))
+                .collect();
+            let near = |pts: &[Vec<f64>], u: &[f64]| {
+                pts.iter()
+                    .any(|p| design::distance(p, u) <= st.duplicate_tol)
+            };
+            let mut perturbed = false;
+            if near(&state.failed_units, &unit) {
+                let moved = design::perturb(
+                    &unit,
+                    &state.failed_units,
+                    st.duplicate_tol,
+                    st.perturb_sigma,
+                    derive_seed(st.seed, iteration, Stream::Perturb),
+                );
+                self.emit(Event::Perturbed {
+                    iteration,
+                    from_unit: &unit,
+                    to_unit: &moved,
+                });
+                unit = moved;
+                perturbed = true;
+            }
+            if near(&state.ok_units, &unit) {
+                break StopReason::Converged;
+            }
+
+            // Steps 3 and 4: run at every snapshot, validate.
+            let params = space.from_unit(&unit)?;
+            let t = Instant::now();
+            let results = runner
+                .run(iteration, std::slice::from_ref(&params))?
+                .pop()
+                .unwrap_or_default();
+            let model_s = t.elapsed().as_secs_f64();
+            let eval = state.absorb(&self.validator, obs, iteration, &unit, &params, results);
+            let v = eval.validation.as_ref();
+            let record = IterationRecord {
+                iteration,
+                model_runs: state.counts.total,
+                mae_c: v.map(|v| v.overall.mae),
+                rmse_c: v.map(|v| v.overall.rmse),
+                max_abs_c: v.map(|v| v.overall.max_abs),
+                score: eval.score,
+                best_mae_c: state.best.as_ref().map(|b| b.validation.overall.mae),
+                per_snapshot: v.map_or_else(Vec::new, |v| {
+                    v.per_snapshot
+                        .iter()
+                        .map(|(l, e)| SnapshotErrors {
+                            snapshot: l.clone(),
+                            mae_c: e.mae,
+                            rmse_c: e.rmse,
+                            max_abs_c: e.max_abs,
+                        })
+                        .collect()
+                }),
+                per_group: v.map_or_else(Default::default, |v| {
+                    v.per_group
+                        .iter()
+                        .map(|(g, e)| (g.clone(), Errors::from(*e)))
+                        .collect()
+                }),
+                fit_mse: fit.train_mse,
+                training_samples,
+                search_loss: outcome.best_cost,
+                search_data_mse,
+                search_evaluations: outcome.evaluations,
+                failed_runs: n_snap - eval.ok_runs,
+                perturbed,
+                params: NamedValues::new(&names, &params),
+                wall_s: Timings {
+                    fit_s,
+                    search_s,
+                    model_s,
+                    total_s: t_iter.elapsed().as_secs_f64(),
+                },
+            };
+            self.emit(Event::IterationDone { record: &record });
+            history.push(record);
+        };
+        self.emit(Event::Stopped { reason: stop });
+
+        let best = state.best.ok_or_else(|| {
+            Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
+        })?;
+        let mut residuals = Vec::new();
+        for (snap, pred) in obs.snapshots().iter().zip(&best.outputs) {
+            for ((info, m), p) in obs.outputs().iter().zip(&snap.measured).zip(pred) {
+                if let Some(m) = m {
+                    residuals.push(Residual {
+                        snapshot: snap.label.clone(),
+                        sensor: info.name.clone(),
+                        measured_c: *m,
+                        predicted_c: *p,
+                    });
+                }
+            }
+        }
+        Ok(Report {
+            schema: REPORT_SCHEMA.into(),
+            seed: st.seed,
+            settings: st.clone(),
+            best: Best {
+                iteration: best.iteration,
+                mae_c: best.validation.overall.mae,
+                rmse_c: best.validation.overall.rmse,
+                max_abs_c: best.validation.overall.max_abs,
+                score: best.score,
+                params: NamedValues::new(&names, &best.params),
+            },
+            initial,
+            history,
+            residuals,
+            stop_reason: stop,
+            runs: state.counts,
+            journal: store.path().map(|_| store.load_report().clone()),
+            wall_s: t_start.elapsed().as_secs_f64(),
+        })
+    }
+}

@@ -1,0 +1,289 @@
+//! The calibration report (`report.json`, formats.md section 3) and its parts.
+//!
+//! Key names follow the contract (`mae_c`, `residuals[].sensor`, ...) whatever the domain.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use serde::de::{MapAccess, Visitor};
+use serde::ser::SerializeMap;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+use super::Settings;
+use crate::{ErrorStats, LoadReport};
+
+/// Schema tag of [`Report`].
+pub const REPORT_SCHEMA: &str = "kalibre.report/1";
+
+/// Parameter values by name, kept in parameter order; a JSON object.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NamedValues(pub Vec<(String, f64)>);
+
+impl NamedValues {
+    /// Pairs names with values.
+    pub fn new(names: &[String], values: &[f64]) -> Self {
+        NamedValues(names.iter().cloned().zip(values.iter().copied()).collect())
+    }
+
+    /// The value of a name.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
+    }
+
+    /// The values in order.
+    pub fn values(&self) -> Vec<f64> {
+        self.0.iter().map(|(_, v)| *v).collect()
+    }
+}
+
+impl Serialize for NamedValues {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut map = serializer.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            map.serialize_entry(k, v)?;
+        }
+        map.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for NamedValues {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = NamedValues;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("an object of parameter values by name")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<NamedValues, A::Error> {
+                let mut out = Vec::new();
+                while let Some((k, v)) = map.next_entry::<String, f64>()? {
+                    if out.iter().any(|(n, _): &(String, f64)| *n == k) {
+                        return Err(serde::de::Error::custom(format!(
+                            "duplicate parameter `{k}`"
+                        )));
+                    }
+                    out.push((k, v));
+                }
+                Ok(NamedValues(out))
+            }
+        }
+        deserializer.deserialize_map(V)
+    }
+}
+
+/// Reads `null` (how JSON writes a non-finite number) back as NaN, so a report with a
+/// diverged fit or search still loads.
+fn null_as_nan<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// MAE, RMSE and max absolute error of a set of values.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Errors {
+    /// Mean absolute error.
+    pub mae_c: f64,
+    /// Root-mean-square error.
+    pub rmse_c: f64,
+    /// Largest absolute error.
+    pub max_abs_c: f64,
+    /// Values compared.
+    pub count: usize,
+}
+
+impl From<ErrorStats> for Errors {
+    fn from(s: ErrorStats) -> Self {
+        Errors {
+            mae_c: s.mae,
+            rmse_c: s.rmse,
+            max_abs_c: s.max_abs,
+            count: s.count,
+        }
+    }
+}
+
+/// Errors of one snapshot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SnapshotErrors {
+    /// Snapshot label.
+    pub snapshot: String,
+    /// Mean absolute error.
+    pub mae_c: f64,
+    /// Root-mean-square error.
+    pub rmse_c: f64,
+    /// Largest absolute error.
+    pub max_abs_c: f64,
+}
+
+/// Wall times of one iteration, seconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Timings {
+    /// Step 1: surrogate fit.
+    pub fit_s: f64,
+    /// Step 2: search.
+    pub search_s: f64,
+    /// Step 3: model runs (wall time of the parallel batch).
+    pub model_s: f64,
+    /// The whole iteration.
+    pub total_s: f64,
+}
+
+/// One four-step iteration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IterationRecord {
+    /// 1-based iteration.
+    pub iteration: usize,
+    /// Every model run so far, initial design and journal replays included.
+    pub model_runs: usize,
+    /// Overall MAE of the model at this iteration's parameters (`None`: a run failed).
+    pub mae_c: Option<f64>,
+    /// Overall RMSE.
+    pub rmse_c: Option<f64>,
+    /// Overall max absolute error.
+    pub max_abs_c: Option<f64>,
+    /// The validator's score (lower is better).
+    pub score: Option<f64>,
+    /// Best overall MAE so far.
+    pub best_mae_c: Option<f64>,
+    /// Per snapshot, in snapshot order (empty when a run failed).
+    pub per_snapshot: Vec<SnapshotErrors>,
+    /// Per output group (e.g. aisle).
+    pub per_group: BTreeMap<String, Errors>,
+    /// Surrogate training MSE after step 1.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub fit_mse: f64,
+    /// Training samples of step 1 (augmented copies included).
+    pub training_samples: usize,
+    /// Search loss at the proposal (step 2).
+    #[serde(deserialize_with = "null_as_nan")]
+    pub search_loss: f64,
+    /// The data term of the search loss (surrogate MSE against the measurements) at the
+    /// proposal; `search_loss` minus this is the weighted regulariser.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub search_data_mse: f64,
+    /// Objective evaluations of the search.
+    pub search_evaluations: usize,
+    /// Runs of this iteration that failed.
+    pub failed_runs: usize,
+    /// True when the proposal was moved off an earlier failed point.
+    pub perturbed: bool,
+    /// The parameters run, by name.
+    pub params: NamedValues,
+    /// Wall times.
+    pub wall_s: Timings,
+}
+
+/// The best parameters found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Best {
+    /// Iteration that found them (0: the initial design).
+    pub iteration: usize,
+    /// Overall MAE.
+    pub mae_c: f64,
+    /// Overall RMSE.
+    pub rmse_c: f64,
+    /// Overall max absolute error.
+    pub max_abs_c: f64,
+    /// The validator's score.
+    pub score: f64,
+    /// Parameters by name.
+    pub params: NamedValues,
+}
+
+/// The model at the initial parameter values, and the initial design.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Initial {
+    /// Overall MAE at the initial values (`None`: a run failed).
+    pub mae_c: Option<f64>,
+    /// Overall RMSE.
+    pub rmse_c: Option<f64>,
+    /// Overall max absolute error.
+    pub max_abs_c: Option<f64>,
+    /// Initial parameters by name.
+    pub params: NamedValues,
+    /// Distinct points of the initial design (lower, upper, midpoint, initial values).
+    pub design_points: usize,
+    /// Model runs of the design (points times snapshots).
+    pub design_runs: usize,
+    /// Design runs that failed.
+    pub failed_runs: usize,
+    /// Wall time of the design's runs, seconds.
+    pub wall_s: f64,
+}
+
+/// A measured value against the best model's prediction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Residual {
+    /// Snapshot label.
+    pub snapshot: String,
+    /// Output (sensor) name.
+    pub sensor: String,
+    /// Measured value.
+    pub measured_c: f64,
+    /// Predicted by the best model.
+    pub predicted_c: f64,
+}
+
+/// Why the loop stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// `max_iterations` reached.
+    MaxIterations,
+    /// The best score reached `target_score`.
+    TargetError,
+    /// Another iteration would exceed `max_model_runs`.
+    ModelRunBudget,
+    /// `max_wall_s` passed.
+    WallClockBudget,
+    /// The search proposed a point already run.
+    Converged,
+}
+
+/// How many model runs were computed, replayed from the journal, and failed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunCounts {
+    /// Every run (new plus cached).
+    pub total: usize,
+    /// Runs computed by the model in this session.
+    pub new: usize,
+    /// Runs replayed from the journal.
+    pub cached: usize,
+    /// Runs that failed (new or cached).
+    pub failed: usize,
+}
+
+/// The result of a calibration; `report.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Report {
+    /// Always [`REPORT_SCHEMA`].
+    pub schema: String,
+    /// Calibration seed.
+    pub seed: u64,
+    /// Settings the loop ran with.
+    pub settings: Settings,
+    /// The best parameters.
+    pub best: Best,
+    /// The model at the initial values.
+    pub initial: Initial,
+    /// One record per four-step iteration.
+    pub history: Vec<IterationRecord>,
+    /// Residuals of the best model, per snapshot and measured output.
+    pub residuals: Vec<Residual>,
+    /// Why the loop stopped.
+    pub stop_reason: StopReason,
+    /// Run counts.
+    pub runs: RunCounts,
+    /// What loading the journal found (`None` without a journal file).
+    pub journal: Option<LoadReport>,
+    /// Wall time of the whole calibration, seconds.
+    pub wall_s: f64,
+}

@@ -1,0 +1,115 @@
+//! Step 3: run the model at parameter points for every snapshot, in parallel, through the
+//! journal (a journaled run is replayed, never repeated).
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::observe::{Event, Observe};
+use crate::{check_outputs, Model, ModelError, Observations, Outputs, Result, RunStore};
+
+/// One run's result and whether it came from the journal.
+#[derive(Debug, Clone)]
+pub(crate) struct RunResult {
+    pub result: std::result::Result<Outputs, ModelError>,
+    pub cached: bool,
+}
+
+/// What step 3 needs, borrowed from the calibrator.
+pub(crate) struct Runner<'r, M: Model> {
+    pub model: &'r M,
+    pub observations: &'r Observations<M::Scenario>,
+    pub store: &'r RunStore,
+    pub param_names: &'r [String],
+    pub output_names: &'r [String],
+    pub observers: &'r [Box<dyn Observe + 'r>],
+    pub pool: Option<&'r rayon::ThreadPool>,
+}
+
+impl<M: Model> Runner<'_, M> {
+    /// Runs every point at every snapshot; `out[point][snapshot]`, in order whatever the
+    /// thread count.
+    pub fn run(&self, iteration: usize, points: &[Vec<f64>]) -> Result<Vec<Vec<RunResult>>> {
+        let n_snap = self.observations.snapshots().len();
+        let jobs: Vec<(usize, usize)> = (0..points.len())
+            .flat_map(|p| (0..n_snap).map(move |s| (p, s)))
+            .collect();
+        let go = || {
+            jobs.par_iter()
+                .map(|&(p, s)| self.run_one(iteration, s, &points[p]))
+                .collect::<Result<Vec<_>>>()
+        };
+        let flat = match self.pool {
+            Some(pool) => pool.install(go)?,
+            None => go()?,
+        };
+        let mut it = flat.into_iter();
+        Ok((0..points.len())
+            .map(|_| it.by_ref().take(n_snap).collect())
+            .collect())
+    }
+
+    fn emit(&self, event: Event<'_>) {
+        for o in self.observers {
+            o.observe(&event);
+        }
+    }
+
+    fn run_one(&self, iteration: usize, s: usize, params: &[f64]) -> Result<RunResult> {
+        let snap = &self.observations.snapshots()[s];
+        let label = snap.label.as_str();
+        if let Some(rec) = self.store.get(label, self.param_names, params) {
+            self.emit(Event::RunStarted {
+                iteration,
+                snapshot: label,
+                params,
+                cached: true,
+            });
+            let result = rec.result();
+            self.emit(Event::RunFinished {
+                iteration,
+                snapshot: label,
+                params,
+                cached: true,
+                error: result.as_ref().err(),
+                wall_s: rec.wall_s,
+            });
+            return Ok(RunResult {
+                result,
+                cached: true,
+            });
+        }
+        self.emit(Event::RunStarted {
+            iteration,
+            snapshot: label,
+            params,
+            cached: false,
+        });
+        let t0 = Instant::now();
+        let result = self
+            .model
+            .evaluate(&snap.scenario, params)
+            .and_then(|o| check_outputs(o, self.output_names))
+            .and_then(|o| match &o.spread {
+                Some(sp) if sp.len() != o.values.len() || sp.iter().any(|v| !v.is_finite()) => Err(
+                    ModelError::failed("output spread has the wrong length or a non-finite value"),
+                ),
+                _ => Ok(o),
+            });
+        let wall_s = t0.elapsed().as_secs_f64();
+        self.store
+            .record(label, self.param_names, params, &result, wall_s)?;
+        self.emit(Event::RunFinished {
+            iteration,
+            snapshot: label,
+            params,
+            cached: false,
+            error: result.as_ref().err(),
+            wall_s,
+        });
+        Ok(RunResult {
+            result,
+            cached: false,
+        })
+    }
+}

@@ -1,0 +1,122 @@
+//! The calibration loop's settings, checked once before the loop starts.
+
+use serde::{Deserialize, Serialize};
+
+use crate::{Error, Result};
+
+/// Settings of a [`crate::Calibrator`].
+///
+/// | Name | Default | Meaning | Range |
+/// |---|---|---|---|
+/// | `seed` | 0 | seeds augmentation, fits, searches and perturbations | any |
+/// | `max_iterations` | 20 | four-step iterations after the initial design | >= 1 |
+/// | `target_score` | none | stop when the best score (default: MAE) is at most this | finite, >= 0 |
+/// | `max_model_runs` | none | stop before exceeding this many model runs (design included) | >= design runs |
+/// | `max_wall_s` | none | stop at the start of an iteration once this much wall time passed | finite, > 0 |
+/// | `max_parallel_runs` | none | model runs at once (a dedicated rayon pool); none: the current pool | >= 1 |
+/// | `augment_copies` | 16 | samples per design run in the first fit: the run plus `copies - 1` noisy copies | >= 1 |
+/// | `augment_sigma` | 0.05 | standard deviation of the augmentation noise, unit box | finite, >= 0 |
+/// | `regularizer_weight` | 1 | weight of the regulariser in the search loss (when one is given) | finite, >= 0 |
+/// | `duplicate_tol` | 1e-9 | max-norm distance in the unit box under which two points are the same | finite, >= 0 |
+/// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point, unit box | finite, > 0 |
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Calibration seed.
+    pub seed: u64,
+    /// Four-step iterations after the initial design.
+    pub max_iterations: usize,
+    /// Stop once the best score is at most this.
+    pub target_score: Option<f64>,
+    /// Budget of model runs, initial design and cached replays included.
+    pub max_model_runs: Option<usize>,
+    /// Budget of wall-clock time, seconds.
+    pub max_wall_s: Option<f64>,
+    /// Model runs at once; `None` runs them in the current rayon pool.
+    pub max_parallel_runs: Option<usize>,
+    /// Samples per design run in the first fit (the run itself plus noisy copies).
+    pub augment_copies: usize,
+    /// Standard deviation of the augmentation noise in the unit box.
+    pub augment_sigma: f64,
+    /// Weight of the regulariser in the search loss.
+    pub regularizer_weight: f64,
+    /// Max-norm distance in the unit box under which two points count as the same.
+    pub duplicate_tol: f64,
+    /// Standard deviation of the noise that moves a proposal off a failed point.
+    pub perturb_sigma: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            seed: 0,
+            max_iterations: 20,
+            target_score: None,
+            max_model_runs: None,
+            max_wall_s: None,
+            max_parallel_runs: None,
+            augment_copies: 16,
+            augment_sigma: 0.05,
+            regularizer_weight: 1.0,
+            duplicate_tol: 1e-9,
+            perturb_sigma: 0.05,
+        }
+    }
+}
+
+fn bad(name: &str, reason: String) -> Error {
+    Error::InvalidSetting {
+        name: name.into(),
+        reason,
+    }
+}
+
+fn non_negative(name: &str, v: f64) -> Result<()> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(bad(name, format!("must be finite and >= 0, got {v}")))
+    }
+}
+
+impl Settings {
+    /// Checks every setting against its range, naming the first offender.
+    pub fn check(&self) -> Result<()> {
+        if self.max_iterations == 0 {
+            return Err(bad("max_iterations", "must be at least 1".into()));
+        }
+        if let Some(t) = self.target_score {
+            non_negative("target_score", t)?;
+        }
+        if self.max_model_runs == Some(0) {
+            return Err(bad("max_model_runs", "must be at least 1".into()));
+        }
+        if let Some(w) = self.max_wall_s {
+            if !(w.is_finite() && w > 0.0) {
+                return Err(bad(
+                    "max_wall_s",
+                    format!("must be finite and > 0, got {w}"),
+                ));
+            }
+        }
+        if self.max_parallel_runs == Some(0) {
+            return Err(bad("max_parallel_runs", "must be at least 1".into()));
+        }
+        if self.augment_copies == 0 {
+            return Err(bad(
+                "augment_copies",
+                "must be at least 1 (1: no augmentation)".into(),
+            ));
+        }
+        non_negative("augment_sigma", self.augment_sigma)?;
+        non_negative("regularizer_weight", self.regularizer_weight)?;
+        non_negative("duplicate_tol", self.duplicate_tol)?;
+        if !(self.perturb_sigma.is_finite() && self.perturb_sigma > 0.0) {
+            return Err(bad(
+                "perturb_sigma",
+                format!("must be finite and > 0, got {}", self.perturb_sigma),
+            ));
+        }
+        Ok(())
+    }
+}

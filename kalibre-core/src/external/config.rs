@@ -1,0 +1,430 @@
+//! `model.toml`: an external command model, its parameters and its scenarios from a file.
+//!
+//! The file is read key by key (not through serde) so that every error names its key as a
+//! path (`params[2].lower`, `output.regex.t_in`), and unknown keys are errors: a typo must
+//! not silently fall back to a default. Relative paths (program when given as a path,
+//! template sources, runs root, fingerprint files) are relative to the file's directory.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use toml::{Table, Value};
+
+use super::command::{ExternalCommand, FailureKind, KeepRuns, RetryPolicy};
+use super::parse::OutputParser;
+use super::{ExternalError, NamedScenario};
+use crate::{Param, ParamSpace, Scale};
+
+/// Everything `kalibre calibrate --model command --config model.toml` needs from the file.
+#[derive(Debug)]
+pub struct CommandModelConfig {
+    /// The model.
+    pub command: ExternalCommand<NamedScenario>,
+    /// The calibrated parameters, in the order the model takes them.
+    pub space: ParamSpace,
+    /// The scenarios (operating conditions) listed in the file.
+    pub scenarios: Vec<NamedScenario>,
+}
+
+struct Ctx<'a> {
+    file: &'a str,
+    base: &'a Path,
+}
+
+impl Ctx<'_> {
+    fn err(&self, key: impl Into<String>, reason: impl Into<String>) -> ExternalError {
+        ExternalError::Config {
+            file: self.file.to_string(),
+            key: key.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// Builder and parser settings are named like the file's keys: add the file.
+    fn lift(&self, e: ExternalError) -> ExternalError {
+        match e {
+            ExternalError::Setting { key, reason } => self.err(key, reason),
+            e => e,
+        }
+    }
+
+    fn path(&self, p: &str) -> PathBuf {
+        let p = Path::new(p);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base.join(p)
+        }
+    }
+
+    fn keys(&self, t: &Table, prefix: &str, allowed: &[&str]) -> Result<(), ExternalError> {
+        match t.keys().find(|k| !allowed.contains(&k.as_str())) {
+            Some(k) => Err(self.err(
+                join(prefix, k),
+                format!("unknown key (expected one of: {})", allowed.join(", ")),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    fn str(&self, t: &Table, prefix: &str, key: &str) -> Result<Option<String>, ExternalError> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(Value::String(s)) => Ok(Some(s.clone())),
+            Some(v) => Err(self.err(
+                join(prefix, key),
+                format!("expected a string, got {}", v.type_str()),
+            )),
+        }
+    }
+
+    fn req_str(&self, t: &Table, prefix: &str, key: &str) -> Result<String, ExternalError> {
+        self.str(t, prefix, key)?
+            .ok_or_else(|| self.err(join(prefix, key), "required"))
+    }
+
+    fn num(&self, t: &Table, prefix: &str, key: &str) -> Result<Option<f64>, ExternalError> {
+        let x = match t.get(key) {
+            None => return Ok(None),
+            Some(Value::Integer(i)) => *i as f64,
+            Some(Value::Float(x)) => *x,
+            Some(v) => {
+                return Err(self.err(
+                    join(prefix, key),
+                    format!("expected a number, got {}", v.type_str()),
+                ))
+            }
+        };
+        if !x.is_finite() {
+            return Err(self.err(join(prefix, key), format!("{x} is not finite")));
+        }
+        Ok(Some(x))
+    }
+
+    fn req_num(&self, t: &Table, prefix: &str, key: &str) -> Result<f64, ExternalError> {
+        self.num(t, prefix, key)?
+            .ok_or_else(|| self.err(join(prefix, key), "required"))
+    }
+
+    fn count(&self, t: &Table, key: &str) -> Result<Option<u32>, ExternalError> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(Value::Integer(i)) => u32::try_from(*i)
+                .map(Some)
+                .map_err(|_| self.err(key, format!("{i} is not a count (0 or more)"))),
+            Some(v) => Err(self.err(key, format!("expected an integer, got {}", v.type_str()))),
+        }
+    }
+
+    fn strings(&self, t: &Table, prefix: &str, key: &str) -> Result<Vec<String>, ExternalError> {
+        match t.get(key) {
+            None => Ok(Vec::new()),
+            Some(Value::Array(a)) => a
+                .iter()
+                .enumerate()
+                .map(|(i, v)| match v {
+                    Value::String(s) => Ok(s.clone()),
+                    v => Err(self.err(
+                        format!("{}[{i}]", join(prefix, key)),
+                        format!("expected a string, got {}", v.type_str()),
+                    )),
+                })
+                .collect(),
+            Some(v) => Err(self.err(
+                join(prefix, key),
+                format!("expected an array of strings, got {}", v.type_str()),
+            )),
+        }
+    }
+
+    fn table<'t>(
+        &self,
+        t: &'t Table,
+        prefix: &str,
+        key: &str,
+    ) -> Result<Option<&'t Table>, ExternalError> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(Value::Table(t)) => Ok(Some(t)),
+            Some(v) => Err(self.err(
+                join(prefix, key),
+                format!("expected a table, got {}", v.type_str()),
+            )),
+        }
+    }
+
+    fn tables<'t>(&self, t: &'t Table, key: &str) -> Result<Vec<&'t Table>, ExternalError> {
+        match t.get(key) {
+            None => Ok(Vec::new()),
+            Some(Value::Array(a)) => a
+                .iter()
+                .enumerate()
+                .map(|(i, v)| match v {
+                    Value::Table(t) => Ok(t),
+                    v => Err(self.err(
+                        format!("{key}[{i}]"),
+                        format!("expected a table, got {}", v.type_str()),
+                    )),
+                })
+                .collect(),
+            Some(v) => Err(self.err(
+                key,
+                format!(
+                    "expected an array of tables ([[{key}]]), got {}",
+                    v.type_str()
+                ),
+            )),
+        }
+    }
+}
+
+fn join(prefix: &str, key: &str) -> String {
+    if prefix.is_empty() {
+        key.to_string()
+    } else {
+        format!("{prefix}.{key}")
+    }
+}
+
+const TOP_KEYS: [&str; 16] = [
+    "program",
+    "args",
+    "runs_root",
+    "timeout_s",
+    "kill_grace_s",
+    "retries",
+    "retry_on",
+    "keep_runs",
+    "fingerprint_files",
+    "log_lines",
+    "env",
+    "templates",
+    "output",
+    "params",
+    "scenarios",
+    "description",
+];
+
+impl CommandModelConfig {
+    /// Reads and checks a `model.toml`.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ExternalError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| ExternalError::io(path, e))?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Parses the text of a `model.toml`; `file` names it in errors and its directory
+    /// anchors relative paths.
+    pub fn from_toml_str(text: &str, file: &Path) -> Result<Self, ExternalError> {
+        let file_name = file.display().to_string();
+        let base = match file.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let cx = Ctx {
+            file: &file_name,
+            base,
+        };
+        let top: Table = text.parse().map_err(|e: toml::de::Error| {
+            let key = match e.span() {
+                Some(s) => {
+                    let line = text[..s.start.min(text.len())].matches('\n').count() + 1;
+                    format!("line {line}")
+                }
+                None => "(syntax)".into(),
+            };
+            cx.err(key, e.message().trim().to_string())
+        })?;
+        cx.keys(&top, "", &TOP_KEYS)?;
+        cx.str(&top, "", "description")?;
+
+        let program = cx.req_str(&top, "", "program")?;
+        let program = if Path::new(&program).components().count() > 1 {
+            cx.path(&program)
+        } else {
+            PathBuf::from(program)
+        };
+        let runs_root = cx.path(
+            &cx.str(&top, "", "runs_root")?
+                .unwrap_or_else(|| "runs".into()),
+        );
+        let config_dir = std::path::absolute(base).map_err(|e| ExternalError::io(base, e))?;
+        let mut b = ExternalCommand::<NamedScenario>::builder(program, runs_root)
+            .with_args(cx.strings(&top, "", "args")?)
+            .with_config_dir(config_dir);
+
+        let timeout = cx.req_num(&top, "", "timeout_s")?;
+        if timeout <= 0.0 || timeout > 1e9 {
+            return Err(cx.err(
+                "timeout_s",
+                format!("{timeout} is not a positive number of seconds"),
+            ));
+        }
+        b = b.with_timeout(Duration::from_secs_f64(timeout));
+        if let Some(g) = cx.num(&top, "", "kill_grace_s")? {
+            if !(0.0..=1e6).contains(&g) {
+                return Err(cx.err("kill_grace_s", format!("{g} is not a number of seconds")));
+            }
+            b = b.with_kill_grace(Duration::from_secs_f64(g));
+        }
+
+        let mut retry = RetryPolicy::default();
+        if let Some(r) = cx.count(&top, "retries")? {
+            retry.max_attempts = r.saturating_add(1);
+        }
+        if top.contains_key("retry_on") {
+            retry.on = cx
+                .strings(&top, "", "retry_on")?
+                .iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    FailureKind::RETRYABLE
+                        .into_iter()
+                        .find(|k| k.name() == s)
+                        .ok_or_else(|| {
+                            cx.err(
+                                format!("retry_on[{i}]"),
+                                format!("`{s}` is not one of timeout, exit, output, non_finite"),
+                            )
+                        })
+                })
+                .collect::<Result<_, _>>()?;
+        }
+        b = b.with_retry(retry);
+        match cx.str(&top, "", "keep_runs")?.as_deref() {
+            None | Some("failed") => {}
+            Some("all") => b = b.with_keep(KeepRuns::All),
+            Some(k) => return Err(cx.err("keep_runs", format!("`{k}` is not `failed` or `all`"))),
+        }
+        for f in cx.strings(&top, "", "fingerprint_files")? {
+            b = b.with_fingerprint_file(cx.path(&f));
+        }
+        if let Some(n) = cx.count(&top, "log_lines")? {
+            b = b.with_log_lines(n as usize);
+        }
+        if let Some(env) = cx.table(&top, "", "env")? {
+            for k in env.keys() {
+                let v = cx.req_str(env, "env", k)?;
+                b = b.with_env(k.clone(), v);
+            }
+        }
+        for (i, t) in cx.tables(&top, "templates")?.into_iter().enumerate() {
+            let p = format!("templates[{i}]");
+            cx.keys(t, &p, &["source", "destination"])?;
+            let source = cx.req_str(t, &p, "source")?;
+            let dest = cx.req_str(t, &p, "destination")?;
+            let source = cx.path(&source);
+            if !source.is_file() {
+                return Err(cx.err(
+                    format!("{p}.source"),
+                    format!("{} is not a readable file", source.display()),
+                ));
+            }
+            b = b.with_template_file(source, dest);
+        }
+
+        let output = cx
+            .table(&top, "", "output")?
+            .ok_or_else(|| cx.err("output", "required ([output] with file, parser, names)"))?;
+        cx.keys(output, "output", &["file", "parser", "names", "regex"])?;
+        let out_file = cx.req_str(output, "output", "file")?;
+        let names = cx.strings(output, "output", "names")?;
+        if names.is_empty() {
+            return Err(cx.err("output.names", "required: the output names in order"));
+        }
+        let parser_name = cx.req_str(output, "output", "parser")?;
+        let regex = cx.table(output, "output", "regex")?;
+        let parser = match (parser_name.as_str(), regex) {
+            ("csv", None) => OutputParser::CsvColumns,
+            ("csv_long", None) => OutputParser::CsvLong,
+            ("regex", Some(r)) => {
+                let mut pats = Vec::new();
+                for k in r.keys() {
+                    pats.push((k.clone(), cx.req_str(r, "output.regex", k)?));
+                }
+                OutputParser::regex(pats).map_err(|e| cx.lift(e))?
+            }
+            ("regex", None) => {
+                return Err(cx.err(
+                    "output.regex",
+                    "required by parser = \"regex\": one pattern per output",
+                ))
+            }
+            ("csv" | "csv_long", Some(_)) => {
+                return Err(cx.err(
+                    "output.regex",
+                    format!("only used with parser = \"regex\", not `{parser_name}`"),
+                ))
+            }
+            (p, _) => {
+                return Err(cx.err(
+                    "output.parser",
+                    format!("`{p}` is not csv, csv_long or regex"),
+                ))
+            }
+        };
+        b = b.with_output(out_file, parser, names);
+
+        let mut space = ParamSpace::new();
+        let params = cx.tables(&top, "params")?;
+        if params.is_empty() {
+            return Err(cx.err("params", "at least one [[params]] is needed"));
+        }
+        for (i, t) in params.iter().enumerate() {
+            let p = format!("params[{i}]");
+            cx.keys(t, &p, &["name", "lower", "upper", "initial", "scale"])?;
+            let name = cx.req_str(t, &p, "name")?;
+            let scale = match cx.str(t, &p, "scale")?.as_deref() {
+                None | Some("linear") => Scale::Linear,
+                Some("log") => Scale::Log,
+                Some(s) => {
+                    return Err(cx.err(
+                        format!("{p}.scale"),
+                        format!("`{s}` is not `linear` or `log`"),
+                    ))
+                }
+            };
+            let param = Param::new(
+                name,
+                cx.req_num(t, &p, "lower")?,
+                cx.req_num(t, &p, "upper")?,
+                cx.req_num(t, &p, "initial")?,
+                scale,
+            )
+            .and_then(|param| space.push(param))
+            .map_err(|e| cx.err(p.clone(), e.to_string()));
+            param?;
+        }
+        b = b.with_params(space.names());
+        let command = b.build().map_err(|e| cx.lift(e))?;
+
+        let mut scenarios = Vec::new();
+        for (i, t) in cx.tables(&top, "scenarios")?.into_iter().enumerate() {
+            let p = format!("scenarios[{i}]");
+            cx.keys(t, &p, &["label", "variables"])?;
+            let label = cx.req_str(t, &p, "label")?;
+            if scenarios.iter().any(|s: &NamedScenario| s.label == label) {
+                return Err(cx.err(format!("{p}.label"), format!("duplicate label `{label}`")));
+            }
+            let mut values = BTreeMap::new();
+            if let Some(vars) = cx.table(t, &p, "variables")? {
+                let vp = format!("{p}.variables");
+                for k in vars.keys() {
+                    values.insert(k.clone(), cx.req_num(vars, &vp, k)?);
+                }
+            }
+            let s = NamedScenario { label, values };
+            command.check_scenario(&s).map_err(|e| match e {
+                ExternalError::Setting { reason, .. } => cx.err(format!("{p}.variables"), reason),
+                e => e,
+            })?;
+            scenarios.push(s);
+        }
+        Ok(CommandModelConfig {
+            command,
+            space,
+            scenarios,
+        })
+    }
+}

@@ -1,0 +1,359 @@
+//! The run journal and cache (`runs.jsonl`): one JSON line per finished model run.
+//!
+//! Every finished run, success or failure, is appended as one line, flushed and synced
+//! before the loop goes on, so a crash loses at most the runs in flight. On open the
+//! journal is read back; a torn last line (a crash mid-write) and unparsable lines are
+//! reported in a [`LoadReport`] and skipped, never fatal. Runs are keyed by model
+//! fingerprint, scenario label, parameter names and the exact bits of the physical
+//! parameter values, so a restarted calibration finds every run it already did.
+
+use std::collections::hash_map::Entry;
+use std::collections::HashMap;
+use std::fs::{File, OpenOptions};
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use serde::{Deserialize, Serialize};
+
+use crate::{Error, ModelError, Outputs, Result};
+
+/// Whether a journaled run succeeded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunStatus {
+    /// The run returned valid outputs.
+    Ok,
+    /// The run failed; `error` says why.
+    Failed,
+}
+
+/// One line of `runs.jsonl`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunRecord {
+    /// Sequence number in the journal (order of finishing; 0-based).
+    pub seq: u64,
+    /// The model's fingerprint ([`crate::Model::fingerprint`]).
+    pub fingerprint: String,
+    /// Snapshot label of the scenario.
+    pub scenario: String,
+    /// Parameter names, in order.
+    pub param_names: Vec<String>,
+    /// Physical parameter values, in order.
+    pub params: Vec<f64>,
+    /// Success or failure.
+    pub status: RunStatus,
+    /// Outputs of a successful run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outputs: Option<Vec<f64>>,
+    /// Per-output spread of a successful run, when the model reports one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spread: Option<Vec<f64>>,
+    /// Why a failed run failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<ModelError>,
+    /// Wall time of the run, seconds.
+    pub wall_s: f64,
+}
+
+impl RunRecord {
+    /// The run's result as the model returned it (after output checks).
+    pub fn result(&self) -> std::result::Result<Outputs, ModelError> {
+        match (&self.status, &self.outputs, &self.error) {
+            (RunStatus::Ok, Some(values), _) => Ok(Outputs {
+                values: values.clone(),
+                spread: self.spread.clone(),
+            }),
+            (_, _, Some(e)) => Err(e.clone()),
+            _ => Err(ModelError::failed(
+                "journal record has neither outputs nor error",
+            )),
+        }
+    }
+
+    fn check(&self) -> std::result::Result<(), String> {
+        if self.params.len() != self.param_names.len() {
+            return Err(format!(
+                "{} parameter values for {} names",
+                self.params.len(),
+                self.param_names.len()
+            ));
+        }
+        match self.status {
+            RunStatus::Ok if self.outputs.is_none() => Err("status ok without outputs".into()),
+            RunStatus::Failed if self.error.is_none() => Err("status failed without error".into()),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// A journal line that could not be used.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BadLine {
+    /// 1-based line number.
+    pub line: usize,
+    /// Why it was skipped.
+    pub reason: String,
+}
+
+/// What opening a journal found.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoadReport {
+    /// Complete lines read (the torn tail excluded).
+    pub lines: usize,
+    /// Runs loaded into the cache.
+    pub loaded: usize,
+    /// Runs of another model fingerprint, ignored.
+    pub other_fingerprint: usize,
+    /// Repeated keys (the first record is kept).
+    pub duplicates: usize,
+    /// Complete lines that could not be parsed, skipped.
+    pub bad_lines: Vec<BadLine>,
+    /// A torn last line (no trailing newline and unparsable), cut off the file.
+    pub torn_tail: Option<BadLine>,
+}
+
+impl LoadReport {
+    /// True when every line was read cleanly.
+    pub fn is_clean(&self) -> bool {
+        self.bad_lines.is_empty() && self.torn_tail.is_none()
+    }
+}
+
+/// Cache key: scenario label, parameter names and the exact bits of the values.
+type Key = (String, Vec<String>, Vec<u64>);
+
+fn key(scenario: &str, names: &[String], params: &[f64]) -> Key {
+    (
+        scenario.to_string(),
+        names.to_vec(),
+        params.iter().map(|x| x.to_bits()).collect(),
+    )
+}
+
+#[derive(Debug)]
+struct Inner {
+    runs: HashMap<Key, RunRecord>,
+    next_seq: u64,
+    file: Option<File>,
+}
+
+/// The journal and cache of model runs of one model fingerprint.
+///
+/// ```
+/// use kalibre_core::{Outputs, RunStore};
+/// let store = RunStore::in_memory("model-v1");
+/// let names = vec!["k".to_string()];
+/// store.record("t0", &names, &[2.5], &Ok(Outputs::from(vec![1.0, 2.0])), 0.1).unwrap();
+/// let hit = store.get("t0", &names, &[2.5]).unwrap();
+/// assert_eq!(hit.outputs, Some(vec![1.0, 2.0]));
+/// assert!(store.get("t0", &names, &[2.5000001]).is_none());
+/// ```
+#[derive(Debug)]
+pub struct RunStore {
+    fingerprint: String,
+    path: Option<PathBuf>,
+    inner: Mutex<Inner>,
+    load: LoadReport,
+}
+
+impl RunStore {
+    /// A store without a file (tests, or calibrations that need no journal).
+    pub fn in_memory(fingerprint: impl Into<String>) -> Self {
+        RunStore {
+            fingerprint: fingerprint.into(),
+            path: None,
+            inner: Mutex::new(Inner {
+                runs: HashMap::new(),
+                next_seq: 0,
+                file: None,
+            }),
+            load: LoadReport::default(),
+        }
+    }
+
+    /// Opens (or creates) the journal at `path` for runs of the model with `fingerprint`.
+    ///
+    /// A torn last line is cut off the file so that later lines start clean; bad lines
+    /// and runs of other fingerprints are skipped. See [`Self::load_report`].
+    pub fn open(path: impl AsRef<Path>, fingerprint: impl Into<String>) -> Result<Self> {
+        let path = path.as_ref().to_path_buf();
+        let fingerprint = fingerprint.into();
+        let mut file = OpenOptions::new()
+            .read(true)
+            .append(true)
+            .create(true)
+            .open(&path)
+            .map_err(|e| Error::io(&path, e))?;
+        let mut bytes = Vec::new();
+        file.read_to_end(&mut bytes)
+            .map_err(|e| Error::io(&path, e))?;
+
+        let mut load = LoadReport::default();
+        let mut runs = HashMap::new();
+        let mut max_seq: Option<u64> = None;
+        let complete_len = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        let mut take = |rec: RunRecord, load: &mut LoadReport| {
+            max_seq = Some(max_seq.map_or(rec.seq, |m: u64| m.max(rec.seq)));
+            if rec.fingerprint != fingerprint {
+                load.other_fingerprint += 1;
+                return;
+            }
+            let k = key(&rec.scenario, &rec.param_names, &rec.params);
+            match runs.entry(k) {
+                Entry::Occupied(_) => load.duplicates += 1,
+                Entry::Vacant(v) => {
+                    v.insert(rec);
+                    load.loaded += 1;
+                }
+            }
+        };
+        for (i, line) in bytes[..complete_len].split(|&b| b == b'\n').enumerate() {
+            if line.is_empty() {
+                continue;
+            }
+            load.lines += 1;
+            match parse(line) {
+                Ok(rec) => take(rec, &mut load),
+                Err(reason) => load.bad_lines.push(BadLine {
+                    line: i + 1,
+                    reason,
+                }),
+            }
+        }
+        let tail = &bytes[complete_len..];
+        let tail_line = bytes[..complete_len]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1;
+        let mut fix_newline = false;
+        if !tail.is_empty() {
+            match parse(tail) {
+                // Only the newline is missing: the record is whole.
+                Ok(rec) => {
+                    load.lines += 1;
+                    take(rec, &mut load);
+                    fix_newline = true;
+                }
+                Err(reason) => {
+                    load.torn_tail = Some(BadLine {
+                        line: tail_line,
+                        reason: format!("torn last line ({} bytes): {reason}", tail.len()),
+                    });
+                    file.set_len(complete_len as u64)
+                        .map_err(|e| Error::io(&path, e))?;
+                    file.sync_data().map_err(|e| Error::io(&path, e))?;
+                }
+            }
+        }
+        file.seek(SeekFrom::End(0))
+            .map_err(|e| Error::io(&path, e))?;
+        if fix_newline {
+            file.write_all(b"\n").map_err(|e| Error::io(&path, e))?;
+            file.sync_data().map_err(|e| Error::io(&path, e))?;
+        }
+        Ok(RunStore {
+            fingerprint,
+            path: Some(path),
+            inner: Mutex::new(Inner {
+                runs,
+                next_seq: max_seq.map_or(0, |m| m + 1),
+                file: Some(file),
+            }),
+            load,
+        })
+    }
+
+    /// The model fingerprint this store serves.
+    pub fn fingerprint(&self) -> &str {
+        &self.fingerprint
+    }
+
+    /// The journal file, when there is one.
+    pub fn path(&self) -> Option<&Path> {
+        self.path.as_deref()
+    }
+
+    /// What opening the journal found.
+    pub fn load_report(&self) -> &LoadReport {
+        &self.load
+    }
+
+    /// Number of cached runs.
+    pub fn len(&self) -> usize {
+        self.lock().runs.len()
+    }
+
+    /// True when no run is cached.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The cached run at exactly these parameter values, if any.
+    pub fn get(&self, scenario: &str, names: &[String], params: &[f64]) -> Option<RunRecord> {
+        self.lock().runs.get(&key(scenario, names, params)).cloned()
+    }
+
+    /// Journals a finished run (appended, flushed and synced before returning) and caches it.
+    /// Safe to call from several threads.
+    pub fn record(
+        &self,
+        scenario: &str,
+        names: &[String],
+        params: &[f64],
+        result: &std::result::Result<Outputs, ModelError>,
+        wall_s: f64,
+    ) -> Result<RunRecord> {
+        let (status, outputs, spread, error) = match result {
+            Ok(o) => (
+                RunStatus::Ok,
+                Some(o.values.clone()),
+                o.spread.clone(),
+                None,
+            ),
+            Err(e) => (RunStatus::Failed, None, None, Some(e.clone())),
+        };
+        let mut inner = self.lock();
+        let rec = RunRecord {
+            seq: inner.next_seq,
+            fingerprint: self.fingerprint.clone(),
+            scenario: scenario.to_string(),
+            param_names: names.to_vec(),
+            params: params.to_vec(),
+            status,
+            outputs,
+            spread,
+            error,
+            wall_s,
+        };
+        if let Some(file) = inner.file.as_mut() {
+            let path = self.path.as_deref().unwrap_or(Path::new("runs.jsonl"));
+            let journal = |reason: String| Error::Journal {
+                path: path.display().to_string(),
+                reason,
+            };
+            let mut line = serde_json::to_vec(&rec).map_err(|e| journal(e.to_string()))?;
+            line.push(b'\n');
+            // One write per line keeps a crash to a torn tail, never an interleaving.
+            file.write_all(&line).map_err(|e| Error::io(path, e))?;
+            file.flush().map_err(|e| Error::io(path, e))?;
+            file.sync_data().map_err(|e| Error::io(path, e))?;
+        }
+        inner.next_seq += 1;
+        inner.runs.insert(key(scenario, names, params), rec.clone());
+        Ok(rec)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        // A panic while holding the lock leaves the map consistent (insert is last).
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+fn parse(line: &[u8]) -> std::result::Result<RunRecord, String> {
+    let rec: RunRecord = serde_json::from_slice(line).map_err(|e| e.to_string())?;
+    rec.check()?;
+    Ok(rec)
+}

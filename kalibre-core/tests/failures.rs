@@ -1,0 +1,97 @@
+//! A model that fails in part of the space: failures are journaled as failed runs, the
+//! loop continues and still finds the result, and proposals on failed points are moved.
+
+mod common;
+
+use std::collections::HashSet;
+use std::fs;
+
+use common::*;
+use kalibre_core::{
+    Calibrator, ModelError, Objective, RunRecord, RunStatus, RunStore, SearchOutcome, Searcher,
+};
+
+/// Fails (`Err`) for `a > 3` and returns a NaN output for `b < 0.8`: the design's lower
+/// corner (0, 0.5) and upper corner (4, 3) both fail.
+const ZONE: FailZone = FailZone {
+    a_err: 3.0,
+    b_nan: 0.8,
+};
+
+#[test]
+fn failed_runs_are_journaled_and_the_loop_still_finds_the_truth() {
+    let dir = temp_dir("failures");
+    let path = dir.join("runs.jsonl");
+    let (model, obs, space) = (Poly::failing(ZONE), observations(), space());
+    let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_seed(1)
+        .with_max_iterations(12)
+        .with_target_score(1e-3)
+        .with_store(RunStore::open(&path, "poly-v1").unwrap())
+        .run()
+        .unwrap();
+    // The two failing corners, at both snapshots.
+    assert_eq!(r.initial.failed_runs, 4);
+    assert!(r.runs.failed >= 4);
+    for (name, truth) in ["a", "b"].iter().zip(TRUTH) {
+        let got = r.best.params.get(name).unwrap();
+        assert!((got - truth).abs() < 2e-3, "{name}: {got} vs {truth}");
+    }
+    let records: Vec<RunRecord> = fs::read_to_string(&path)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(records.len(), r.runs.total);
+    let failed: Vec<&RunRecord> = records
+        .iter()
+        .filter(|x| x.status == RunStatus::Failed)
+        .collect();
+    assert_eq!(failed.len(), r.runs.failed);
+    assert!(failed.iter().all(|x| x.outputs.is_none()));
+    assert!(failed
+        .iter()
+        .any(|x| matches!(x.error, Some(ModelError::Failed { .. }))));
+    assert!(failed
+        .iter()
+        .any(|x| matches!(x.error, Some(ModelError::NonFinite { index: 2, .. }))));
+}
+
+/// Always proposes the design's upper corner, which fails: the loop must move off it.
+struct StuckOnFailure;
+
+impl Searcher for StuckOnFailure {
+    fn search(
+        &self,
+        _objective: &dyn Objective,
+        _start: &[f64],
+        _seed: u64,
+    ) -> kalibre_core::Result<SearchOutcome> {
+        Ok(SearchOutcome {
+            best_unit: vec![1.0, 1.0],
+            best_cost: 0.0,
+            evaluations: 0,
+            trace: Vec::new(),
+        })
+    }
+}
+
+#[test]
+fn a_proposal_on_a_failed_point_is_moved_and_never_repeated() {
+    let (model, obs, space) = (Poly::failing(ZONE), observations(), space());
+    let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_searcher(StuckOnFailure)
+        .with_max_iterations(5)
+        .run()
+        .unwrap();
+    assert_eq!(r.history.len(), 5);
+    assert!(r.history.iter().all(|h| h.perturbed));
+    let mut seen = HashSet::new();
+    for h in &r.history {
+        let bits: Vec<u64> = h.params.values().iter().map(|v| v.to_bits()).collect();
+        assert!(seen.insert(bits), "point {:?} run twice", h.params);
+    }
+    assert_eq!(model.calls(), r.runs.total);
+    // Near the corner (a > 3) every run fails; the best stays a design point.
+    assert_eq!(r.best.iteration, 0);
+}

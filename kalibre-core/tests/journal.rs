@@ -1,0 +1,202 @@
+//! `runs.jsonl`: exact-bit keys, torn last lines, garbage lines, foreign fingerprints,
+//! parallel appends.
+
+mod common;
+
+use std::fs;
+use std::io::Write;
+
+use kalibre_core::{ModelError, Outputs, RunStatus, RunStore};
+use rayon::prelude::*;
+
+fn names() -> Vec<String> {
+    vec!["a".into(), "b".into()]
+}
+
+fn ok(v: &[f64]) -> Result<Outputs, ModelError> {
+    Ok(Outputs::from(v.to_vec()))
+}
+
+fn lines(path: &std::path::Path) -> Vec<String> {
+    fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn values_round_trip_bit_exactly_and_keys_are_exact() {
+    let dir = common::temp_dir("journal-bits");
+    let path = dir.join("runs.jsonl");
+    let p = [0.1 + 0.2, 1.0 / 3.0];
+    let out = [std::f64::consts::PI, 1e-300, -2.5e17, 0.1 + 0.7];
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store.record("t0", &names(), &p, &ok(&out), 0.5).unwrap();
+        store
+            .record(
+                "t0",
+                &names(),
+                &[0.3, 1.0 / 3.0],
+                &Err(ModelError::failed("boom")),
+                0.1,
+            )
+            .unwrap();
+    }
+    let store = RunStore::open(&path, "m1").unwrap();
+    assert!(store.load_report().is_clean());
+    assert_eq!(store.len(), 2);
+    let rec = store.get("t0", &names(), &p).unwrap();
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(rec.outputs.as_ref().unwrap()), bits(&out));
+    assert_eq!(bits(&rec.params), bits(&p));
+    // 0.1 + 0.2 != 0.3: a different key, which holds the failed run.
+    let failed = store.get("t0", &names(), &[0.3, 1.0 / 3.0]).unwrap();
+    assert_eq!(failed.status, RunStatus::Failed);
+    assert_eq!(failed.result().unwrap_err(), ModelError::failed("boom"));
+    assert!(store.get("t1", &names(), &p).is_none());
+    assert!(store.get("t0", &["a".into(), "c".into()], &p).is_none());
+}
+
+#[test]
+fn a_torn_last_line_is_reported_cut_and_never_fatal() {
+    let dir = common::temp_dir("journal-torn");
+    let path = dir.join("runs.jsonl");
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        for i in 0..3 {
+            store
+                .record("t0", &names(), &[i as f64, 1.0], &ok(&[i as f64]), 0.0)
+                .unwrap();
+        }
+    }
+    let whole = fs::read(&path).unwrap();
+    let clean_len = whole.len();
+    // A crash mid-write: half of a fourth line, no newline.
+    let mut f = fs::OpenOptions::new().append(true).open(&path).unwrap();
+    f.write_all(br#"{"seq":3,"fingerprint":"m1","scenario":"t0","param_names":["a","b"],"par"#)
+        .unwrap();
+    drop(f);
+
+    let store = RunStore::open(&path, "m1").unwrap();
+    let load = store.load_report();
+    assert_eq!(load.loaded, 3);
+    assert!(load.bad_lines.is_empty());
+    let torn = load.torn_tail.as_ref().expect("torn tail reported");
+    assert_eq!(torn.line, 4);
+    assert_eq!(
+        fs::read(&path).unwrap().len(),
+        clean_len,
+        "torn bytes cut off"
+    );
+    // Appending after the cut gives clean lines, and the sequence goes on.
+    let rec = store
+        .record("t0", &names(), &[9.0, 1.0], &ok(&[9.0]), 0.0)
+        .unwrap();
+    assert_eq!(rec.seq, 3);
+    drop(store);
+    let again = RunStore::open(&path, "m1").unwrap();
+    assert!(again.load_report().is_clean());
+    assert_eq!(again.len(), 4);
+    assert_eq!(lines(&path).len(), 4);
+}
+
+#[test]
+fn a_complete_last_line_without_newline_is_kept() {
+    let dir = common::temp_dir("journal-nonewline");
+    let path = dir.join("runs.jsonl");
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store
+            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
+            .unwrap();
+        store
+            .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
+            .unwrap();
+    }
+    let mut bytes = fs::read(&path).unwrap();
+    assert_eq!(bytes.pop(), Some(b'\n'));
+    fs::write(&path, &bytes).unwrap();
+    let store = RunStore::open(&path, "m1").unwrap();
+    assert!(store.load_report().is_clean());
+    assert_eq!(store.len(), 2);
+    store
+        .record("t0", &names(), &[3.0, 1.0], &ok(&[3.0]), 0.0)
+        .unwrap();
+    drop(store);
+    let again = RunStore::open(&path, "m1").unwrap();
+    assert!(again.load_report().is_clean());
+    assert_eq!(again.len(), 3);
+}
+
+#[test]
+fn garbage_lines_and_foreign_runs_are_skipped_and_reported() {
+    let dir = common::temp_dir("journal-garbage");
+    let path = dir.join("runs.jsonl");
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store
+            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
+            .unwrap();
+        let other = RunStore::in_memory("m2");
+        let foreign = other
+            .record("t0", &names(), &[5.0, 1.0], &ok(&[5.0]), 0.0)
+            .unwrap();
+        drop(store);
+        let mut f = fs::OpenOptions::new().append(true).open(&path).unwrap();
+        writeln!(f, "this is not json").unwrap();
+        writeln!(f, "{}", serde_json::to_string(&foreign).unwrap()).unwrap();
+        // Parses as JSON but breaks the record's rules (ok without outputs).
+        writeln!(
+            f,
+            r#"{{"seq":9,"fingerprint":"m1","scenario":"t0","param_names":["a","b"],"params":[7.0,1.0],"status":"ok","wall_s":0.0}}"#
+        )
+        .unwrap();
+        writeln!(f, r#"{{"seq":10,"unknown_field":1}}"#).unwrap();
+    }
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store
+            .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
+            .unwrap();
+    }
+    let store = RunStore::open(&path, "m1").unwrap();
+    let load = store.load_report();
+    assert_eq!(load.lines, 6);
+    assert_eq!(load.loaded, 2);
+    assert_eq!(load.other_fingerprint, 1);
+    assert!(load.torn_tail.is_none());
+    let bad: Vec<usize> = load.bad_lines.iter().map(|b| b.line).collect();
+    assert_eq!(bad, vec![2, 4, 5]);
+    assert!(load.bad_lines[1].reason.contains("without outputs"));
+    assert!(
+        store.get("t0", &names(), &[5.0, 1.0]).is_none(),
+        "foreign run ignored"
+    );
+    assert!(store.get("t0", &names(), &[2.0, 1.0]).is_some());
+    // The foreign line's sequence number (0 of m2) and the bad ones do not collide with new ones.
+    assert_eq!(store.get("t0", &names(), &[2.0, 1.0]).unwrap().seq, 1);
+}
+
+#[test]
+fn parallel_appends_give_whole_lines() {
+    let dir = common::temp_dir("journal-parallel");
+    let path = dir.join("runs.jsonl");
+    let store = RunStore::open(&path, "m1").unwrap();
+    (0..64).into_par_iter().for_each(|i| {
+        let p = [i as f64, 0.5];
+        store
+            .record("t0", &names(), &p, &ok(&[i as f64; 8]), 0.0)
+            .unwrap();
+    });
+    drop(store);
+    let store = RunStore::open(&path, "m1").unwrap();
+    assert!(store.load_report().is_clean());
+    assert_eq!(store.len(), 64);
+    let mut seqs: Vec<u64> = (0..64)
+        .map(|i| store.get("t0", &names(), &[i as f64, 0.5]).unwrap().seq)
+        .collect();
+    seqs.sort();
+    assert_eq!(seqs, (0..64).collect::<Vec<_>>());
+}

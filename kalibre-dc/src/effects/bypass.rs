@@ -1,0 +1,186 @@
+//! `bypass`: part of the supply enters the room where no server draws it (a cable
+//! cut-out in a hot aisle, a misplaced tile), at supply temperature; the regular tiles
+//! (or CRAC fronts) deliver the rest.
+//!
+//! | field | required | meaning |
+//! |---|---|---|
+//! | `position_m`, `size_m` | one placement | floor opening: `[x, y]` minimum corner and `[dx, dy]` size (m) |
+//! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep) behind its exhaust |
+//! | `depth_m` | no | depth of the `behind_rack` strip (m), default 0.4 |
+//! | `fraction` | no | initial share of the CRAC flow, default 0.05 |
+//! | `fraction_bounds` | no | bounds, within and default `[0, 0.5]` |
+
+use kalibre_core::Param;
+use serde_json::Value;
+
+use super::fields::{param_fields, spec, Fields};
+use super::{check_values, Effect, EffectFactory};
+use crate::hall::{Aabb, EffectSpec, Hall};
+use crate::sim::{SimMods, SupplyOpening};
+use crate::Result;
+
+const KIND: &str = "bypass";
+const BOUNDS: [f64; 2] = [0.0, 0.5];
+
+/// Where the bypass air enters.
+#[derive(Debug, Clone, PartialEq)]
+enum Placement {
+    Floor {
+        position_m: [f64; 2],
+        size_m: [f64; 2],
+    },
+    BehindRack {
+        rack: String,
+        depth_m: f64,
+    },
+}
+
+/// A bypass opening.
+#[derive(Debug, Clone)]
+pub struct Bypass {
+    placement: Placement,
+    region: Aabb,
+    param: Param,
+}
+
+impl Effect for Bypass {
+    fn kind(&self) -> &str {
+        KIND
+    }
+
+    fn parameters(&self) -> Vec<Param> {
+        vec![self.param.clone()]
+    }
+
+    fn to_spec(&self) -> EffectSpec {
+        let mut f: Vec<(String, Value)> = match &self.placement {
+            Placement::Floor { position_m, size_m } => vec![
+                ("position_m".into(), Value::from(position_m.to_vec())),
+                ("size_m".into(), Value::from(size_m.to_vec())),
+            ],
+            Placement::BehindRack { rack, depth_m } => vec![
+                ("behind_rack".into(), Value::from(rack.clone())),
+                ("depth_m".into(), Value::from(*depth_m)),
+            ],
+        };
+        f.extend(param_fields(&self.param, BOUNDS[0], BOUNDS[1]));
+        spec(
+            KIND,
+            f.iter().map(|(k, v)| (k.as_str(), v.clone())).collect(),
+        )
+    }
+
+    fn modify(&self, values: &[f64], _hall: &Hall, mods: &mut SimMods) -> Result<()> {
+        check_values(KIND, values, 1)?;
+        if values[0] > 0.0 {
+            mods.supply_openings.push(SupplyOpening {
+                region: self.region,
+                share: values[0],
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Builds [`Bypass`].
+#[derive(Debug, Clone, Copy)]
+pub struct BypassFactory;
+
+impl EffectFactory for BypassFactory {
+    fn kind(&self) -> &str {
+        KIND
+    }
+
+    fn build(&self, s: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
+        let mut f = Fields::new(s);
+        let pos = f.opt_array::<2>("position_m")?;
+        let size = f.opt_array::<2>("size_m")?;
+        let behind = f.opt_str("behind_rack")?;
+        let depth = f.opt_f64("depth_m")?;
+        let room = hall.room.size_m;
+        let (placement, region) = match (pos, size, behind) {
+            (Some(p), Some(sz), None) => {
+                if depth.is_some() {
+                    return Err(f.error("depth_m", "only with `behind_rack`"));
+                }
+                if !(sz[0] > 0.0 && sz[1] > 0.0) {
+                    return Err(f.error("size_m", "must be positive"));
+                }
+                if p[0] < -1e-9
+                    || p[1] < -1e-9
+                    || p[0] + sz[0] > room[0] + 1e-9
+                    || p[1] + sz[1] > room[1] + 1e-9
+                {
+                    return Err(f.error("position_m", "the opening must lie inside the room"));
+                }
+                let region = Aabb {
+                    min: [p[0], p[1], 0.0],
+                    max: [p[0] + sz[0], p[1] + sz[1], 0.0],
+                };
+                (
+                    Placement::Floor {
+                        position_m: p,
+                        size_m: sz,
+                    },
+                    region,
+                )
+            }
+            (None, None, Some(id)) => {
+                let r =
+                    hall.racks.iter().find(|r| r.id == id).ok_or_else(|| {
+                        f.error("behind_rack", format!("no rack `{id}` in the hall"))
+                    })?;
+                let d = depth.unwrap_or(0.4);
+                if !(d > 0.0 && d <= 5.0) {
+                    return Err(f.error("depth_m", format!("{d} is outside (0, 5]")));
+                }
+                let b = Aabb::from_position_size(r.position_m, r.size_m);
+                let (axis, sign) = r.inlet.opposite().axis_sign();
+                let mut region = Aabb {
+                    min: [b.min[0], b.min[1], 0.0],
+                    max: [b.max[0], b.max[1], 0.0],
+                };
+                if sign > 0.0 {
+                    region.min[axis] = b.max[axis];
+                    region.max[axis] = (b.max[axis] + d).min(room[axis]);
+                } else {
+                    region.max[axis] = b.min[axis];
+                    region.min[axis] = (b.min[axis] - d).max(0.0);
+                }
+                if region.max[axis] - region.min[axis] <= 1e-9 {
+                    return Err(f.error(
+                        "behind_rack",
+                        format!("rack `{id}` exhausts against a wall"),
+                    ));
+                }
+                (
+                    Placement::BehindRack {
+                        rack: id.to_string(),
+                        depth_m: d,
+                    },
+                    region,
+                )
+            }
+            _ => {
+                return Err(f.error(
+                    "position_m",
+                    "give either `position_m` and `size_m` (a floor opening) or `behind_rack`",
+                ))
+            }
+        };
+        let param = f.param("fraction", BOUNDS[0], BOUNDS[1], 0.05)?;
+        f.finish()?;
+        Ok(Box::new(Bypass {
+            placement,
+            region,
+            param,
+        }))
+    }
+
+    fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {
+        hall.racks
+            .iter()
+            .map(|r| spec(KIND, vec![("behind_rack", Value::from(r.id.clone()))]))
+            .collect()
+    }
+}

@@ -1,0 +1,141 @@
+//! `containment_leakage`: openings in aisle containment (gaps, open doors, missing
+//! panels); the flow through them follows the pressure difference across the panel.
+//!
+//! | field | required | meaning |
+//! |---|---|---|
+//! | `containment` | no | index into `containment`; every containment when absent |
+//! | `sides` | no | panels opened: any of `-x`, `+x`, `-y`, `+y`, `top`; all when absent (`-x`/`+x` are the aisle-end doors for rows along x) |
+//! | `open_fraction` | no | initial open fraction of those panels, default 0.05 |
+//! | `open_fraction_bounds` | no | bounds, within and default `[0, 1]` |
+
+use kalibre_core::Param;
+use serde_json::Value;
+
+use super::fields::{param_fields, spec, Fields};
+use super::{check_values, Effect, EffectFactory};
+use crate::hall::{EffectSpec, Hall};
+use crate::sim::{SimMods, WallOpening, WallSide};
+use crate::Result;
+
+const KIND: &str = "containment_leakage";
+const BOUNDS: [f64; 2] = [0.0, 1.0];
+
+/// Leaky containment panels.
+#[derive(Debug, Clone)]
+pub struct ContainmentLeakage {
+    containment: Option<usize>,
+    sides: Option<Vec<WallSide>>,
+    param: Param,
+}
+
+impl Effect for ContainmentLeakage {
+    fn kind(&self) -> &str {
+        KIND
+    }
+
+    fn parameters(&self) -> Vec<Param> {
+        vec![self.param.clone()]
+    }
+
+    fn to_spec(&self) -> EffectSpec {
+        let mut f: Vec<(String, Value)> = Vec::new();
+        if let Some(c) = self.containment {
+            f.push(("containment".into(), Value::from(c)));
+        }
+        if let Some(s) = &self.sides {
+            f.push((
+                "sides".into(),
+                Value::from(s.iter().map(|w| w.as_str()).collect::<Vec<_>>()),
+            ));
+        }
+        f.extend(param_fields(&self.param, BOUNDS[0], BOUNDS[1]));
+        spec(
+            KIND,
+            f.iter().map(|(k, v)| (k.as_str(), v.clone())).collect(),
+        )
+    }
+
+    fn modify(&self, values: &[f64], hall: &Hall, mods: &mut SimMods) -> Result<()> {
+        check_values(KIND, values, 1)?;
+        let sides = self.sides.clone().unwrap_or_else(|| WallSide::ALL.to_vec());
+        let which: Vec<usize> = match self.containment {
+            Some(c) => vec![c],
+            None => (0..hall.containment.len()).collect(),
+        };
+        for c in which {
+            mods.wall_openings.push(WallOpening {
+                containment: c,
+                sides: sides.clone(),
+                open_fraction: values[0].clamp(0.0, 1.0),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Builds [`ContainmentLeakage`].
+#[derive(Debug, Clone, Copy)]
+pub struct ContainmentLeakageFactory;
+
+impl EffectFactory for ContainmentLeakageFactory {
+    fn kind(&self) -> &str {
+        KIND
+    }
+
+    fn build(&self, s: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
+        let mut f = Fields::new(s);
+        if hall.containment.is_empty() {
+            return Err(f.error("kind", "the hall has no containment"));
+        }
+        let containment = f.opt_usize("containment")?;
+        if let Some(c) = containment {
+            if c >= hall.containment.len() {
+                return Err(f.error(
+                    "containment",
+                    format!(
+                        "index {c} but the hall has {} containments",
+                        hall.containment.len()
+                    ),
+                ));
+            }
+        }
+        let sides = match f.opt_str_list("sides")? {
+            None => None,
+            Some(list) => {
+                if list.is_empty() {
+                    return Err(f.error("sides", "empty list"));
+                }
+                let mut out = Vec::new();
+                for s in list {
+                    out.push(WallSide::parse(s).ok_or_else(|| {
+                        f.error("sides", format!("`{s}` is not one of -x, +x, -y, +y, top"))
+                    })?);
+                }
+                Some(out)
+            }
+        };
+        let param = f.param("open_fraction", BOUNDS[0], BOUNDS[1], 0.05)?;
+        f.finish()?;
+        Ok(Box::new(ContainmentLeakage {
+            containment,
+            sides,
+            param,
+        }))
+    }
+
+    fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {
+        let mut out = Vec::new();
+        for c in 0..hall.containment.len() {
+            for s in WallSide::ALL {
+                out.push(spec(
+                    KIND,
+                    vec![
+                        ("containment", Value::from(c)),
+                        ("sides", Value::from(vec![s.as_str()])),
+                    ],
+                ));
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,451 @@
+//! The rules of `formats.md` section 1 that the JSON structure alone does not enforce:
+//! ids, unit ranges, boxes inside the room, overlaps, sensors in the air, alpha bounds.
+//!
+//! The first problem in document order (section by section) is reported, with the JSON
+//! pointer of the offending value.
+
+use std::collections::{HashMap, HashSet};
+
+use super::geometry::Aabb;
+use super::types::{Hall, SupplyKind, HALL_SCHEMA};
+use crate::{Error, Result};
+
+/// Tolerance of every geometric test (m): boxes that touch do not overlap.
+pub const GEOMETRY_TOL_M: f64 = 1e-3;
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+impl Hall {
+    /// Checks every rule of `formats.md` section 1 that the types do not already enforce;
+    /// `file` names the source in errors. [`Hall::from_json_str`] calls it.
+    pub fn validate(&self, file: &str) -> Result<()> {
+        let c = Checker { file };
+        if self.schema != HALL_SCHEMA {
+            return Err(c.err(
+                "/schema",
+                format!("expected \"{HALL_SCHEMA}\", found \"{}\"", self.schema),
+            ));
+        }
+        let room = self.room.size_m;
+        for (a, &s) in room.iter().enumerate() {
+            c.positive(s, &format!("/room/size_m/{a}"), "room size")?;
+        }
+        self.check_server_types(&c)?;
+        self.check_cracs(&c, room)?;
+        for (i, t) in self.tiles.iter().enumerate() {
+            let p = format!("/tiles/{i}");
+            c.check_box(&p, &t.position_m, &t.size_m, &room[..2])?;
+            let f = t.open_fraction;
+            c.finite(f, &format!("{p}/open_fraction"))?;
+            if !(f > 0.0 && f <= 1.0) {
+                return Err(c.err(
+                    format!("{p}/open_fraction"),
+                    format!("expected a fraction in (0, 1], found {f}"),
+                ));
+            }
+        }
+        for (i, r) in self.returns.iter().enumerate() {
+            c.check_box(
+                &format!("/returns/{i}"),
+                &r.position_m,
+                &r.size_m,
+                &room[..2],
+            )?;
+        }
+        self.check_racks(&c, room)?;
+        self.check_containment(&c, room)?;
+        self.check_sensors(&c)?;
+        for (i, e) in self.effects.iter().enumerate() {
+            if e.kind.is_empty() {
+                return Err(c.err(
+                    format!("/effects/{i}/kind"),
+                    "expected a non-empty effect kind",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn check_server_types(&self, c: &Checker) -> Result<()> {
+        c.unique_ids(
+            self.server_types
+                .iter()
+                .enumerate()
+                .map(|(i, t)| (t.id.as_str(), format!("/server_types/{i}/id"))),
+        )?;
+        for (i, t) in self.server_types.iter().enumerate() {
+            let p = format!("/server_types/{i}/alpha_cfm_per_w");
+            let a = t.alpha_cfm_per_w;
+            c.finite(a.initial, &format!("{p}/initial"))?;
+            c.finite(a.min, &format!("{p}/min"))?;
+            c.finite(a.max, &format!("{p}/max"))?;
+            if a.min <= 0.0 {
+                return Err(c.err(
+                    format!("{p}/min"),
+                    format!("expected 0 < min <= initial <= max, found min {}", a.min),
+                ));
+            }
+            if a.min > a.max {
+                return Err(c.err(
+                    p,
+                    format!(
+                        "expected 0 < min <= initial <= max, found min {} > max {} (inverted bounds)",
+                        a.min, a.max
+                    ),
+                ));
+            }
+            if a.initial < a.min || a.initial > a.max {
+                return Err(c.err(
+                    format!("{p}/initial"),
+                    format!(
+                        "expected 0 < min <= initial <= max, found initial {} outside [{}, {}]",
+                        a.initial, a.min, a.max
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn check_cracs(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
+        c.unique_ids(
+            self.cracs
+                .iter()
+                .enumerate()
+                .map(|(i, k)| (k.id.as_str(), format!("/cracs/{i}/id"))),
+        )?;
+        for (i, k) in self.cracs.iter().enumerate() {
+            let p = format!("/cracs/{i}");
+            c.check_box(&p, &k.position_m, &k.size_m, &room)?;
+            c.positive(
+                k.rated_flow_m3_s,
+                &format!("{p}/rated_flow_m3_s"),
+                "rated flow",
+            )?;
+            if k.supply == SupplyKind::Floor && self.tiles.is_empty() {
+                return Err(c.err(
+                    format!("{p}/supply"),
+                    format!(
+                        "CRAC `{}` has supply `floor`, which needs tiles, but the hall has no tiles",
+                        k.id
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn check_racks(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
+        c.unique_ids(
+            self.racks
+                .iter()
+                .enumerate()
+                .map(|(i, r)| (r.id.as_str(), format!("/racks/{i}/id"))),
+        )?;
+        c.unique_ids(self.racks.iter().enumerate().flat_map(|(i, r)| {
+            r.servers
+                .iter()
+                .enumerate()
+                .map(move |(j, s)| (s.id.as_str(), format!("/racks/{i}/servers/{j}/id")))
+        }))?;
+        let types: HashSet<&str> = self.server_types.iter().map(|t| t.id.as_str()).collect();
+        for (i, r) in self.racks.iter().enumerate() {
+            let p = format!("/racks/{i}");
+            c.check_box(&p, &r.position_m, &r.size_m, &room)?;
+            if r.units < 1 {
+                return Err(c.err(format!("{p}/units"), "expected units >= 1, found 0"));
+            }
+            for (j, s) in r.servers.iter().enumerate() {
+                let sp = format!("{p}/servers/{j}");
+                if !types.contains(s.server_type.as_str()) {
+                    let mut known: Vec<&str> = types.iter().copied().collect();
+                    known.sort_unstable();
+                    return Err(c.err(
+                        format!("{sp}/type"),
+                        format!(
+                            "unknown server type `{}`; expected one of: {}",
+                            s.server_type,
+                            known.join(", ")
+                        ),
+                    ));
+                }
+                if s.u < 1 || s.u > r.units {
+                    return Err(c.err(
+                        format!("{sp}/u"),
+                        format!(
+                            "server `{}` starts at unit {}, outside its rack's units; expected 1..={}",
+                            s.id, s.u, r.units
+                        ),
+                    ));
+                }
+                if s.height_u < 1 {
+                    return Err(c.err(format!("{sp}/height_u"), "expected height_u >= 1, found 0"));
+                }
+                let top = u64::from(s.u) + u64::from(s.height_u) - 1;
+                if top > u64::from(r.units) {
+                    return Err(c.err(
+                        format!("{sp}/height_u"),
+                        format!(
+                            "server `{}` spans units {}..={top}, outside its rack's units; expected u + height_u - 1 <= {}",
+                            s.id, s.u, r.units
+                        ),
+                    ));
+                }
+            }
+            check_unit_overlaps(c, &p, r)?;
+        }
+        let boxes: Vec<Aabb> = self
+            .racks
+            .iter()
+            .map(|r| Aabb::from_position_size(r.position_m, r.size_m))
+            .collect();
+        if let Some((first, later)) = first_overlap(&boxes) {
+            return Err(c.err(
+                format!("/racks/{later}"),
+                format!(
+                    "rack `{}` overlaps rack `{}`; expected racks not to overlap (touching is fine, tolerance 1 mm)",
+                    self.racks[later].id, self.racks[first].id
+                ),
+            ));
+        }
+        for (i, (r, b)) in self.racks.iter().zip(&boxes).enumerate() {
+            for k in &self.cracs {
+                if b.overlaps(
+                    &Aabb::from_position_size(k.position_m, k.size_m),
+                    GEOMETRY_TOL_M,
+                ) {
+                    return Err(c.err(
+                        format!("/racks/{i}"),
+                        format!(
+                            "rack `{}` overlaps CRAC `{}`; expected racks not to overlap a CRAC",
+                            r.id, k.id
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn check_containment(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
+        for (i, b) in self.containment.iter().enumerate() {
+            let p = format!("/containment/{i}");
+            for a in 0..3 {
+                c.finite(b.min_m[a], &format!("{p}/min_m/{a}"))?;
+                c.finite(b.max_m[a], &format!("{p}/max_m/{a}"))?;
+            }
+            for a in 0..3 {
+                if b.max_m[a] <= b.min_m[a] {
+                    return Err(c.err(
+                        format!("{p}/max_m/{a}"),
+                        format!(
+                            "expected max_m > min_m along {} (positive size), found {} <= {}",
+                            AXES[a], b.max_m[a], b.min_m[a]
+                        ),
+                    ));
+                }
+                if b.min_m[a] < -GEOMETRY_TOL_M {
+                    return Err(c.err(
+                        format!("{p}/min_m/{a}"),
+                        format!("expected >= 0 (inside the room), found {}", b.min_m[a]),
+                    ));
+                }
+                if b.max_m[a] > room[a] + GEOMETRY_TOL_M {
+                    return Err(c.err(
+                        format!("{p}/max_m/{a}"),
+                        format!(
+                            "expected <= {} (inside the room along {}), found {}",
+                            room[a], AXES[a], b.max_m[a]
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn check_sensors(&self, c: &Checker) -> Result<()> {
+        c.unique_ids(
+            self.sensors
+                .iter()
+                .enumerate()
+                .map(|(i, s)| (s.id.as_str(), format!("/sensors/{i}/id"))),
+        )?;
+        let room = self.room_box();
+        for (i, s) in self.sensors.iter().enumerate() {
+            let p = format!("/sensors/{i}/position_m");
+            for (a, &v) in s.position_m.iter().enumerate() {
+                c.finite(v, &format!("{p}/{a}"))?;
+            }
+            if !room.contains_point(s.position_m, GEOMETRY_TOL_M) {
+                return Err(c.err(
+                    p,
+                    format!(
+                        "sensor `{}` at {:?} is outside the room; expected a point within [0, {}] x [0, {}] x [0, {}] m",
+                        s.id, s.position_m, room.max[0], room.max[1], room.max[2]
+                    ),
+                ));
+            }
+            let solids = self
+                .racks
+                .iter()
+                .map(|r| ("rack", &r.id, r.position_m, r.size_m))
+                .chain(
+                    self.cracs
+                        .iter()
+                        .map(|k| ("CRAC", &k.id, k.position_m, k.size_m)),
+                );
+            for (what, id, pos, size) in solids {
+                let b = Aabb::from_position_size(pos, size);
+                if b.contains_point_strict(s.position_m, GEOMETRY_TOL_M) {
+                    return Err(c.err(
+                        p,
+                        format!(
+                            "sensor `{}` at {:?} is inside {what} `{id}`; expected a point in the air, not inside a solid",
+                            s.id, s.position_m
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Servers of one rack must not share a unit. Sorting by first unit keeps this linear in
+/// the number of servers after the sort.
+fn check_unit_overlaps(c: &Checker, rack_pointer: &str, r: &super::types::Rack) -> Result<()> {
+    let mut spans: Vec<(u64, u64, usize)> = r
+        .servers
+        .iter()
+        .enumerate()
+        .map(|(j, s)| {
+            let u = u64::from(s.u);
+            (u, u + u64::from(s.height_u).max(1) - 1, j)
+        })
+        .collect();
+    spans.sort_unstable();
+    let mut reach: Option<(u64, usize)> = None; // highest top so far and its server
+    for &(u, top, j) in &spans {
+        if let Some((prev_top, k)) = reach {
+            if u <= prev_top {
+                let (first, later) = (j.min(k), j.max(k));
+                let (a, b) = (&r.servers[first], &r.servers[later]);
+                return Err(c.err(
+                    format!("{rack_pointer}/servers/{later}/u"),
+                    format!(
+                        "server `{}` (units {}..={}) overlaps server `{}` (units {}..={}); expected no two servers of a rack to share a unit",
+                        b.id,
+                        b.u,
+                        u64::from(b.u) + u64::from(b.height_u) - 1,
+                        a.id,
+                        a.u,
+                        u64::from(a.u) + u64::from(a.height_u) - 1
+                    ),
+                ));
+            }
+        }
+        if reach.is_none_or(|(prev_top, _)| top > prev_top) {
+            reach = Some((top, j));
+        }
+    }
+    Ok(())
+}
+
+/// The overlapping pair `(first, later)` with the earliest `later` (then earliest `first`)
+/// in list order. A sweep along x avoids comparing every pair of a large hall.
+fn first_overlap(boxes: &[Aabb]) -> Option<(usize, usize)> {
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
+    order.sort_by(|&a, &b| boxes[a].min[0].total_cmp(&boxes[b].min[0]));
+    let mut best: Option<(usize, usize)> = None;
+    for (n, &i) in order.iter().enumerate() {
+        for &j in &order[n + 1..] {
+            if boxes[j].min[0] >= boxes[i].max[0] - GEOMETRY_TOL_M {
+                break;
+            }
+            if boxes[i].overlaps(&boxes[j], GEOMETRY_TOL_M) {
+                let pair = (i.min(j), i.max(j));
+                if best.is_none_or(|(f, l)| (pair.1, pair.0) < (l, f)) {
+                    best = Some(pair);
+                }
+            }
+        }
+    }
+    best
+}
+
+struct Checker<'a> {
+    file: &'a str,
+}
+
+impl Checker<'_> {
+    fn err(&self, field: impl Into<String>, message: impl Into<String>) -> Error {
+        Error::format(self.file, field, message)
+    }
+
+    fn finite(&self, v: f64, pointer: &str) -> Result<()> {
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(self.err(pointer, format!("expected a finite number, found {v}")))
+        }
+    }
+
+    fn positive(&self, v: f64, pointer: &str, what: &str) -> Result<()> {
+        self.finite(v, pointer)?;
+        if v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.err(pointer, format!("expected a positive {what}, found {v}")))
+        }
+    }
+
+    /// A room-aligned box given by its minimum corner and size (2-D footprints or 3-D
+    /// boxes): finite, positive size, inside the room within the tolerance.
+    fn check_box(&self, pointer: &str, pos: &[f64], size: &[f64], room: &[f64]) -> Result<()> {
+        for (a, (&p, &s)) in pos.iter().zip(size).enumerate() {
+            self.finite(p, &format!("{pointer}/position_m/{a}"))?;
+            self.positive(s, &format!("{pointer}/size_m/{a}"), "size")?;
+        }
+        for (a, ((&p, &s), &r)) in pos.iter().zip(size).zip(room).enumerate() {
+            if p < -GEOMETRY_TOL_M {
+                return Err(self.err(
+                    format!("{pointer}/position_m/{a}"),
+                    format!(
+                        "box starts at {} = {p} m, outside the room; expected >= 0",
+                        AXES[a]
+                    ),
+                ));
+            }
+            if p + s > r + GEOMETRY_TOL_M {
+                return Err(self.err(
+                    format!("{pointer}/position_m/{a}"),
+                    format!(
+                        "box reaches {} = {} m, outside the room; expected position + size <= {r} m",
+                        AXES[a],
+                        p + s
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Non-empty ids, unique within the list.
+    fn unique_ids<'b>(&self, ids: impl Iterator<Item = (&'b str, String)>) -> Result<()> {
+        let mut seen: HashMap<&str, String> = HashMap::new();
+        for (id, pointer) in ids {
+            if id.is_empty() {
+                return Err(self.err(pointer, "expected a non-empty id"));
+            }
+            if let Some(first) = seen.get(id) {
+                return Err(self.err(
+                    pointer,
+                    format!("duplicate id `{id}` (first at {first}); expected unique ids"),
+                ));
+            }
+            seen.insert(id, pointer);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,200 @@
+//! Matrix-free Krylov solvers: Jacobi-preconditioned CG (symmetric pressure system) and
+//! BiCGSTAB (advection-diffusion). Vector operations run on rayon in fixed chunks, and
+//! every reduction sums the per-chunk partial sums in chunk order, so results are
+//! bit-identical at any thread count.
+
+use rayon::prelude::*;
+
+/// Chunk length of parallel vector operations (fixed: it defines the summation order).
+pub(crate) const CHUNK: usize = 8192;
+
+/// A linear operator on cell vectors with a Jacobi preconditioner.
+pub(crate) trait Operator: Sync {
+    /// `y = A x`.
+    fn apply(&self, x: &[f64], y: &mut [f64]);
+    /// `1 / diag(A)` (1 on rows that are identities).
+    fn inv_diag(&self) -> &[f64];
+}
+
+/// Outcome of one linear solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveStats {
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Final residual norm relative to the right-hand side norm.
+    pub rel_residual: f64,
+}
+
+/// Deterministic dot product.
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let parts: Vec<f64> = a
+        .par_chunks(CHUNK)
+        .zip(b.par_chunks(CHUNK))
+        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>())
+        .collect();
+    parts.iter().sum()
+}
+
+fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// Jacobi-preconditioned conjugate gradients; `x` holds the initial guess and the answer.
+pub(crate) fn pcg(
+    op: &dyn Operator,
+    b: &[f64],
+    x: &mut [f64],
+    tol: f64,
+    max_iter: usize,
+) -> SolveStats {
+    let n = b.len();
+    let minv = op.inv_diag();
+    let mut r = vec![0.0; n];
+    op.apply(x, &mut r);
+    r.par_iter_mut()
+        .zip(b.par_iter())
+        .for_each(|(r, b)| *r = b - *r);
+    let bnorm = norm(b).max(f64::MIN_POSITIVE);
+    let mut z: Vec<f64> = r.iter().zip(minv).map(|(r, m)| r * m).collect();
+    let mut p = z.clone();
+    let mut ap = vec![0.0; n];
+    let mut rz = dot(&r, &z);
+    let mut rel = norm(&r) / bnorm;
+    let mut it = 0;
+    while rel > tol && it < max_iter {
+        op.apply(&p, &mut ap);
+        let pap = dot(&p, &ap);
+        if pap <= 0.0 || !pap.is_finite() {
+            break;
+        }
+        let alpha = rz / pap;
+        x.par_chunks_mut(CHUNK)
+            .zip(r.par_chunks_mut(CHUNK))
+            .zip(p.par_chunks(CHUNK).zip(ap.par_chunks(CHUNK)))
+            .for_each(|((x, r), (p, ap))| {
+                for i in 0..x.len() {
+                    x[i] += alpha * p[i];
+                    r[i] -= alpha * ap[i];
+                }
+            });
+        it += 1;
+        rel = norm(&r) / bnorm;
+        if rel <= tol {
+            break;
+        }
+        z.par_chunks_mut(CHUNK)
+            .zip(r.par_chunks(CHUNK).zip(minv.par_chunks(CHUNK)))
+            .for_each(|(z, (r, m))| {
+                for i in 0..z.len() {
+                    z[i] = r[i] * m[i];
+                }
+            });
+        let rz_new = dot(&r, &z);
+        let beta = rz_new / rz;
+        rz = rz_new;
+        p.par_chunks_mut(CHUNK)
+            .zip(z.par_chunks(CHUNK))
+            .for_each(|(p, z)| {
+                for i in 0..p.len() {
+                    p[i] = z[i] + beta * p[i];
+                }
+            });
+    }
+    SolveStats {
+        iterations: it,
+        rel_residual: rel,
+    }
+}
+
+/// Jacobi right-preconditioned BiCGSTAB; `x` holds the initial guess and the answer.
+pub(crate) fn bicgstab(
+    op: &dyn Operator,
+    b: &[f64],
+    x: &mut [f64],
+    tol: f64,
+    max_iter: usize,
+) -> SolveStats {
+    let n = b.len();
+    let minv = op.inv_diag();
+    let mut r = vec![0.0; n];
+    op.apply(x, &mut r);
+    r.par_iter_mut()
+        .zip(b.par_iter())
+        .for_each(|(r, b)| *r = b - *r);
+    let bnorm = norm(b).max(f64::MIN_POSITIVE);
+    let r0 = r.clone();
+    let (mut rho, mut alpha, mut omega) = (1.0, 1.0, 1.0);
+    let mut v = vec![0.0; n];
+    let mut p = vec![0.0; n];
+    let mut phat = vec![0.0; n];
+    let mut s = vec![0.0; n];
+    let mut shat = vec![0.0; n];
+    let mut t = vec![0.0; n];
+    let mut rel = norm(&r) / bnorm;
+    let mut it = 0;
+    while rel > tol && it < max_iter {
+        let rho_new = dot(&r0, &r);
+        if rho_new == 0.0 || !rho_new.is_finite() {
+            break;
+        }
+        let beta = (rho_new / rho) * (alpha / omega);
+        rho = rho_new;
+        p.par_chunks_mut(CHUNK)
+            .zip(phat.par_chunks_mut(CHUNK))
+            .zip(r.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
+            .zip(minv.par_chunks(CHUNK))
+            .for_each(|(((p, ph), (r, v)), m)| {
+                for i in 0..p.len() {
+                    p[i] = r[i] + beta * (p[i] - omega * v[i]);
+                    ph[i] = p[i] * m[i];
+                }
+            });
+        op.apply(&phat, &mut v);
+        let r0v = dot(&r0, &v);
+        if r0v == 0.0 || !r0v.is_finite() {
+            break;
+        }
+        alpha = rho / r0v;
+        s.par_chunks_mut(CHUNK)
+            .zip(shat.par_chunks_mut(CHUNK))
+            .zip(r.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
+            .zip(minv.par_chunks(CHUNK))
+            .for_each(|(((s, sh), (r, v)), m)| {
+                for i in 0..s.len() {
+                    s[i] = r[i] - alpha * v[i];
+                    sh[i] = s[i] * m[i];
+                }
+            });
+        it += 1;
+        let snorm = norm(&s) / bnorm;
+        if snorm <= tol {
+            x.par_iter_mut()
+                .zip(phat.par_iter())
+                .for_each(|(x, ph)| *x += alpha * ph);
+            r.copy_from_slice(&s);
+            rel = snorm;
+            break;
+        }
+        op.apply(&shat, &mut t);
+        let tt = dot(&t, &t);
+        omega = if tt > 0.0 { dot(&t, &s) / tt } else { 0.0 };
+        x.par_chunks_mut(CHUNK)
+            .zip(r.par_chunks_mut(CHUNK))
+            .zip(phat.par_chunks(CHUNK).zip(shat.par_chunks(CHUNK)))
+            .zip(s.par_chunks(CHUNK).zip(t.par_chunks(CHUNK)))
+            .for_each(|(((x, r), (ph, sh)), (s, t))| {
+                for i in 0..x.len() {
+                    x[i] += alpha * ph[i] + omega * sh[i];
+                    r[i] = s[i] - omega * t[i];
+                }
+            });
+        rel = norm(&r) / bnorm;
+        if omega == 0.0 {
+            break;
+        }
+    }
+    SolveStats {
+        iterations: it,
+        rel_residual: rel,
+    }
+}

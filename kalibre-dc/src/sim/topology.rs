@@ -1,0 +1,517 @@
+//! The symbolic part of the simulator, built once per hall and grid: solid cells, open
+//! faces and their conductances, containment walls, supply and return cells, server
+//! intake and exhaust cells with weights, and sensor interpolation stencils.
+
+use super::grid::{Grid, GEOM_EPS};
+use super::mods::WallSide;
+use super::SimConfig;
+use crate::hall::{Aabb, Hall, Side, SupplyKind};
+use crate::{Error, Result};
+
+/// Cells with weights summing to one.
+pub(crate) type Stencil = Vec<(usize, f64)>;
+
+/// One containment face crossing: axis and the cell on its low side.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct WallFace {
+    pub axis: usize,
+    pub low: usize,
+}
+
+/// The grid topology of a hall.
+#[derive(Debug, Clone)]
+pub(crate) struct Topology {
+    pub grid: Grid,
+    /// Solid (rack, CRAC) or inactive (enclosed, no flow) cells.
+    pub solid: Vec<bool>,
+    /// Conductance (m) of the face between `c` and `c + stride(a)`; 0 when closed.
+    pub g: [Vec<f64>; 3],
+    /// Conductance (m) from a cell to a fixed-pressure outlet (ceiling returns, or the
+    /// gauge cell when there are none).
+    pub g_outlet: Vec<f64>,
+    /// True when the hall has ceiling returns (else air returns into CRAC tops).
+    pub has_returns: bool,
+    /// Cells of each tile with weights, and each tile's share of the floor supply.
+    pub tiles: Vec<(Stencil, f64)>,
+    /// Per CRAC: the cells its supply enters (front face cells for `front` CRACs; empty
+    /// for `floor` CRACs).
+    pub crac_front: Vec<Stencil>,
+    /// Per CRAC: cells above its top face that take its return flow (no returns only).
+    pub crac_top: Vec<Stencil>,
+    /// Per server (hall order): intake and exhaust cells with weights.
+    pub server_intake: Vec<Stencil>,
+    /// Exhaust cells per server.
+    pub server_exhaust: Vec<Stencil>,
+    /// Sensor trilinear stencils (hall order).
+    pub sensors: Vec<Stencil>,
+    /// Per containment, per side (`WallSide::ALL` order): the wall faces between fluid cells.
+    pub walls: Vec<[Vec<WallFace>; 5]>,
+}
+
+/// Full (open) conductance of a face normal to axis `a`: area over centre distance.
+fn full_g(grid: &Grid, a: usize) -> f64 {
+    grid.face_area(a) / grid.d[a]
+}
+
+impl Topology {
+    pub fn build(hall: &Hall, config: &SimConfig) -> Result<Self> {
+        let grid = Grid::new(hall.room.size_m, config.cell_m);
+        let n = grid.len();
+        let mut solid = vec![false; n];
+        for r in &hall.racks {
+            for c in grid.cells_in_box(&Aabb::from_position_size(r.position_m, r.size_m)) {
+                solid[c] = true;
+            }
+        }
+        for cr in &hall.cracs {
+            for c in grid.cells_in_box(&Aabb::from_position_size(cr.position_m, cr.size_m)) {
+                solid[c] = true;
+            }
+        }
+        let mut g: [Vec<f64>; 3] = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        for (a, ga) in g.iter_mut().enumerate() {
+            let s = grid.stride(a);
+            let gf = full_g(&grid, a);
+            for (c, v) in ga.iter_mut().enumerate() {
+                let ijk = grid.ijk(c);
+                if ijk[a] + 1 < grid.n[a] && !solid[c] && !solid[c + s] {
+                    *v = gf;
+                }
+            }
+        }
+        let walls = containment_walls(
+            hall,
+            &grid,
+            &solid,
+            &mut g,
+            config.containment_leak_fraction,
+        );
+
+        // Returns: ceiling cells under each grille, Dirichlet p = 0 half a cell away.
+        let mut g_outlet = vec![0.0; n];
+        let top = grid.n[2] - 1;
+        let g_half = grid.face_area(2) / (0.5 * grid.d[2]);
+        for (ri, r) in hall.returns.iter().enumerate() {
+            let b = Aabb {
+                min: [r.position_m[0], r.position_m[1], hall.room.size_m[2]],
+                max: [
+                    r.position_m[0] + r.size_m[0],
+                    r.position_m[1] + r.size_m[1],
+                    hall.room.size_m[2],
+                ],
+            };
+            let cells = layer_cells(&grid, &b, top);
+            let open: Vec<usize> = cells.into_iter().filter(|&c| !solid[c]).collect();
+            if open.is_empty() {
+                return Err(Error::Simulation(format!(
+                    "return {ri} lies over solid cells only"
+                )));
+            }
+            for c in open {
+                g_outlet[c] = g_half;
+            }
+        }
+        let has_returns = !hall.returns.is_empty();
+
+        let mut tiles = Vec::with_capacity(hall.tiles.len());
+        let total_open: f64 = hall
+            .tiles
+            .iter()
+            .map(|t| t.size_m[0] * t.size_m[1] * t.open_fraction)
+            .sum();
+        for (ti, t) in hall.tiles.iter().enumerate() {
+            let b = Aabb {
+                min: [t.position_m[0], t.position_m[1], 0.0],
+                max: [
+                    t.position_m[0] + t.size_m[0],
+                    t.position_m[1] + t.size_m[1],
+                    0.0,
+                ],
+            };
+            let cells = layer_cells(&grid, &b, 0);
+            if cells.iter().any(|&c| solid[c]) {
+                return Err(Error::Simulation(format!(
+                    "tile {ti} at {:?} lies under a rack or CRAC",
+                    t.position_m
+                )));
+            }
+            let w = 1.0 / cells.len() as f64;
+            let share = t.size_m[0] * t.size_m[1] * t.open_fraction / total_open;
+            tiles.push((cells.into_iter().map(|c| (c, w)).collect(), share));
+        }
+
+        let mut crac_front = Vec::with_capacity(hall.cracs.len());
+        let mut crac_top = Vec::with_capacity(hall.cracs.len());
+        for cr in &hall.cracs {
+            let b = Aabb::from_position_size(cr.position_m, cr.size_m);
+            crac_front.push(match cr.supply {
+                SupplyKind::Floor => Vec::new(),
+                SupplyKind::Front => {
+                    let side = front_side(hall, &b);
+                    face_stencil(&grid, &solid, &b, side, [b.min[2], b.max[2]]).ok_or_else(
+                        || {
+                            Error::Simulation(format!(
+                                "CRAC `{}`: its front face has no open cell",
+                                cr.id
+                            ))
+                        },
+                    )?
+                }
+            });
+            crac_top.push(if has_returns {
+                Vec::new()
+            } else {
+                top_stencil(&grid, &solid, &b).ok_or_else(|| {
+                    Error::Simulation(format!(
+                        "CRAC `{}` reaches the ceiling and the hall has no returns: no return path",
+                        cr.id
+                    ))
+                })?
+            });
+        }
+        // Without returns, one CRAC-top cell fixes the pressure level; the fluxes balance,
+        // so no flow passes through it.
+        if !has_returns {
+            if let Some(&(c, _)) = crac_top.first().and_then(|s| s.first()) {
+                g_outlet[c] = g_half;
+            }
+        }
+
+        let mut server_intake = Vec::new();
+        let mut server_exhaust = Vec::new();
+        for s in hall.servers() {
+            let b = s.bounds();
+            let z = [b.min[2], b.max[2]];
+            let rb = Aabb::from_position_size(s.rack.position_m, s.rack.size_m);
+            let inl = face_stencil(&grid, &solid, &rb, s.rack.inlet, z).ok_or_else(|| {
+                Error::Simulation(format!(
+                    "server `{}`: no open cell at its intake",
+                    s.server.id
+                ))
+            })?;
+            let exh =
+                face_stencil(&grid, &solid, &rb, s.rack.inlet.opposite(), z).ok_or_else(|| {
+                    Error::Simulation(format!(
+                        "server `{}`: no open cell at its exhaust",
+                        s.server.id
+                    ))
+                })?;
+            server_intake.push(inl);
+            server_exhaust.push(exh);
+        }
+
+        let mut topo = Topology {
+            grid,
+            solid,
+            g,
+            g_outlet,
+            has_returns,
+            tiles,
+            crac_front,
+            crac_top,
+            server_intake,
+            server_exhaust,
+            sensors: Vec::new(),
+            walls,
+        };
+        topo.deactivate_enclosed(hall)?;
+        for s in &hall.sensors {
+            let st = topo.sensor_stencil(s.position_m).ok_or_else(|| {
+                Error::Simulation(format!("sensor `{}`: no open cell around it", s.id))
+            })?;
+            topo.sensors.push(st);
+        }
+        Ok(topo)
+    }
+
+    /// Marks fluid regions without any outlet as inactive; refuses one that has inflow,
+    /// servers or supply (its mass balance would have no solution).
+    fn deactivate_enclosed(&mut self, hall: &Hall) -> Result<()> {
+        let n = self.grid.len();
+        let mut comp = vec![usize::MAX; n];
+        let mut anchored = Vec::new();
+        let mut stack = Vec::new();
+        for start in 0..n {
+            if self.solid[start] || comp[start] != usize::MAX {
+                continue;
+            }
+            let id = anchored.len();
+            let mut has_outlet = false;
+            comp[start] = id;
+            stack.push(start);
+            while let Some(c) = stack.pop() {
+                has_outlet |= self.g_outlet[c] > 0.0;
+                for a in 0..3 {
+                    let s = self.grid.stride(a);
+                    if self.g[a][c] > 0.0 && comp[c + s] == usize::MAX {
+                        comp[c + s] = id;
+                        stack.push(c + s);
+                    }
+                    if c >= s && self.g[a][c - s] > 0.0 && comp[c - s] == usize::MAX {
+                        comp[c - s] = id;
+                        stack.push(c - s);
+                    }
+                }
+            }
+            anchored.push(has_outlet);
+        }
+        let lost = |st: &Stencil| st.iter().any(|&(c, _)| !anchored[comp[c]]);
+        for (s, (i, e)) in hall
+            .servers()
+            .zip(self.server_intake.iter().zip(&self.server_exhaust))
+        {
+            if lost(i) || lost(e) {
+                return Err(Error::Simulation(format!(
+                    "server `{}` draws or exhausts into an enclosed region with no return path \
+                     (add a return, or containment leakage)",
+                    s.server.id
+                )));
+            }
+        }
+        if self.tiles.iter().any(|(t, _)| lost(t))
+            || self.crac_front.iter().chain(&self.crac_top).any(lost)
+        {
+            return Err(Error::Simulation(
+                "a tile or CRAC opens into an enclosed region with no return path".into(),
+            ));
+        }
+        for c in 0..n {
+            if !self.solid[c] && !anchored[comp[c]] {
+                self.solid[c] = true;
+                for a in 0..3 {
+                    let s = self.grid.stride(a);
+                    self.g[a][c] = 0.0;
+                    if c >= s {
+                        self.g[a][c - s] = 0.0;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Trilinear weights of the eight cell centres around `p`, solid ones dropped and the
+    /// rest renormalised; `None` when all eight are solid.
+    pub fn sensor_stencil(&self, p: [f64; 3]) -> Option<Stencil> {
+        let g = &self.grid;
+        let mut i0 = [0usize; 3];
+        let mut t = [0.0; 3];
+        for a in 0..3 {
+            let s = (p[a] / g.d[a] - 0.5).clamp(0.0, (g.n[a] - 1) as f64);
+            let i = (s.floor() as usize).min(g.n[a] - 2);
+            i0[a] = i;
+            t[a] = s - i as f64;
+        }
+        let mut st = Vec::with_capacity(8);
+        for corner in 0..8usize {
+            let mut w = 1.0;
+            let mut ijk = [0usize; 3];
+            for a in 0..3 {
+                let up = (corner >> a) & 1 == 1;
+                ijk[a] = i0[a] + up as usize;
+                w *= if up { t[a] } else { 1.0 - t[a] };
+            }
+            let c = g.idx(ijk[0], ijk[1], ijk[2]);
+            if w > 1e-12 && !self.solid[c] {
+                st.push((c, w));
+            }
+        }
+        let total: f64 = st.iter().map(|(_, w)| w).sum();
+        if total <= 1e-12 {
+            // Point within a cell of a solid: the nearest fluid corner.
+            let mut best: Option<(usize, f64)> = None;
+            for corner in 0..8usize {
+                let ijk: Vec<usize> = (0..3).map(|a| i0[a] + ((corner >> a) & 1)).collect();
+                let c = g.idx(ijk[0], ijk[1], ijk[2]);
+                if !self.solid[c] {
+                    let d = super::super::hall::distance(g.cell_centre(c), p);
+                    if best.is_none_or(|(_, bd)| d < bd) {
+                        best = Some((c, d));
+                    }
+                }
+            }
+            return best.map(|(c, _)| vec![(c, 1.0)]);
+        }
+        Some(st.into_iter().map(|(c, w)| (c, w / total)).collect())
+    }
+
+    /// Intake or exhaust cells of a rack (whole face, or a height band), for effects.
+    pub fn rack_face(
+        &self,
+        hall: &Hall,
+        rack: usize,
+        side: Side,
+        z: Option<[f64; 2]>,
+    ) -> Option<Stencil> {
+        let r = &hall.racks[rack];
+        let b = Aabb::from_position_size(r.position_m, r.size_m);
+        let z = z.unwrap_or([b.min[2], b.max[2]]);
+        face_stencil(&self.grid, &self.solid, &b, side, z)
+    }
+
+    /// Open cells whose centres lie in a box, evenly weighted (`None` when none is open).
+    pub fn box_stencil(&self, b: &Aabb) -> Option<Stencil> {
+        let cells: Vec<usize> = self
+            .grid
+            .cells_in_box(b)
+            .into_iter()
+            .filter(|&c| !self.solid[c])
+            .collect();
+        if cells.is_empty() {
+            return None;
+        }
+        let w = 1.0 / cells.len() as f64;
+        Some(cells.into_iter().map(|c| (c, w)).collect())
+    }
+}
+
+/// Cells of layer `k` under the xy extent of `b`.
+fn layer_cells(grid: &Grid, b: &Aabb, k: usize) -> Vec<usize> {
+    let mut bb = *b;
+    bb.min[2] = grid.centre(2, k);
+    bb.max[2] = bb.min[2];
+    grid.cells_in_box(&bb)
+}
+
+/// The side of a CRAC box facing the most open room (its front).
+fn front_side(hall: &Hall, b: &Aabb) -> Side {
+    let room = hall.room.size_m;
+    let room_space = |s: Side| match s {
+        Side::PlusX => room[0] - b.max[0],
+        Side::MinusX => b.min[0],
+        Side::PlusY => room[1] - b.max[1],
+        Side::MinusY => b.min[1],
+    };
+    [Side::PlusX, Side::MinusX, Side::PlusY, Side::MinusY]
+        .into_iter()
+        .fold(Side::PlusX, |best, s| {
+            if room_space(s) > room_space(best) + GEOM_EPS {
+                s
+            } else {
+                best
+            }
+        })
+}
+
+/// The first open cells outside face `side` of box `b`, over the box's tangential extent
+/// and the height band `z`, weighted by overlap area; `None` when none is open.
+pub(crate) fn face_stencil(
+    grid: &Grid,
+    solid: &[bool],
+    b: &Aabb,
+    side: Side,
+    z: [f64; 2],
+) -> Option<Stencil> {
+    let (a, sign) = side.axis_sign();
+    let t = 1 - a;
+    // First cell whose centre lies outside the box on that side.
+    let out = if sign > 0.0 {
+        let i = (b.max[a] / grid.d[a] - 0.5 + GEOM_EPS).floor() + 1.0;
+        if i >= grid.n[a] as f64 {
+            return None;
+        }
+        i.max(0.0) as usize
+    } else {
+        let i = (b.min[a] / grid.d[a] - 0.5 - GEOM_EPS).ceil() - 1.0;
+        if i < 0.0 {
+            return None;
+        }
+        i as usize
+    };
+    let mut st = Vec::new();
+    for k in grid.overlapping(2, z[0], z[1]) {
+        let wz = grid.overlap(2, k, z[0], z[1]);
+        for it in grid.overlapping(t, b.min[t], b.max[t]) {
+            let wt = grid.overlap(t, it, b.min[t], b.max[t]);
+            let mut ijk = [0; 3];
+            ijk[a] = out;
+            ijk[t] = it;
+            ijk[2] = k;
+            let c = grid.idx(ijk[0], ijk[1], ijk[2]);
+            if !solid[c] && wz * wt > 0.0 {
+                st.push((c, wz * wt));
+            }
+        }
+    }
+    let total: f64 = st.iter().map(|(_, w)| w).sum();
+    if total <= 0.0 {
+        return None;
+    }
+    Some(st.into_iter().map(|(c, w)| (c, w / total)).collect())
+}
+
+/// Open cells just above the top face of box `b`, evenly weighted.
+fn top_stencil(grid: &Grid, solid: &[bool], b: &Aabb) -> Option<Stencil> {
+    let k = (b.max[2] / grid.d[2] - 0.5 + GEOM_EPS).floor() + 1.0;
+    if k >= grid.n[2] as f64 {
+        return None;
+    }
+    let cells: Vec<usize> = layer_cells(grid, b, k.max(0.0) as usize)
+        .into_iter()
+        .filter(|&c| !solid[c])
+        .collect();
+    if cells.is_empty() {
+        return None;
+    }
+    let w = 1.0 / cells.len() as f64;
+    Some(cells.into_iter().map(|c| (c, w)).collect())
+}
+
+/// Closes the faces on each containment box's planes (scaled by the leak fraction) and
+/// lists them per side.
+fn containment_walls(
+    hall: &Hall,
+    grid: &Grid,
+    solid: &[bool],
+    g: &mut [Vec<f64>; 3],
+    leak: f64,
+) -> Vec<[Vec<WallFace>; 5]> {
+    let room = hall.room.size_m;
+    let mut out = Vec::with_capacity(hall.containment.len());
+    for cb in &hall.containment {
+        let mut sides: [Vec<WallFace>; 5] = Default::default();
+        for (si, side) in WallSide::ALL.into_iter().enumerate() {
+            let (a, at_max) = match side {
+                WallSide::MinusX => (0, false),
+                WallSide::PlusX => (0, true),
+                WallSide::MinusY => (1, false),
+                WallSide::PlusY => (1, true),
+                WallSide::Top => (2, true),
+            };
+            let x = if at_max { cb.max_m[a] } else { cb.min_m[a] };
+            if x <= GEOM_EPS || x >= room[a] - GEOM_EPS {
+                continue; // on a room wall, floor or ceiling
+            }
+            // Face index f separates cells f-1 and f.
+            let f = (x / grid.d[a]).round() as usize;
+            if f == 0 || f >= grid.n[a] {
+                continue;
+            }
+            let tang: Vec<usize> = (0..3).filter(|&t| t != a).collect();
+            let r0 = grid.range_in(tang[0], cb.min_m[tang[0]], cb.max_m[tang[0]]);
+            let r1 = grid.range_in(tang[1], cb.min_m[tang[1]], cb.max_m[tang[1]]);
+            for i1 in r1 {
+                for i0 in r0.clone() {
+                    let mut ijk = [0usize; 3];
+                    ijk[a] = f - 1;
+                    ijk[tang[0]] = i0;
+                    ijk[tang[1]] = i1;
+                    let low = grid.idx(ijk[0], ijk[1], ijk[2]);
+                    let high = low + grid.stride(a);
+                    if solid[low] || solid[high] {
+                        continue;
+                    }
+                    g[a][low] = leak * full_g(grid, a);
+                    sides[si].push(WallFace { axis: a, low });
+                }
+            }
+        }
+        out.push(sides);
+    }
+    out
+}
+
+/// Full conductance of an open face on axis `a` (for opened walls).
+pub(crate) fn open_face_g(grid: &Grid, a: usize) -> f64 {
+    full_g(grid, a)
+}

@@ -1,0 +1,243 @@
+//! The thermal graph's edges: CRAC-to-sensor (`Wcs`) and server-to-sensor (`Wss`) weights
+//! from normalised reciprocal distances, cut below a threshold and stored sparse.
+//!
+//! Both matrices are stored by sensor (one CSR row per sensor), which is the order the
+//! forward pass reads them in.
+//!
+//! | matrix | from | to | weight before the cut | after the cut |
+//! |---|---|---|---|---|
+//! | `Wcs` | CRAC box centre | sensor | `r_ik / max_i r_ik` (nearest CRAC = 1) | kept as is: they are softmax logits (times fan speed), so their scale must not depend on how many CRACs a sensor sees |
+//! | `Wss` | server exhaust-face centre | hot-aisle sensor | `r_jk / max_j r_jk` | row rescaled to sum 1, so `X_hot` is a distance-weighted mean of `P / alpha` whose scale does not grow with the number of servers |
+//!
+//! with `r = 1 / max(d, min_distance_m)`: the floor keeps a sensor sitting on an exhaust
+//! grille from giving one server all the weight. Entries whose relative weight is below the
+//! threshold are cut (absent from the CSR, i.e. zero): a CRAC with no edge to a sensor takes
+//! no part in that sensor's softmax. Cold-aisle sensors have no `Wss` row: their output uses
+//! the cooling block only.
+
+use crate::hall::{distance, Aabb, Aisle, Hall};
+use crate::{Error, Result};
+
+/// A compressed sparse row matrix (rows = sensors).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Csr {
+    /// `row_ptr[k]..row_ptr[k + 1]` are the entries of row `k`.
+    pub row_ptr: Vec<usize>,
+    /// Column (CRAC or server index) of each entry; ascending within a row.
+    pub col: Vec<u32>,
+    /// Value of each entry.
+    pub val: Vec<f64>,
+}
+
+impl Csr {
+    /// Number of rows.
+    pub fn rows(&self) -> usize {
+        self.row_ptr.len().saturating_sub(1)
+    }
+
+    /// Number of stored entries.
+    pub fn nnz(&self) -> usize {
+        self.val.len()
+    }
+
+    /// The entry range of row `k`.
+    pub fn range(&self, k: usize) -> std::ops::Range<usize> {
+        self.row_ptr[k]..self.row_ptr[k + 1]
+    }
+
+    /// The stored value at (`row`, `col`), zero when the entry is cut.
+    pub fn get(&self, row: usize, col: usize) -> f64 {
+        let r = self.range(row);
+        match self.col[r.clone()].binary_search(&(col as u32)) {
+            Ok(i) => self.val[r.start + i],
+            Err(_) => 0.0,
+        }
+    }
+
+    fn push_row(&mut self, mut entries: Vec<(u32, f64)>) {
+        if self.row_ptr.is_empty() {
+            self.row_ptr.push(0);
+        }
+        entries.sort_by_key(|e| e.0);
+        for (c, v) in entries {
+            self.col.push(c);
+            self.val.push(v);
+        }
+        self.row_ptr.push(self.val.len());
+    }
+}
+
+/// How the adjacency is built.
+///
+/// | Name | Default | Meaning | Range |
+/// |---|---|---|---|
+/// | `crac_threshold` | 0.3 | relative weight below which a CRAC-sensor edge is cut | `[0, 1]` |
+/// | `server_threshold` | 0.3 | relative weight below which a server-sensor edge is cut | `[0, 1]` |
+/// | `min_distance_m` | 0.5 | distance floor in the reciprocal (m) | `> 0` |
+///
+/// With the defaults a hot-aisle sensor keeps the servers within about 3.3 times the
+/// distance of the nearest one (at least 1.7 m), typically the racks on both sides of its
+/// aisle within a couple of metres along the row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdjacencySettings {
+    /// Relative cut-off for `Wcs`.
+    pub crac_threshold: f64,
+    /// Relative cut-off for `Wss`.
+    pub server_threshold: f64,
+    /// Distance floor (m).
+    pub min_distance_m: f64,
+}
+
+impl Default for AdjacencySettings {
+    fn default() -> Self {
+        AdjacencySettings {
+            crac_threshold: 0.3,
+            server_threshold: 0.3,
+            min_distance_m: 0.5,
+        }
+    }
+}
+
+impl AdjacencySettings {
+    /// Sets the CRAC cut-off.
+    pub fn with_crac_threshold(mut self, t: f64) -> Self {
+        self.crac_threshold = t;
+        self
+    }
+
+    /// Sets the server cut-off.
+    pub fn with_server_threshold(mut self, t: f64) -> Self {
+        self.server_threshold = t;
+        self
+    }
+
+    /// Sets the distance floor (m).
+    pub fn with_min_distance_m(mut self, d: f64) -> Self {
+        self.min_distance_m = d;
+        self
+    }
+
+    /// Validates the settings.
+    pub fn check(self) -> Result<Self> {
+        for (name, t) in [
+            ("crac_threshold", self.crac_threshold),
+            ("server_threshold", self.server_threshold),
+        ] {
+            if !(0.0..=1.0).contains(&t) {
+                return Err(setting(name, format!("must lie in [0, 1], got {t}")));
+            }
+        }
+        if !(self.min_distance_m.is_finite() && self.min_distance_m > 0.0) {
+            return Err(setting(
+                "min_distance_m",
+                format!("must be positive and finite, got {}", self.min_distance_m),
+            ));
+        }
+        Ok(self)
+    }
+}
+
+pub(crate) fn setting(name: &str, reason: String) -> Error {
+    Error::Core(kalibre_core::Error::InvalidSetting {
+        name: name.to_string(),
+        reason,
+    })
+}
+
+/// The two adjacency matrices of a hall.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Adjacency {
+    /// CRAC-to-sensor weights `Wcs`, one row per sensor, columns are CRACs.
+    pub cs: Csr,
+    /// Server-to-sensor weights `Wss`, one row per sensor (empty for cold-aisle sensors),
+    /// columns are servers in hall order.
+    pub ss: Csr,
+}
+
+impl Adjacency {
+    /// Builds both matrices from the hall's geometry (see the module docs).
+    pub fn from_hall(hall: &Hall, settings: &AdjacencySettings) -> Result<Self> {
+        let settings = settings.check()?;
+        if hall.cracs.is_empty() {
+            return Err(Error::Mismatch(format!(
+                "hall `{}` has no CRAC: the thermal graph needs at least one",
+                hall.name
+            )));
+        }
+        if hall.sensors.is_empty() {
+            return Err(Error::Mismatch(format!("hall `{}` has no sensor", hall.name)));
+        }
+        let floor = settings.min_distance_m;
+        let recip = |a: [f64; 3], b: [f64; 3]| 1.0 / distance(a, b).max(floor);
+        let crac_centres: Vec<[f64; 3]> = hall
+            .cracs
+            .iter()
+            .map(|c| Aabb::from_position_size(c.position_m, c.size_m).centre())
+            .collect();
+        let exhausts: Vec<[f64; 3]> = hall.servers().map(|s| s.exhaust_centre()).collect();
+        let mut cs = Csr::default();
+        let mut ss = Csr::default();
+        for sensor in &hall.sensors {
+            let p = sensor.position_m;
+            let r: Vec<f64> = crac_centres.iter().map(|&c| recip(c, p)).collect();
+            cs.push_row(relative_cut(&r, settings.crac_threshold));
+            if sensor.aisle == Aisle::Hot && !exhausts.is_empty() {
+                let r: Vec<f64> = exhausts.iter().map(|&e| recip(e, p)).collect();
+                let mut row = relative_cut(&r, settings.server_threshold);
+                let sum: f64 = row.iter().map(|e| e.1).sum();
+                for e in &mut row {
+                    e.1 /= sum;
+                }
+                ss.push_row(row);
+            } else {
+                ss.push_row(Vec::new());
+            }
+        }
+        Ok(Adjacency { cs, ss })
+    }
+}
+
+/// Entries `r_i / max r` at or above `threshold` (the maximum itself is always kept).
+fn relative_cut(r: &[f64], threshold: f64) -> Vec<(u32, f64)> {
+    let max = r.iter().copied().fold(0.0, f64::max);
+    r.iter()
+        .enumerate()
+        .map(|(i, &v)| (i as u32, v / max))
+        .filter(|&(_, w)| w >= threshold)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_cut_keeps_the_nearest_and_drops_far_entries() {
+        let kept = relative_cut(&[1.0, 0.5, 0.1, 0.29], 0.3);
+        assert_eq!(kept, vec![(0, 1.0), (1, 0.5)]);
+    }
+
+    #[test]
+    fn csr_get_returns_zero_for_cut_entries() {
+        let mut m = Csr::default();
+        m.push_row(vec![(3, 0.5), (1, 0.25)]);
+        m.push_row(vec![]);
+        assert_eq!(m.rows(), 2);
+        assert_eq!(m.get(0, 1), 0.25);
+        assert_eq!(m.get(0, 3), 0.5);
+        assert_eq!(m.get(0, 2), 0.0);
+        assert_eq!(m.get(1, 0), 0.0);
+    }
+
+    #[test]
+    fn bad_settings_are_rejected() {
+        assert!(AdjacencySettings::default()
+            .with_server_threshold(1.5)
+            .check()
+            .is_err());
+        assert!(AdjacencySettings::default()
+            .with_min_distance_m(0.0)
+            .check()
+            .is_err());
+    }
+}

@@ -1,0 +1,325 @@
+//! The paper's search regulariser: a ReLU penalty on server temperature rises outside a
+//! plausible range, weighted by server power, and a report of where it binds.
+//!
+//! A server's rise is `dT_j = P_j / (rho cp Q_j)` with `Q_j = alpha_j P_j * 4.71947e-4`
+//! m3/s, i.e. `dT_j = K / alpha_j` with `K = 1 / (4.71947e-4 rho cp)` (1.757 K cfm/W at
+//! rho 1.2 kg/m3, cp 1005 J/(kg K)), independent of the power. The penalty is
+//!
+//! ```text
+//! R(alpha) = mean over snapshots s of
+//!            mean over servers j of (P_sj / mean_j P_sj) * (relu(lo - dT_j) + relu(dT_j - hi))
+//! ```
+//!
+//! in kelvin. The paper weights by raw watts and sums over servers, which makes the prior
+//! thousands of times larger than the data term (a mean squared error in K^2); weighting by
+//! power relative to the mean and averaging keeps a uniform 1 K violation at a cost of 1,
+//! comparable with the data. It is a prior, not physics: real servers run rises of
+//! 15-20 C, so [`TemperatureRisePenalty::report`] says when and where it binds (a
+//! prior-data conflict) instead of silently clamping alpha.
+
+use kalibre_core::Regularizer;
+use serde::{Deserialize, Serialize};
+
+use super::adjacency::setting;
+use crate::hall::Hall;
+use crate::snapshots::OperatingState;
+use crate::{Error, ParamLayout, Result};
+
+/// m3/s per cfm.
+pub const M3_S_PER_CFM: f64 = 4.71947e-4;
+
+/// Settings of the [`TemperatureRisePenalty`].
+///
+/// | Name | Default | Meaning | Range |
+/// |---|---|---|---|
+/// | `lower_c` | 5 | lowest plausible server temperature rise (K) | `>= 0` |
+/// | `upper_c` | 15 | highest plausible rise (K) | `> lower_c` |
+/// | `weight` | 1 | the paper's lambda: pass it to the objective with the penalty | `>= 0` |
+/// | `air_density_kg_m3` | 1.2 | rho | `> 0` |
+/// | `air_heat_capacity_j_kg_k` | 1005 | cp | `> 0` |
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PenaltySettings {
+    /// Lower end of the plausible rise (K).
+    pub lower_c: f64,
+    /// Upper end of the plausible rise (K).
+    pub upper_c: f64,
+    /// Weight of the penalty in the search objective.
+    pub weight: f64,
+    /// Air density (kg/m3).
+    pub air_density_kg_m3: f64,
+    /// Air heat capacity (J/(kg K)).
+    pub air_heat_capacity_j_kg_k: f64,
+}
+
+impl Default for PenaltySettings {
+    fn default() -> Self {
+        PenaltySettings {
+            lower_c: 5.0,
+            upper_c: 15.0,
+            weight: 1.0,
+            air_density_kg_m3: 1.2,
+            air_heat_capacity_j_kg_k: 1005.0,
+        }
+    }
+}
+
+impl PenaltySettings {
+    /// Sets the plausible range of server temperature rises (K).
+    pub fn with_range_c(mut self, lower_c: f64, upper_c: f64) -> Self {
+        self.lower_c = lower_c;
+        self.upper_c = upper_c;
+        self
+    }
+    /// Sets the weight.
+    pub fn with_weight(mut self, weight: f64) -> Self {
+        self.weight = weight;
+        self
+    }
+    /// Sets the air properties.
+    pub fn with_air(mut self, density_kg_m3: f64, heat_capacity_j_kg_k: f64) -> Self {
+        self.air_density_kg_m3 = density_kg_m3;
+        self.air_heat_capacity_j_kg_k = heat_capacity_j_kg_k;
+        self
+    }
+    /// Validates the settings.
+    pub fn check(self) -> Result<Self> {
+        if !(self.lower_c.is_finite() && self.lower_c >= 0.0) {
+            return Err(setting("lower_c", format!("must be >= 0, got {}", self.lower_c)));
+        }
+        if !(self.upper_c.is_finite() && self.upper_c > self.lower_c) {
+            return Err(setting(
+                "upper_c",
+                format!("must exceed lower_c {}, got {}", self.lower_c, self.upper_c),
+            ));
+        }
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return Err(setting("weight", format!("must be >= 0, got {}", self.weight)));
+        }
+        for (name, v) in [
+            ("air_density_kg_m3", self.air_density_kg_m3),
+            ("air_heat_capacity_j_kg_k", self.air_heat_capacity_j_kg_k),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(setting(name, format!("must be positive, got {v}")));
+            }
+        }
+        Ok(self)
+    }
+
+    /// `K` in `dT = K / alpha` (K cfm/W).
+    pub fn rise_coefficient(&self) -> f64 {
+        1.0 / (M3_S_PER_CFM * self.air_density_kg_m3 * self.air_heat_capacity_j_kg_k)
+    }
+}
+
+/// Which end of the range a server's rise violates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RiseBound {
+    /// Below `lower_c` (alpha too large).
+    Below,
+    /// Above `upper_c` (alpha too small).
+    Above,
+}
+
+/// One alpha value whose rise lies outside the range.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RiseViolation {
+    /// The parameter name, or `fixed alpha of server <id>` when alpha is not calibrated.
+    pub source: String,
+    /// The alpha (cfm/W).
+    pub alpha_cfm_per_w: f64,
+    /// The rise it implies (K).
+    pub rise_c: f64,
+    /// Which bound.
+    pub bound: RiseBound,
+    /// Servers with this alpha.
+    pub servers: usize,
+}
+
+/// Where the penalty binds at given parameters (a prior-data conflict when it binds at
+/// the calibrated optimum).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PenaltyReport {
+    /// The unweighted penalty (K).
+    pub value: f64,
+    /// True when any server's rise lies outside the range.
+    pub binds: bool,
+    /// The range (K).
+    pub range_c: [f64; 2],
+    /// Servers below the range.
+    pub servers_below: usize,
+    /// Servers above the range.
+    pub servers_above: usize,
+    /// Share of the penalty weight (power-weighted) carried by servers outside the range.
+    pub weight_fraction_outside: f64,
+    /// Each alpha value outside the range, largest violation first.
+    pub violations: Vec<RiseViolation>,
+}
+
+/// The paper's power-weighted ReLU penalty on server temperature rises (module docs).
+#[derive(Debug, Clone)]
+pub struct TemperatureRisePenalty {
+    layout: ParamLayout,
+    server_ids: Vec<String>,
+    /// Per server: mean over snapshots of `P_sj / mean_j P_sj`, divided by the server count.
+    server_weight: Vec<f64>,
+    settings: PenaltySettings,
+    k: f64,
+}
+
+impl TemperatureRisePenalty {
+    /// The penalty for `hall` with its parameter layout, weighted by the powers of
+    /// `scenarios` (the snapshots searched over).
+    pub fn new(
+        hall: &Hall,
+        layout: &ParamLayout,
+        scenarios: &[OperatingState],
+        settings: PenaltySettings,
+    ) -> Result<Self> {
+        let settings = settings.check()?;
+        let m = hall.server_count();
+        if layout.alpha_index().len() != m {
+            return Err(Error::Mismatch(format!(
+                "parameter layout covers {} servers, hall `{}` has {m}",
+                layout.alpha_index().len(),
+                hall.name
+            )));
+        }
+        if scenarios.is_empty() {
+            return Err(Error::Mismatch("the rise penalty needs at least one snapshot".into()));
+        }
+        let mut server_weight = vec![0.0; m];
+        for s in scenarios {
+            if s.power_w.len() != m || s.power_w.iter().any(|p| !p.is_finite() || *p < 0.0) {
+                return Err(Error::Mismatch(format!(
+                    "snapshot `{}`: needs {m} finite non-negative server powers",
+                    s.label
+                )));
+            }
+            let mean = s.power_w.iter().sum::<f64>() / m.max(1) as f64;
+            if mean > 0.0 {
+                for (w, p) in server_weight.iter_mut().zip(&s.power_w) {
+                    *w += p / mean / (scenarios.len() * m) as f64;
+                }
+            }
+        }
+        Ok(TemperatureRisePenalty {
+            layout: layout.clone(),
+            server_ids: hall.servers().map(|s| s.server.id.clone()).collect(),
+            server_weight,
+            k: settings.rise_coefficient(),
+            settings,
+        })
+    }
+
+    /// The settings (the weight to use is `settings().weight`).
+    pub fn settings(&self) -> &PenaltySettings {
+        &self.settings
+    }
+
+    /// A server's temperature rise (K) at `alpha` (cfm/W).
+    pub fn rise_c(&self, alpha_cfm_per_w: f64) -> f64 {
+        self.k / alpha_cfm_per_w
+    }
+
+    /// Per-server weights (mean relative power over snapshots, divided by the server count).
+    pub fn server_weights(&self) -> &[f64] {
+        &self.server_weight
+    }
+
+    /// ReLU violation and its derivative with respect to the rise.
+    pub(crate) fn violation(&self, rise: f64) -> (f64, f64) {
+        let (lo, hi) = (self.settings.lower_c, self.settings.upper_c);
+        if rise < lo {
+            (lo - rise, -1.0)
+        } else if rise > hi {
+            (rise - hi, 1.0)
+        } else {
+            (0.0, 0.0)
+        }
+    }
+
+    /// `K` in `dT = K / alpha`.
+    pub(crate) fn rise_coefficient(&self) -> f64 {
+        self.k
+    }
+
+    /// Where the penalty binds at physical parameters `params`.
+    pub fn report(&self, params: &[f64]) -> PenaltyReport {
+        let alpha = self.layout.alpha_per_server(params);
+        let space = self.layout.space();
+        let mut rep = PenaltyReport {
+            value: 0.0,
+            binds: false,
+            range_c: [self.settings.lower_c, self.settings.upper_c],
+            servers_below: 0,
+            servers_above: 0,
+            weight_fraction_outside: 0.0,
+            violations: Vec::new(),
+        };
+        let total_weight: f64 = self.server_weight.iter().sum();
+        // Group servers by the source of their alpha (a parameter or a fixed value).
+        let mut groups: Vec<(Option<usize>, usize, RiseViolation, f64)> = Vec::new();
+        for (j, (&a, &w)) in alpha.iter().zip(&self.server_weight).enumerate() {
+            let rise = self.rise_c(a);
+            let (v, _) = self.violation(rise);
+            rep.value += w * v;
+            if v == 0.0 {
+                continue;
+            }
+            let bound = if rise < self.settings.lower_c {
+                rep.servers_below += 1;
+                RiseBound::Below
+            } else {
+                rep.servers_above += 1;
+                RiseBound::Above
+            };
+            rep.weight_fraction_outside += w;
+            let src = self.layout.alpha_index()[j];
+            match groups.iter_mut().find(|g| src.is_some() && g.0 == src) {
+                Some(g) => g.2.servers += 1,
+                None => groups.push((
+                    src,
+                    j,
+                    RiseViolation {
+                        source: match src {
+                            Some(i) => space.params()[i].name.clone(),
+                            None => format!("fixed alpha of server {}", self.server_ids[j]),
+                        },
+                        alpha_cfm_per_w: a,
+                        rise_c: rise,
+                        bound,
+                        servers: 1,
+                    },
+                    v,
+                )),
+            }
+        }
+        if total_weight > 0.0 {
+            rep.weight_fraction_outside /= total_weight;
+        }
+        groups.sort_by(|a, b| b.3.total_cmp(&a.3).then(a.1.cmp(&b.1)));
+        rep.violations = groups.into_iter().map(|g| g.2).collect();
+        rep.binds = rep.servers_below + rep.servers_above > 0;
+        rep
+    }
+}
+
+impl Regularizer for TemperatureRisePenalty {
+    /// The unweighted penalty and its gradient with respect to the parameters:
+    /// `dR/dalpha_j = w_j * relu'(...) * (-K / alpha_j^2)`.
+    fn value_and_gradient(&self, params: &[f64]) -> (f64, Vec<f64>) {
+        let alpha = self.layout.alpha_per_server(params);
+        let mut value = 0.0;
+        let mut g_alpha = vec![0.0; alpha.len()];
+        for ((g, &a), &w) in g_alpha.iter_mut().zip(&alpha).zip(&self.server_weight) {
+            let (v, dv) = self.violation(self.k / a);
+            value += w * v;
+            *g = w * dv * (-self.k / (a * a));
+        }
+        let mut grad = vec![0.0; params.len()];
+        self.layout.accumulate_alpha_gradient(&g_alpha, &mut grad);
+        (value, grad)
+    }
+}

@@ -1,0 +1,31 @@
+//! Extension point: additional linear terms of the thermal graph.
+//!
+//! The paper's surrogate only knows alpha. A physical effect (issue 6: bypass, leakage,
+//! supply offsets, ...) adds its parameters to the [`crate::ParamLayout`] and its influence
+//! to the surrogate as a [`SurrogateTerm`]: a feature per sensor `f_k(scenario, params)`
+//! that enters every sensor's output as `e_k * (f_k - mean_k) / scale_k`, where `e_k` is a
+//! trainable weight fitted with the others (least squares start, then Adam) and the
+//! mean and scale are taken over the training samples at each fit.
+
+use std::fmt::Debug;
+
+use crate::snapshots::OperatingState;
+
+/// One additional linear term of the [`super::ThermalGraph`].
+pub trait SurrogateTerm: Send + Sync + Debug {
+    /// A short name (the effect kind), for reports.
+    fn name(&self) -> &str;
+
+    /// The feature of every sensor at a scenario and physical parameters (the full hall
+    /// parameter vector), written into `out` (one value per sensor, hall order).
+    fn features(&self, scenario: &OperatingState, params: &[f64], out: &mut [f64]);
+
+    /// Adds `sum_k cotangent_k * d f_k / d params` into `grad` (one value per parameter).
+    fn features_vjp(
+        &self,
+        scenario: &OperatingState,
+        params: &[f64],
+        cotangent: &[f64],
+        grad: &mut [f64],
+    );
+}

@@ -1,0 +1,344 @@
+//! Effects: the registry's errors, spec round trips, and that each effect moves the
+//! readings it should, in the expected direction only.
+
+#[path = "support/sim_halls.rs"]
+mod sim_halls;
+
+use kalibre_core::{Model, Param, Scale};
+use kalibre_dc::effects::{from_spec, Effect, EffectFactory, EffectRegistry};
+use kalibre_dc::hall::{EffectSpec, Hall};
+use kalibre_dc::sim::{AirLink, SimConfig, SimMods, Simulator};
+use kalibre_dc::snapshots::OperatingState;
+use kalibre_dc::{Error, HallModel};
+use serde_json::{json, Value};
+use sim_halls::{contained_hall, demo_hall, uniform_state};
+
+fn spec(v: Value) -> EffectSpec {
+    serde_json::from_value(v).expect("spec json")
+}
+
+fn effect_error(v: Value, hall: &Hall) -> String {
+    match from_spec(&spec(v), hall) {
+        Err(e @ Error::Effect { .. }) => e.to_string(),
+        Err(e) => panic!("wrong error type: {e}"),
+        Ok(e) => panic!("accepted: {e:?}"),
+    }
+}
+
+/// Sensor readings with and without one effect at the given values.
+fn with_and_without(
+    hall: &Hall,
+    state: &OperatingState,
+    alpha: f64,
+    e: &dyn Effect,
+    values: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let sim = Simulator::new(hall, SimConfig::default()).expect("sim");
+    let a = vec![alpha; hall.server_count()];
+    let base = sim.solve(state, &a, &[]).expect("base").sensor_c().to_vec();
+    let on = sim
+        .solve(state, &a, &[(e, values)])
+        .expect("with effect")
+        .sensor_c()
+        .to_vec();
+    (base, on)
+}
+
+fn idx(hall: &Hall, id: &str) -> usize {
+    hall.sensors
+        .iter()
+        .position(|s| s.id == id)
+        .unwrap_or_else(|| panic!("no sensor {id}"))
+}
+
+#[test]
+fn bad_entries_get_errors_naming_the_field() {
+    let hall = demo_hall();
+    let cases = [
+        (json!({"kind": "leakage"}), "unknown effect kind"),
+        (json!({"kind": "bypass", "fraction": 0.1}), "`position_m`"),
+        (
+            json!({"kind": "bypass", "behind_rack": "A01", "fracton": 0.1}),
+            "field `fracton`: unknown field",
+        ),
+        (
+            json!({"kind": "bypass", "behind_rack": "A01", "fraction": 0.9}),
+            "field `fraction`: 0.9 is outside [0, 0.5]",
+        ),
+        (
+            json!({"kind": "bypass", "behind_rack": "Z99"}),
+            "field `behind_rack`: no rack `Z99`",
+        ),
+        (
+            json!({"kind": "bypass", "position_m": [11.8, 1.0], "size_m": [0.6, 0.6]}),
+            "field `position_m`",
+        ),
+        (
+            json!({"kind": "crac_supply_offset", "crac": "crac-9"}),
+            "field `crac`: no CRAC `crac-9`",
+        ),
+        (
+            json!({"kind": "crac_supply_offset", "offset_c": "cold"}),
+            "field `offset_c`: expected a finite number",
+        ),
+        (
+            json!({"kind": "crac_supply_offset", "offset_c_bounds": [2.0, -2.0]}),
+            "field `offset_c_bounds`",
+        ),
+        (
+            json!({"kind": "rack_recirculation"}),
+            "field `rack`: missing",
+        ),
+        (
+            json!({"kind": "rack_recirculation", "rack": "A01", "z_m": [1.5, 2.5]}),
+            "field `z_m`",
+        ),
+        (
+            json!({"kind": "rack_recirculation", "rack": "A01", "fraction": -0.1}),
+            "field `fraction`",
+        ),
+        (json!({"kind": "containment_leakage"}), "no containment"),
+    ];
+    for (v, want) in cases {
+        let msg = effect_error(v.clone(), &hall);
+        assert!(msg.contains(want), "{v}: `{msg}` lacks `{want}`");
+    }
+    let ch = contained_hall(false);
+    let msg = effect_error(
+        json!({"kind": "containment_leakage", "sides": ["north"]}),
+        &ch,
+    );
+    assert!(msg.contains("field `sides`"), "{msg}");
+    let msg = effect_error(
+        json!({"kind": "containment_leakage", "containment": 3}),
+        &ch,
+    );
+    assert!(msg.contains("field `containment`"), "{msg}");
+}
+
+#[test]
+fn specs_round_trip_and_name_parameters() {
+    let hall = demo_hall();
+    for v in [
+        json!({"kind": "crac_supply_offset", "crac": "crac-2", "offset_c": -1.5}),
+        json!({"kind": "bypass", "position_m": [4.0, 0.6], "size_m": [0.6, 0.4], "fraction": 0.1, "fraction_bounds": [0.0, 0.3]}),
+        json!({"kind": "bypass", "behind_rack": "B03", "depth_m": 0.6}),
+        json!({"kind": "rack_recirculation", "rack": "A05", "z_m": [1.0, 1.2], "fraction": 0.2}),
+    ] {
+        let e = from_spec(&spec(v.clone()), &hall).expect("build");
+        let again = from_spec(&e.to_spec(), &hall).expect("rebuild");
+        assert_eq!(e.parameters(), again.parameters(), "{v}");
+        assert_eq!(e.to_spec(), again.to_spec());
+    }
+    let mut h = demo_hall();
+    h.effects = vec![
+        spec(json!({"kind": "crac_supply_offset"})),
+        spec(json!({"kind": "bypass", "behind_rack": "A01"})),
+    ];
+    let m = HallModel::new(&h, SimConfig::default()).expect("model");
+    let names = m.layout().space().names();
+    assert!(
+        names.contains(&"crac_supply_offset/offset_c".to_string()),
+        "{names:?}"
+    );
+    assert!(names.contains(&"bypass/fraction".to_string()), "{names:?}");
+    let mut bad = demo_hall();
+    bad.effects = vec![spec(
+        json!({"kind": "bypass", "behind_rack": "A01", "fraction": 2.0}),
+    )];
+    let err = HallModel::new(&bad, SimConfig::default()).expect_err("out of range");
+    assert!(err.to_string().contains("effects/0"), "{err}");
+}
+
+/// A downstream kind: a forced link moving hot-aisle air into the cold aisle.
+#[derive(Debug)]
+struct Fan;
+impl Effect for Fan {
+    fn kind(&self) -> &str {
+        "test_fan"
+    }
+    fn parameters(&self) -> Vec<Param> {
+        vec![Param::new("flow_m3_s", 0.0, 1.0, 0.2, Scale::Linear).expect("param")]
+    }
+    fn to_spec(&self) -> EffectSpec {
+        spec(json!({"kind": "test_fan"}))
+    }
+    fn modify(&self, v: &[f64], _h: &Hall, m: &mut SimMods) -> kalibre_dc::Result<()> {
+        m.air_links.push(AirLink {
+            from: kalibre_dc::hall::Aabb {
+                min: [7.8, 1.0, 0.2],
+                max: [8.4, 1.8, 1.0],
+            },
+            to: kalibre_dc::hall::Aabb {
+                min: [7.8, 3.0, 0.2],
+                max: [8.4, 3.4, 1.0],
+            },
+            flow_m3_s: v[0],
+        });
+        Ok(())
+    }
+}
+struct FanFactory;
+impl EffectFactory for FanFactory {
+    fn kind(&self) -> &str {
+        "test_fan"
+    }
+    fn build(&self, _s: &EffectSpec, _h: &Hall) -> kalibre_dc::Result<Box<dyn Effect>> {
+        Ok(Box::new(Fan))
+    }
+}
+
+#[test]
+fn downstream_kinds_register_and_run() {
+    let mut reg = EffectRegistry::builtin();
+    reg.register(Box::new(FanFactory)).expect("register");
+    assert!(
+        reg.register(Box::new(FanFactory)).is_err(),
+        "duplicate kind accepted"
+    );
+    let mut hall = demo_hall();
+    hall.effects = vec![spec(json!({"kind": "test_fan"}))];
+    assert!(
+        HallModel::new(&hall, SimConfig::default()).is_err(),
+        "builtin registry knows test_fan"
+    );
+    let m = HallModel::with_registry(&hall, SimConfig::default(), &reg).expect("model");
+    let state = uniform_state(&hall, 18.0, 0.9, 400.0);
+    let mut p = m.layout().space().initial();
+    let on = m.evaluate(&state, &p).expect("run").values;
+    *p.last_mut().expect("fan param") = 0.0;
+    let off = m.evaluate(&state, &p).expect("run").values;
+    let c = idx(&hall, "c-A11-0");
+    assert!(
+        on[c] > off[c] + 0.2,
+        "link moved hot air into the cold aisle: {} vs {}",
+        on[c],
+        off[c]
+    );
+    for k in [
+        "crac_supply_offset",
+        "bypass",
+        "rack_recirculation",
+        "containment_leakage",
+    ] {
+        assert!(reg.get(k).is_some());
+    }
+    assert!(!reg
+        .get("rack_recirculation")
+        .expect("kind")
+        .candidates(&hall)
+        .is_empty());
+}
+
+#[test]
+fn crac_offset_shifts_every_reading_down() {
+    let hall = demo_hall();
+    let state = uniform_state(&hall, 18.0, 0.9, 400.0);
+    let all = from_spec(&spec(json!({"kind": "crac_supply_offset"})), &hall).expect("effect");
+    let (base, on) = with_and_without(&hall, &state, 0.12, all.as_ref(), &[-1.0]);
+    for (b, o) in base.iter().zip(&on) {
+        assert!((o - b + 1.0).abs() < 1e-5, "shift {}", o - b);
+    }
+    let one = from_spec(
+        &spec(json!({"kind": "crac_supply_offset", "crac": "crac-1"})),
+        &hall,
+    )
+    .expect("effect");
+    let (base, on) = with_and_without(&hall, &state, 0.12, one.as_ref(), &[-1.0]);
+    // One of four floor CRACs: the plenum mixes, so every reading falls, by at most 1 C.
+    for (b, o) in base.iter().zip(&on) {
+        assert!(o - b < -0.05 && o - b > -1.0 - 1e-9, "shift {}", o - b);
+    }
+}
+
+#[test]
+fn rack_recirculation_warms_that_racks_intake_only() {
+    let hall = demo_hall();
+    let state = uniform_state(&hall, 18.0, 0.9, 400.0);
+    let e = from_spec(
+        &spec(json!({"kind": "rack_recirculation", "rack": "A11", "z_m": [1.2, 1.6]})),
+        &hall,
+    )
+    .expect("effect");
+    let (base, on) = with_and_without(&hall, &state, 0.12, e.as_ref(), &[0.3]);
+    let c = idx(&hall, "c-A11-1");
+    assert!(on[c] > base[c] + 0.5, "c-A11-1 {} -> {}", base[c], on[c]);
+    let h = idx(&hall, "h-A11-1");
+    assert!(
+        on[h] > base[h] + 0.2,
+        "its exhaust is hotter: {} -> {}",
+        base[h],
+        on[h]
+    );
+    // Elsewhere readings barely move: the rack now draws less from the cold aisle, so
+    // neighbours may even cool slightly.
+    for (i, (b, o)) in base.iter().zip(&on).enumerate() {
+        if !hall.sensors[i].id.contains("A11") {
+            assert!(
+                (o - b).abs() < 0.1,
+                "{} moved {}",
+                hall.sensors[i].id,
+                o - b
+            );
+        }
+    }
+}
+
+#[test]
+fn bypass_cools_the_hot_aisle_behind_and_starves_the_cold_aisle() {
+    let hall = demo_hall();
+    let state = uniform_state(&hall, 18.0, 0.9, 400.0);
+    let e = from_spec(
+        &spec(json!({"kind": "bypass", "behind_rack": "A08"})),
+        &hall,
+    )
+    .expect("effect");
+    let (base, on) = with_and_without(&hall, &state, 0.13, e.as_ref(), &[0.2]);
+    let h = idx(&hall, "h-A08-0");
+    assert!(on[h] < base[h] - 0.5, "h-A08-0 {} -> {}", base[h], on[h]);
+    let cold: Vec<usize> = (0..hall.sensors.len())
+        .filter(|&i| hall.sensors[i].id.starts_with("c-"))
+        .collect();
+    for &i in &cold {
+        assert!(
+            on[i] - base[i] > -0.02,
+            "{} cooled by {}",
+            hall.sensors[i].id,
+            base[i] - on[i]
+        );
+    }
+    let rise: f64 = cold.iter().map(|&i| on[i] - base[i]).sum::<f64>() / cold.len() as f64;
+    assert!(rise > 0.05, "cold aisle mean rise {rise}");
+}
+
+#[test]
+fn containment_leakage_draws_hot_air_out_where_the_panels_open() {
+    // Sealed hot-aisle containment (only the default panel leakage connects the sides):
+    // 100 servers at 500 W, alpha 0.15 draw 3.5 m3/s against 3.0 m3/s of supply, so the
+    // deficit must come out of the hot aisle through the panels. Opening the -x end
+    // draws it there.
+    let hall = contained_hall(false);
+    let state = uniform_state(&hall, 18.0, 0.6, 500.0);
+    let e = from_spec(
+        &spec(json!({"kind": "containment_leakage", "sides": ["-x"]})),
+        &hall,
+    )
+    .expect("effect");
+    let (base, on) = with_and_without(&hall, &state, 0.15, e.as_ref(), &[0.5]);
+    let d = |id: &str| on[idx(&hall, id)] - base[idx(&hall, id)];
+    let report: Vec<String> = hall
+        .sensors
+        .iter()
+        .map(|s| format!("{} {:+.3}", s.id, d(&s.id)))
+        .collect();
+    for id in ["c-A02-0", "c-B02-0"] {
+        assert!(d(id) > 0.1, "{id} rose only {}: {report:?}", d(id));
+    }
+    for id in ["c-A10-0", "c-B10-0"] {
+        assert!(
+            d(id) < 0.0,
+            "{id} at the closed end rose {}: {report:?}",
+            d(id)
+        );
+    }
+}

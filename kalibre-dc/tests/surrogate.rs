@@ -1,0 +1,389 @@
+//! The thermal graph surrogate: gradients against finite differences, recovery of a
+//! planted truth, alpha recovery by search, adjacency structure, the rise penalty and the
+//! specialised objective against the generic one.
+
+mod surrogate_fixture;
+
+use kalibre_core::search::Objective;
+use kalibre_core::{
+    Observations, OutputInfo, Regularizer, Sample, Snapshot, Surrogate, SurrogateObjective,
+    TrainingSet,
+};
+use kalibre_dc::hall::{AlphaMode, Hall};
+use kalibre_dc::snapshots::OperatingState;
+use kalibre_dc::surrogate::*;
+use kalibre_dc::ParamLayout;
+use proptest::prelude::*;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use surrogate_fixture::{hall, state, HALL_A, SMALL};
+
+fn graph(hall: &Hall, mode: AlphaMode, settings: ThermalGraphSettings) -> ThermalGraph {
+    let layout = ParamLayout::with_mode(hall, mode, &[]).unwrap();
+    ThermalGraph::new(hall, layout, settings).unwrap()
+}
+
+/// The paper's initial design in the unit box (lower, upper, midpoint of every
+/// parameter), each with `copies` Gaussian-jittered copies (sd 0.05 in unit coordinates).
+fn design(g: &ThermalGraph, copies: usize, seed: u64) -> Vec<Vec<f64>> {
+    let space = g.layout().space();
+    let d = space.dim();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 0.05).unwrap();
+    let mut out = Vec::new();
+    for base in [0.0, 1.0, 0.5] {
+        out.push(space.from_unit(&vec![base; d]).unwrap());
+        for _ in 1..copies {
+            let u: Vec<f64> = (0..d)
+                .map(|_| (base + noise.sample(&mut rng) as f64).clamp(0.0, 1.0))
+                .collect();
+            out.push(space.from_unit(&u).unwrap());
+        }
+    }
+    out
+}
+
+fn samples(truth: &ThermalGraph, scenarios: &[OperatingState], params: &[Vec<f64>]) -> Vec<Sample> {
+    let mut out = Vec::new();
+    for (s, scen) in scenarios.iter().enumerate() {
+        for p in params {
+            out.push(Sample {
+                snapshot: s,
+                params: p.clone(),
+                outputs: truth.predict(scen, p),
+            });
+        }
+    }
+    out
+}
+
+/// A graph with known weights: the least-squares fit (no Adam) to physically shaped
+/// outputs, `T = a X_cold + b` plus, in the hot aisle, `g X_hot + d` with `g` close to
+/// `K / mean power` (so that a server's rise is about `1.76 / alpha` K), which the graph
+/// represents exactly.
+fn planted(hall: &Hall, mode: AlphaMode, scenarios: &[OperatingState], seed: u64) -> ThermalGraph {
+    let mut g = graph(hall, mode, ThermalGraphSettings::default().with_epochs(0).with_ridge(0.0));
+    let n = g.sensor_count();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x5eed);
+    let coef: Vec<[f64; 4]> = (0..n)
+        .map(|_| {
+            [
+                rng.random_range(0.8..1.2),
+                rng.random_range(-1.0..1.0),
+                1.757 / 300.0 * rng.random_range(0.6..1.0),
+                rng.random_range(-1.0..1.0),
+            ]
+        })
+        .collect();
+    let d = design(&g, 4, seed);
+    let mut train = Vec::new();
+    for (si, scen) in scenarios.iter().enumerate() {
+        for p in &d {
+            let (xc, xh) = g.hidden(scen, p).unwrap();
+            let outputs = (0..n)
+                .map(|k| {
+                    let c = coef[k];
+                    let cold = c[0] * xc[k] + c[1];
+                    if g.hot_mask()[k] { cold + c[2] * xh[k] + c[3] } else { cold }
+                })
+                .collect();
+            train.push(Sample { snapshot: si, params: p.clone(), outputs });
+        }
+    }
+    g.fit(TrainingSet { scenarios, samples: &train }, 0).unwrap();
+    g
+}
+
+fn random_unit(d: usize, rng: &mut Xoshiro256PlusPlus) -> Vec<f64> {
+    (0..d).map(|_| rng.random_range(0.05..0.95)).collect()
+}
+
+fn rel_close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * (1.0 + a.abs().max(b.abs()))
+}
+
+#[test]
+fn adjacency_is_sparse_cut_and_normalised_at_hall_a_size() {
+    let h = hall(HALL_A, AlphaMode::PerServer);
+    assert_eq!(h.server_count(), 2240);
+    let settings = AdjacencySettings::default();
+    let adj = Adjacency::from_hall(&h, &settings).unwrap();
+    let m = h.server_count();
+    let mut hot_rows = 0;
+    for (k, sensor) in h.sensors.iter().enumerate() {
+        // Wcs: nearest CRAC has weight one, every kept entry is at or above the cut.
+        let cs = adj.cs.range(k);
+        let max = adj.cs.val[cs.clone()].iter().copied().fold(0.0, f64::max);
+        assert!((max - 1.0).abs() < 1e-12);
+        assert!(adj.cs.val[cs].iter().all(|&w| w >= settings.crac_threshold));
+        let ss = adj.ss.range(k);
+        if sensor.aisle == kalibre_dc::hall::Aisle::Cold {
+            assert!(ss.is_empty(), "cold sensor {} has server edges", sensor.id);
+            continue;
+        }
+        hot_rows += 1;
+        let row = &adj.ss.val[ss.clone()];
+        assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12, "row {k} not normalised");
+        // Relative weights: the kept ones reach the cut, the cut ones are zero.
+        let recip: Vec<f64> = h
+            .servers()
+            .map(|s| {
+                1.0 / kalibre_dc::hall::distance(s.exhaust_centre(), sensor.position_m)
+                    .max(settings.min_distance_m)
+            })
+            .collect();
+        let rmax = recip.iter().copied().fold(0.0, f64::max);
+        for (j, r) in recip.iter().enumerate() {
+            let kept = adj.ss.get(k, j) != 0.0;
+            assert_eq!(kept, r / rmax >= settings.server_threshold, "sensor {k}, server {j}");
+        }
+        assert!(row.len() < m / 4, "row {k} keeps {} of {m} servers", row.len());
+    }
+    assert_eq!(hot_rows, 32);
+    // A higher threshold keeps fewer edges.
+    let tight = Adjacency::from_hall(&h, &settings.with_server_threshold(0.6)).unwrap();
+    assert!(tight.ss.nnz() < adj.ss.nnz());
+}
+
+#[test]
+fn fit_recovers_a_planted_truth() {
+    for mode in [AlphaMode::PerType, AlphaMode::PerServer] {
+        let h = hall(SMALL, mode);
+        let scenarios: Vec<_> = (0..3).map(|i| state(&h, &format!("t{i}"), 10 + i)).collect();
+        let truth = planted(&h, mode, &scenarios, 7);
+        let mut learner = graph(&h, mode, ThermalGraphSettings::default());
+        let train = samples(&truth, &scenarios, &design(&learner, 16, 3));
+        let summary = learner
+            .fit(TrainingSet { scenarios: &scenarios, samples: &train }, 0)
+            .unwrap();
+        assert!(summary.train_mse < 1e-4, "{mode:?}: train mse {}", summary.train_mse);
+        // Held out: new parameters inside the training range.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(99);
+        let space = learner.layout().space().clone();
+        let mut worst: f64 = 0.0;
+        for _ in 0..20 {
+            let p = space.from_unit(&random_unit(space.dim(), &mut rng)).unwrap();
+            for s in &scenarios {
+                for (a, b) in learner.predict(s, &p).iter().zip(truth.predict(s, &p)) {
+                    worst = worst.max((a - b).abs());
+                }
+            }
+        }
+        assert!(worst < 0.05, "{mode:?}: held-out max error {worst} C");
+    }
+}
+
+/// Minimises an objective in the unit box with projected Adam (a plain local search),
+/// halving the step every `steps / 6` steps.
+fn descend(obj: &dyn Objective, start: &[f64], steps: usize, lr0: f64) -> Vec<f64> {
+    let mut x = start.to_vec();
+    let (mut m, mut v) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+    for t in 1..=steps {
+        let lr = lr0 * 0.5f64.powi((6 * t / steps) as i32);
+        let (_, g) = obj.cost_and_gradient(&x);
+        for i in 0..x.len() {
+            m[i] = 0.9 * m[i] + 0.1 * g[i];
+            v[i] = 0.999 * v[i] + 0.001 * g[i] * g[i];
+            let mh = m[i] / (1.0 - 0.9f64.powi(t as i32));
+            let vh = v[i] / (1.0 - 0.999f64.powi(t as i32));
+            x[i] = (x[i] - lr * mh / (vh.sqrt() + 1e-12)).clamp(0.0, 1.0);
+        }
+    }
+    x
+}
+
+#[test]
+fn search_on_the_fitted_surrogate_recovers_per_type_alpha() {
+    let mode = AlphaMode::PerType;
+    let h = hall(HALL_A, mode);
+    let scenarios: Vec<_> = (0..2).map(|i| state(&h, &format!("t{i}"), 20 + i)).collect();
+    let truth = planted(&h, mode, &scenarios, 11);
+    let space = truth.layout().space().clone();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+    let alpha_true: Vec<f64> = (0..space.dim()).map(|_| rng.random_range(0.13..0.3)).collect();
+    let outputs: Vec<OutputInfo> = h
+        .sensors
+        .iter()
+        .map(|s| OutputInfo { name: s.id.clone(), group: s.aisle.as_str().into() })
+        .collect();
+    let obs = Observations::new(
+        outputs,
+        scenarios
+            .iter()
+            .map(|s| Snapshot {
+                label: s.label.clone(),
+                scenario: s.clone(),
+                measured: truth.predict(s, &alpha_true).into_iter().map(Some).collect(),
+            })
+            .collect(),
+    )
+    .unwrap();
+    let mut learner = graph(&h, mode, ThermalGraphSettings::default());
+    let train = samples(&truth, &scenarios, &design(&learner, 16, 4));
+    learner.fit(TrainingSet { scenarios: &scenarios, samples: &train }, 0).unwrap();
+    let penalty =
+        TemperatureRisePenalty::new(&h, learner.layout(), &scenarios, PenaltySettings::default())
+            .unwrap();
+    let obj = ThermalGraphObjective::new(&learner, &obs).unwrap().with_penalty(&penalty);
+    let start = space.to_unit(&space.initial()).unwrap();
+    let best_u = descend(&obj, &start, 3000, 0.05);
+    let best = space.from_unit(&best_u).unwrap();
+    // Measured: within 0.9% for every type (the search stops short of the exact optimum).
+    for (t, (b, a)) in best.iter().zip(&alpha_true).enumerate() {
+        assert!((b / a - 1.0).abs() < 0.02, "type {t}: found {b}, truth {a}");
+    }
+    assert!(!penalty.report(&best).binds);
+}
+
+#[test]
+fn penalty_reports_where_it_binds() {
+    let mode = AlphaMode::PerType;
+    let h = hall(SMALL, mode);
+    let layout = ParamLayout::with_mode(&h, mode, &[]).unwrap();
+    let scen = vec![state(&h, "t0", 1)];
+    let pen = TemperatureRisePenalty::new(&h, &layout, &scen, PenaltySettings::default()).unwrap();
+    // K = 1 / (4.71947e-4 * 1.2 * 1005) = 1.757 K cfm/W.
+    assert!((pen.rise_c(1.0) - 1.7570).abs() < 1e-3);
+    // Rises 8.8 K (alpha 0.2) are inside [5, 15]: no penalty.
+    let inside = vec![0.2; layout.space().dim()];
+    let rep = pen.report(&inside);
+    assert!(!rep.binds && rep.value == 0.0 && rep.violations.is_empty());
+    // Type 1 at alpha 0.08 (rise 22 K) binds from above; type 2 at 0.5 (3.5 K) from below.
+    let mut p = inside.clone();
+    p[1] = 0.08;
+    p[2] = 0.5;
+    let rep = pen.report(&p);
+    assert!(rep.binds);
+    assert_eq!(rep.violations.len(), 2);
+    assert_eq!(rep.violations[0].source, "alpha/type-1");
+    assert_eq!(rep.violations[0].bound, RiseBound::Above);
+    assert_eq!(rep.violations[1].bound, RiseBound::Below);
+    assert!(rep.servers_above > 0 && rep.servers_below > 0);
+    assert!(rep.weight_fraction_outside > 0.0 && rep.weight_fraction_outside < 1.0);
+    // The value is the power-weighted mean violation: below the largest violation (K).
+    let (v, _) = pen.value_and_gradient(&p);
+    assert!((v - rep.value).abs() < 1e-12);
+    assert!(v > 0.0 && v < pen.rise_c(0.08) - 15.0);
+    assert!(PenaltySettings::default().with_range_c(10.0, 5.0).check().is_err());
+}
+
+#[test]
+fn bad_training_data_is_a_clear_error() {
+    let h = hall(SMALL, AlphaMode::PerType);
+    let mut g = graph(&h, AlphaMode::PerType, ThermalGraphSettings::default());
+    let scen = vec![state(&h, "t0", 1)];
+    let p = g.layout().space().initial();
+    let bad = vec![Sample { snapshot: 0, params: p.clone(), outputs: vec![20.0; 3] }];
+    let err = g.fit(TrainingSet { scenarios: &scen, samples: &bad }, 0).unwrap_err();
+    assert!(err.to_string().contains("training sample 0"), "{err}");
+    let bad = vec![Sample { snapshot: 4, params: p, outputs: vec![] }];
+    assert!(g.fit(TrainingSet { scenarios: &scen, samples: &bad }, 0).is_err());
+    assert!(ThermalGraphSettings::default().with_decay(0.0, 10).check().is_err());
+}
+
+fn fd_check(f: impl Fn(&[f64]) -> f64, x: &[f64], grad: &[f64], rel: f64) -> Result<(), TestCaseError> {
+    for i in 0..x.len() {
+        let h = 1e-6 * x[i].abs().max(1e-3);
+        let (mut xp, mut xm) = (x.to_vec(), x.to_vec());
+        xp[i] += h;
+        xm[i] -= h;
+        let fd = (f(&xp) - f(&xm)) / (2.0 * h);
+        prop_assert!(rel_close(fd, grad[i], rel), "coordinate {i}: fd {fd}, analytic {}", grad[i]);
+    }
+    Ok(())
+}
+
+fn fitted_small(mode: AlphaMode, trainable: bool, seed: u64) -> (Hall, Vec<OperatingState>, ThermalGraph, Vec<Sample>) {
+    let h = hall(SMALL, mode);
+    let scenarios: Vec<_> = (0..2).map(|i| state(&h, &format!("t{i}"), seed + i)).collect();
+    let truth = planted(&h, mode, &scenarios, seed);
+    let settings = ThermalGraphSettings::default().with_epochs(3).with_trainable_adjacency(trainable);
+    let mut g = graph(&h, mode, settings);
+    let train = samples(&truth, &scenarios, &design(&g, 2, seed));
+    g.fit(TrainingSet { scenarios: &scenarios, samples: &train }, 0).unwrap();
+    // Move the weights off the fit so every gradient entry is exercised.
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let theta: Vec<f64> = g.weights_vector().iter().map(|t| t + rng.random_range(-0.3..0.3)).collect();
+    g.set_weights_vector(&theta).unwrap();
+    (h, scenarios, g, train)
+}
+
+fn mode_of(per_server: bool) -> AlphaMode {
+    if per_server { AlphaMode::PerServer } else { AlphaMode::PerType }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    #[test]
+    fn vjp_matches_finite_differences(seed in 0u64..1000, per_server in any::<bool>()) {
+        let (_, scenarios, g, _) = fitted_small(mode_of(per_server), false, seed);
+        let space = g.layout().space().clone();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed + 1);
+        let p = space.from_unit(&random_unit(space.dim(), &mut rng)).unwrap();
+        let ct: Vec<f64> = (0..g.sensor_count()).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let s = &scenarios[0];
+        let grad = g.vjp(s, &p, &ct);
+        fd_check(|x| g.predict(s, x).iter().zip(&ct).map(|(o, c)| o * c).sum(), &p, &grad, 1e-5)?;
+    }
+
+    #[test]
+    fn weight_gradient_matches_finite_differences(seed in 0u64..1000, per_server in any::<bool>(), trainable in any::<bool>()) {
+        let (_, scenarios, g, train) = fitted_small(mode_of(per_server), trainable, seed);
+        let data = || TrainingSet { scenarios: &scenarios, samples: &train };
+        let (_, grad) = g.training_loss_and_gradient(data()).unwrap();
+        let theta = g.weights_vector();
+        let probe = std::cell::RefCell::new(fitted_small(mode_of(per_server), trainable, seed).2);
+        fd_check(|t| {
+            let mut p = probe.borrow_mut();
+            p.set_weights_vector(t).unwrap();
+            p.training_loss_and_gradient(data()).unwrap().0
+        }, &theta, &grad, 1e-5)?;
+    }
+
+    #[test]
+    fn penalty_gradient_matches_finite_differences(seed in 0u64..1000, per_server in any::<bool>()) {
+        let mode = mode_of(per_server);
+        let h = hall(SMALL, mode);
+        let layout = ParamLayout::with_mode(&h, mode, &[]).unwrap();
+        let scen = vec![state(&h, "t0", seed), state(&h, "t1", seed + 1)];
+        let pen = TemperatureRisePenalty::new(&h, &layout, &scen, PenaltySettings::default()).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        // Alphas straddling the range (rises from 3.5 to 29 K), away from the kinks.
+        let p: Vec<f64> = (0..layout.space().dim()).map(|_| rng.random_range(0.06..0.5)).collect();
+        for a in &p {
+            let r = pen.rise_c(*a);
+            prop_assume!((r - 5.0).abs() > 1e-3 && (r - 15.0).abs() > 1e-3);
+        }
+        let (_, grad) = pen.value_and_gradient(&p);
+        fd_check(|x| pen.value_and_gradient(x).0, &p, &grad, 1e-5)?;
+    }
+
+    #[test]
+    fn specialised_objective_equals_the_generic_one(seed in 0u64..1000, per_server in any::<bool>()) {
+        let mode = mode_of(per_server);
+        let (h, scenarios, g, _) = fitted_small(mode, false, seed);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed + 2);
+        let outputs: Vec<OutputInfo> = h.sensors.iter()
+            .map(|s| OutputInfo { name: s.id.clone(), group: s.aisle.as_str().into() }).collect();
+        let obs = Observations::new(outputs, scenarios.iter().map(|s| Snapshot {
+            label: s.label.clone(),
+            scenario: s.clone(),
+            // One dead sensor per snapshot.
+            measured: (0..h.sensors.len()).map(|k| (k != 1).then(|| rng.random_range(18.0..40.0))).collect(),
+        }).collect()).unwrap();
+        let pen = TemperatureRisePenalty::new(&h, g.layout(), &scenarios, PenaltySettings::default().with_weight(0.7)).unwrap();
+        let space = g.layout().space();
+        let generic = SurrogateObjective::new(&g, &obs, space).with_regularizer(&pen, 0.7);
+        let fast = ThermalGraphObjective::new(&g, &obs).unwrap().with_penalty(&pen);
+        let u: Vec<f64> = (0..space.dim()).map(|_| rng.random_range(0.0..1.0)).collect();
+        prop_assert!(rel_close(fast.cost(&u), generic.cost(&u), 1e-10));
+        let (c1, g1) = fast.cost_and_gradient(&u);
+        let (c2, g2) = generic.cost_and_gradient(&u);
+        prop_assert!(rel_close(c1, c2, 1e-10));
+        for (a, b) in g1.iter().zip(&g2) {
+            prop_assert!(rel_close(*a, *b, 1e-9), "{a} vs {b}");
+        }
+    }
+}
