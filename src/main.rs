@@ -1,6 +1,13 @@
-//! The `kalibre` command-line tool (subcommands are wired as their crates land).
+//! The `kalibre` command-line tool.
+
+mod cli;
+
+use clap::Parser;
 
 fn main() {
-    eprintln!("kalibre: the command-line tool is being assembled; see README.md");
-    std::process::exit(2);
+    let args = cli::Cli::parse();
+    if let Err(e) = cli::run(args) {
+        eprintln!("kalibre: error: {e}");
+        std::process::exit(e.exit_code());
+    }
 }

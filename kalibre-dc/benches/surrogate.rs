@@ -11,7 +11,9 @@ use std::time::Instant;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use kalibre_core::search::{DifferentialEvolution, Hybrid, Objective, Searcher};
-use kalibre_core::{Observations, OutputInfo, Sample, Snapshot, Surrogate, SurrogateObjective, TrainingSet};
+use kalibre_core::{
+    Observations, OutputInfo, Sample, Snapshot, Surrogate, SurrogateObjective, TrainingSet,
+};
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::surrogate::*;
@@ -67,34 +69,73 @@ fn setup() -> Setup {
     for base in [0.0f64, 1.0, 0.5] {
         for c in 0..16 {
             let u: Vec<f64> = (0..d)
-                .map(|_| if c == 0 { base } else { (base + noise.sample(&mut rng) as f64).clamp(0.0, 1.0) })
+                .map(|_| {
+                    if c == 0 {
+                        base
+                    } else {
+                        (base + noise.sample(&mut rng)).clamp(0.0, 1.0)
+                    }
+                })
                 .collect();
             let p = space.from_unit(&u).unwrap();
-            samples.push(Sample { snapshot: 0, outputs: outputs(&p), params: p });
+            samples.push(Sample {
+                snapshot: 0,
+                outputs: outputs(&p),
+                params: p,
+            });
         }
     }
     let truth: Vec<f64> = (0..d).map(|_| rng.random_range(0.1..0.25)).collect();
     let obs = Observations::new(
         hall.sensors
             .iter()
-            .map(|s| OutputInfo { name: s.id.clone(), group: s.aisle.as_str().into() })
+            .map(|s| OutputInfo {
+                name: s.id.clone(),
+                group: s.aisle.as_str().into(),
+            })
             .collect(),
         vec![Snapshot {
             label: "t0".into(),
             scenario: scenarios[0].clone(),
-            measured: outputs(&truth).into_iter().map(|v| Some(v + rng.random_range(-0.2..0.2))).collect(),
+            measured: outputs(&truth)
+                .into_iter()
+                .map(|v| Some(v + rng.random_range(-0.2..0.2)))
+                .collect(),
         }],
     )
     .unwrap();
-    Setup { hall, scenarios, samples, obs }
+    Setup {
+        hall,
+        scenarios,
+        samples,
+        obs,
+    }
 }
 
 /// One loop iteration's surrogate work: refit the graph (built once per calibration, as
 /// the loop does), build the search objective on it, search.
-fn iteration(s: &Setup, g: &mut ThermalGraph, pen: &TemperatureRisePenalty, searcher: &dyn Searcher) -> (f64, usize) {
-    g.fit(TrainingSet { scenarios: &s.scenarios, samples: &s.samples }, 0).unwrap();
-    let obj = ThermalGraphObjective::new(g, &s.obs).unwrap().with_penalty(pen);
-    let start = g.layout().space().to_unit(&g.layout().space().initial()).unwrap();
+fn iteration(
+    s: &Setup,
+    g: &mut ThermalGraph,
+    pen: &TemperatureRisePenalty,
+    searcher: &dyn Searcher,
+) -> (f64, usize) {
+    g.fit(
+        TrainingSet {
+            scenarios: &s.scenarios,
+            samples: &s.samples,
+        },
+        0,
+    )
+    .unwrap();
+    let obj = ThermalGraphObjective::new(g, &s.obs)
+        .unwrap()
+        .with_penalty(pen);
+    let start = g
+        .layout()
+        .space()
+        .to_unit(&g.layout().space().initial())
+        .unwrap();
     let out = searcher.search(&obj, &start, 7).unwrap();
     (out.best_cost, out.evaluations)
 }
@@ -115,10 +156,25 @@ fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
 fn print_figures(s: &Setup) {
     let mut g = new_graph(&s.hall);
     let fit_ms = median_ms(11, || {
-        g.fit(TrainingSet { scenarios: &s.scenarios, samples: &s.samples }, 0).unwrap();
+        g.fit(
+            TrainingSet {
+                scenarios: &s.scenarios,
+                samples: &s.samples,
+            },
+            0,
+        )
+        .unwrap();
     });
-    let pen = TemperatureRisePenalty::new(&s.hall, g.layout(), &s.scenarios, PenaltySettings::default()).unwrap();
-    let obj = ThermalGraphObjective::new(&g, &s.obs).unwrap().with_penalty(&pen);
+    let pen = TemperatureRisePenalty::new(
+        &s.hall,
+        g.layout(),
+        &s.scenarios,
+        PenaltySettings::default(),
+    )
+    .unwrap();
+    let obj = ThermalGraphObjective::new(&g, &s.obs)
+        .unwrap()
+        .with_penalty(&pen);
     let space = g.layout().space();
     let u = space.to_unit(&space.initial()).unwrap();
     let evals_ms = median_ms(5, || {
@@ -140,31 +196,83 @@ fn print_figures(s: &Setup) {
     });
     let hybrid = Hybrid::default();
     let full_de = Hybrid::default().with_de(
-        DifferentialEvolution::default().to_builder().with_give_up_after(None).build().unwrap(),
+        DifferentialEvolution::default()
+            .to_builder()
+            .with_give_up_after(None)
+            .build()
+            .unwrap(),
     );
     let mut ev = (0, 0);
     let mut g2 = new_graph(&s.hall);
     let it_ms = median_ms(7, || ev.0 = iteration(s, &mut g2, &pen, &hybrid).1);
     let it_full_ms = median_ms(5, || ev.1 = iteration(s, &mut g2, &pen, &full_de).1);
-    println!("thermal graph at hall-a size, alpha per server ({} parameters), one snapshot, 48 samples", space.dim());
-    println!("  adjacency nnz: Wss {}, Wcs {}; objective rows merged entries {}", g.adjacency().ss.nnz(), g.adjacency().cs.nnz(), obj.nnz());
+    println!(
+        "thermal graph at hall-a size, alpha per server ({} parameters), one snapshot, 48 samples",
+        space.dim()
+    );
+    println!(
+        "  adjacency nnz: Wss {}, Wcs {}; objective rows merged entries {}",
+        g.adjacency().ss.nnz(),
+        g.adjacency().cs.nnz(),
+        obj.nnz()
+    );
     // The searchers' own cost: the same searches on a trivial objective of equal size.
     let quad = Quadratic(space.dim());
     let mut qe = (0, 0);
-    let q_ms = median_ms(7, || qe.0 = hybrid.search(&quad, &u, 7).unwrap().evaluations);
-    let q_full_ms = median_ms(5, || qe.1 = full_de.search(&quad, &u, 7).unwrap().evaluations);
+    let q_ms = median_ms(7, || {
+        qe.0 = hybrid.search(&quad, &u, 7).unwrap().evaluations
+    });
+    let q_full_ms = median_ms(5, || {
+        qe.1 = full_de.search(&quad, &u, 7).unwrap().evaluations
+    });
     let show = |what: &str, wall: f64| {
         println!("  {what:<68} {wall:8.3} ms");
     };
-    println!("  (median wall time of repeated runs; load average {})",
-        std::fs::read_to_string("/proc/loadavg").unwrap_or_default().split_whitespace().next().unwrap_or("?"));
+    println!(
+        "  (median wall time of repeated runs; load average {})",
+        std::fs::read_to_string("/proc/loadavg")
+            .unwrap_or_default()
+            .split_whitespace()
+            .next()
+            .unwrap_or("?")
+    );
     show("fit (150 epochs, fixed adjacency)", fit_ms);
-    show("1000 costs + 100 gradients (specialised objective)", evals_ms);
-    show("1000 costs + 100 gradients (generic SurrogateObjective)", generic_ms);
-    show(&format!("iteration: fit + default hybrid search ({} evaluations)", ev.0), it_ms);
-    show(&format!("iteration: fit + hybrid, all 100 DE generations ({} evals)", ev.1), it_full_ms);
-    show(&format!("searcher alone, default hybrid, trivial objective ({} evals)", qe.0), q_ms);
-    show(&format!("searcher alone, all 100 DE generations, trivial objective ({} evals)", qe.1), q_full_ms);
+    show(
+        "1000 costs + 100 gradients (specialised objective)",
+        evals_ms,
+    );
+    show(
+        "1000 costs + 100 gradients (generic SurrogateObjective)",
+        generic_ms,
+    );
+    show(
+        &format!(
+            "iteration: fit + default hybrid search ({} evaluations)",
+            ev.0
+        ),
+        it_ms,
+    );
+    show(
+        &format!(
+            "iteration: fit + hybrid, all 100 DE generations ({} evals)",
+            ev.1
+        ),
+        it_full_ms,
+    );
+    show(
+        &format!(
+            "searcher alone, default hybrid, trivial objective ({} evals)",
+            qe.0
+        ),
+        q_ms,
+    );
+    show(
+        &format!(
+            "searcher alone, all 100 DE generations, trivial objective ({} evals)",
+            qe.1
+        ),
+        q_full_ms,
+    );
     println!("  target: 15 ms per iteration");
 }
 
@@ -175,11 +283,26 @@ fn bench(c: &mut Criterion) {
     group.sample_size(10);
     group.bench_function("fit", |b| {
         let mut g = new_graph(&s.hall);
-        b.iter(|| g.fit(TrainingSet { scenarios: &s.scenarios, samples: &s.samples }, 0).unwrap())
+        b.iter(|| {
+            g.fit(
+                TrainingSet {
+                    scenarios: &s.scenarios,
+                    samples: &s.samples,
+                },
+                0,
+            )
+            .unwrap()
+        })
     });
     let hybrid = Hybrid::default();
     let mut g = new_graph(&s.hall);
-    let pen = TemperatureRisePenalty::new(&s.hall, g.layout(), &s.scenarios, PenaltySettings::default()).unwrap();
+    let pen = TemperatureRisePenalty::new(
+        &s.hall,
+        g.layout(),
+        &s.scenarios,
+        PenaltySettings::default(),
+    )
+    .unwrap();
     group.bench_function("iteration_fit_and_hybrid_search", |b| {
         b.iter(|| iteration(&s, &mut g, &pen, &hybrid))
     });

@@ -6,11 +6,13 @@
 
 #![warn(missing_docs)]
 
+pub mod calibration;
 pub mod effects;
 mod error;
 pub mod hall;
 mod model;
 mod params;
+pub mod report;
 pub mod sim;
 pub mod snapshots;
 pub mod surrogate;

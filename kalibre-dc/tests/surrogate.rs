@@ -36,7 +36,7 @@ fn design(g: &ThermalGraph, copies: usize, seed: u64) -> Vec<Vec<f64>> {
         out.push(space.from_unit(&vec![base; d]).unwrap());
         for _ in 1..copies {
             let u: Vec<f64> = (0..d)
-                .map(|_| (base + noise.sample(&mut rng) as f64).clamp(0.0, 1.0))
+                .map(|_| (base + noise.sample(&mut rng)).clamp(0.0, 1.0))
                 .collect();
             out.push(space.from_unit(&u).unwrap());
         }
@@ -63,7 +63,13 @@ fn samples(truth: &ThermalGraph, scenarios: &[OperatingState], params: &[Vec<f64
 /// `K / mean power` (so that a server's rise is about `1.76 / alpha` K), which the graph
 /// represents exactly.
 fn planted(hall: &Hall, mode: AlphaMode, scenarios: &[OperatingState], seed: u64) -> ThermalGraph {
-    let mut g = graph(hall, mode, ThermalGraphSettings::default().with_epochs(0).with_ridge(0.0));
+    let mut g = graph(
+        hall,
+        mode,
+        ThermalGraphSettings::default()
+            .with_epochs(0)
+            .with_ridge(0.0),
+    );
     let n = g.sensor_count();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x5eed);
     let coef: Vec<[f64; 4]> = (0..n)
@@ -85,13 +91,28 @@ fn planted(hall: &Hall, mode: AlphaMode, scenarios: &[OperatingState], seed: u64
                 .map(|k| {
                     let c = coef[k];
                     let cold = c[0] * xc[k] + c[1];
-                    if g.hot_mask()[k] { cold + c[2] * xh[k] + c[3] } else { cold }
+                    if g.hot_mask()[k] {
+                        cold + c[2] * xh[k] + c[3]
+                    } else {
+                        cold
+                    }
                 })
                 .collect();
-            train.push(Sample { snapshot: si, params: p.clone(), outputs });
+            train.push(Sample {
+                snapshot: si,
+                params: p.clone(),
+                outputs,
+            });
         }
     }
-    g.fit(TrainingSet { scenarios, samples: &train }, 0).unwrap();
+    g.fit(
+        TrainingSet {
+            scenarios,
+            samples: &train,
+        },
+        0,
+    )
+    .unwrap();
     g
 }
 
@@ -124,7 +145,10 @@ fn adjacency_is_sparse_cut_and_normalised_at_hall_a_size() {
         }
         hot_rows += 1;
         let row = &adj.ss.val[ss.clone()];
-        assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12, "row {k} not normalised");
+        assert!(
+            (row.iter().sum::<f64>() - 1.0).abs() < 1e-12,
+            "row {k} not normalised"
+        );
         // Relative weights: the kept ones reach the cut, the cut ones are zero.
         let recip: Vec<f64> = h
             .servers()
@@ -136,9 +160,17 @@ fn adjacency_is_sparse_cut_and_normalised_at_hall_a_size() {
         let rmax = recip.iter().copied().fold(0.0, f64::max);
         for (j, r) in recip.iter().enumerate() {
             let kept = adj.ss.get(k, j) != 0.0;
-            assert_eq!(kept, r / rmax >= settings.server_threshold, "sensor {k}, server {j}");
+            assert_eq!(
+                kept,
+                r / rmax >= settings.server_threshold,
+                "sensor {k}, server {j}"
+            );
         }
-        assert!(row.len() < m / 4, "row {k} keeps {} of {m} servers", row.len());
+        assert!(
+            row.len() < m / 4,
+            "row {k} keeps {} of {m} servers",
+            row.len()
+        );
     }
     assert_eq!(hot_rows, 32);
     // A higher threshold keeps fewer edges.
@@ -150,20 +182,34 @@ fn adjacency_is_sparse_cut_and_normalised_at_hall_a_size() {
 fn fit_recovers_a_planted_truth() {
     for mode in [AlphaMode::PerType, AlphaMode::PerServer] {
         let h = hall(SMALL, mode);
-        let scenarios: Vec<_> = (0..3).map(|i| state(&h, &format!("t{i}"), 10 + i)).collect();
+        let scenarios: Vec<_> = (0..3)
+            .map(|i| state(&h, &format!("t{i}"), 10 + i))
+            .collect();
         let truth = planted(&h, mode, &scenarios, 7);
         let mut learner = graph(&h, mode, ThermalGraphSettings::default());
         let train = samples(&truth, &scenarios, &design(&learner, 16, 3));
         let summary = learner
-            .fit(TrainingSet { scenarios: &scenarios, samples: &train }, 0)
+            .fit(
+                TrainingSet {
+                    scenarios: &scenarios,
+                    samples: &train,
+                },
+                0,
+            )
             .unwrap();
-        assert!(summary.train_mse < 1e-4, "{mode:?}: train mse {}", summary.train_mse);
+        assert!(
+            summary.train_mse < 1e-4,
+            "{mode:?}: train mse {}",
+            summary.train_mse
+        );
         // Held out: new parameters inside the training range.
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(99);
         let space = learner.layout().space().clone();
         let mut worst: f64 = 0.0;
         for _ in 0..20 {
-            let p = space.from_unit(&random_unit(space.dim(), &mut rng)).unwrap();
+            let p = space
+                .from_unit(&random_unit(space.dim(), &mut rng))
+                .unwrap();
             for s in &scenarios {
                 for (a, b) in learner.predict(s, &p).iter().zip(truth.predict(s, &p)) {
                     worst = worst.max((a - b).abs());
@@ -197,15 +243,22 @@ fn descend(obj: &dyn Objective, start: &[f64], steps: usize, lr0: f64) -> Vec<f6
 fn search_on_the_fitted_surrogate_recovers_per_type_alpha() {
     let mode = AlphaMode::PerType;
     let h = hall(HALL_A, mode);
-    let scenarios: Vec<_> = (0..2).map(|i| state(&h, &format!("t{i}"), 20 + i)).collect();
+    let scenarios: Vec<_> = (0..2)
+        .map(|i| state(&h, &format!("t{i}"), 20 + i))
+        .collect();
     let truth = planted(&h, mode, &scenarios, 11);
     let space = truth.layout().space().clone();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-    let alpha_true: Vec<f64> = (0..space.dim()).map(|_| rng.random_range(0.13..0.3)).collect();
+    let alpha_true: Vec<f64> = (0..space.dim())
+        .map(|_| rng.random_range(0.13..0.3))
+        .collect();
     let outputs: Vec<OutputInfo> = h
         .sensors
         .iter()
-        .map(|s| OutputInfo { name: s.id.clone(), group: s.aisle.as_str().into() })
+        .map(|s| OutputInfo {
+            name: s.id.clone(),
+            group: s.aisle.as_str().into(),
+        })
         .collect();
     let obs = Observations::new(
         outputs,
@@ -214,18 +267,32 @@ fn search_on_the_fitted_surrogate_recovers_per_type_alpha() {
             .map(|s| Snapshot {
                 label: s.label.clone(),
                 scenario: s.clone(),
-                measured: truth.predict(s, &alpha_true).into_iter().map(Some).collect(),
+                measured: truth
+                    .predict(s, &alpha_true)
+                    .into_iter()
+                    .map(Some)
+                    .collect(),
             })
             .collect(),
     )
     .unwrap();
     let mut learner = graph(&h, mode, ThermalGraphSettings::default());
     let train = samples(&truth, &scenarios, &design(&learner, 16, 4));
-    learner.fit(TrainingSet { scenarios: &scenarios, samples: &train }, 0).unwrap();
+    learner
+        .fit(
+            TrainingSet {
+                scenarios: &scenarios,
+                samples: &train,
+            },
+            0,
+        )
+        .unwrap();
     let penalty =
         TemperatureRisePenalty::new(&h, learner.layout(), &scenarios, PenaltySettings::default())
             .unwrap();
-    let obj = ThermalGraphObjective::new(&learner, &obs).unwrap().with_penalty(&penalty);
+    let obj = ThermalGraphObjective::new(&learner, &obs)
+        .unwrap()
+        .with_penalty(&penalty);
     let start = space.to_unit(&space.initial()).unwrap();
     let best_u = descend(&obj, &start, 3000, 0.05);
     let best = space.from_unit(&best_u).unwrap();
@@ -265,7 +332,10 @@ fn penalty_reports_where_it_binds() {
     let (v, _) = pen.value_and_gradient(&p);
     assert!((v - rep.value).abs() < 1e-12);
     assert!(v > 0.0 && v < pen.rise_c(0.08) - 15.0);
-    assert!(PenaltySettings::default().with_range_c(10.0, 5.0).check().is_err());
+    assert!(PenaltySettings::default()
+        .with_range_c(10.0, 5.0)
+        .check()
+        .is_err());
 }
 
 #[test]
@@ -274,43 +344,102 @@ fn bad_training_data_is_a_clear_error() {
     let mut g = graph(&h, AlphaMode::PerType, ThermalGraphSettings::default());
     let scen = vec![state(&h, "t0", 1)];
     let p = g.layout().space().initial();
-    let bad = vec![Sample { snapshot: 0, params: p.clone(), outputs: vec![20.0; 3] }];
-    let err = g.fit(TrainingSet { scenarios: &scen, samples: &bad }, 0).unwrap_err();
+    let bad = vec![Sample {
+        snapshot: 0,
+        params: p.clone(),
+        outputs: vec![20.0; 3],
+    }];
+    let err = g
+        .fit(
+            TrainingSet {
+                scenarios: &scen,
+                samples: &bad,
+            },
+            0,
+        )
+        .unwrap_err();
     assert!(err.to_string().contains("training sample 0"), "{err}");
-    let bad = vec![Sample { snapshot: 4, params: p, outputs: vec![] }];
-    assert!(g.fit(TrainingSet { scenarios: &scen, samples: &bad }, 0).is_err());
-    assert!(ThermalGraphSettings::default().with_decay(0.0, 10).check().is_err());
+    let bad = vec![Sample {
+        snapshot: 4,
+        params: p,
+        outputs: vec![],
+    }];
+    assert!(g
+        .fit(
+            TrainingSet {
+                scenarios: &scen,
+                samples: &bad
+            },
+            0
+        )
+        .is_err());
+    assert!(ThermalGraphSettings::default()
+        .with_decay(0.0, 10)
+        .check()
+        .is_err());
 }
 
-fn fd_check(f: impl Fn(&[f64]) -> f64, x: &[f64], grad: &[f64], rel: f64) -> Result<(), TestCaseError> {
+fn fd_check(
+    f: impl Fn(&[f64]) -> f64,
+    x: &[f64],
+    grad: &[f64],
+    rel: f64,
+) -> Result<(), TestCaseError> {
     for i in 0..x.len() {
         let h = 1e-6 * x[i].abs().max(1e-3);
         let (mut xp, mut xm) = (x.to_vec(), x.to_vec());
         xp[i] += h;
         xm[i] -= h;
         let fd = (f(&xp) - f(&xm)) / (2.0 * h);
-        prop_assert!(rel_close(fd, grad[i], rel), "coordinate {i}: fd {fd}, analytic {}", grad[i]);
+        prop_assert!(
+            rel_close(fd, grad[i], rel),
+            "coordinate {i}: fd {fd}, analytic {}",
+            grad[i]
+        );
     }
     Ok(())
 }
 
-fn fitted_small(mode: AlphaMode, trainable: bool, seed: u64) -> (Hall, Vec<OperatingState>, ThermalGraph, Vec<Sample>) {
+fn fitted_small(
+    mode: AlphaMode,
+    trainable: bool,
+    seed: u64,
+) -> (Hall, Vec<OperatingState>, ThermalGraph, Vec<Sample>) {
     let h = hall(SMALL, mode);
-    let scenarios: Vec<_> = (0..2).map(|i| state(&h, &format!("t{i}"), seed + i)).collect();
+    let scenarios: Vec<_> = (0..2)
+        .map(|i| state(&h, &format!("t{i}"), seed + i))
+        .collect();
     let truth = planted(&h, mode, &scenarios, seed);
-    let settings = ThermalGraphSettings::default().with_epochs(3).with_trainable_adjacency(trainable);
+    let settings = ThermalGraphSettings::default()
+        .with_epochs(3)
+        .with_trainable_adjacency(trainable);
     let mut g = graph(&h, mode, settings);
     let train = samples(&truth, &scenarios, &design(&g, 2, seed));
-    g.fit(TrainingSet { scenarios: &scenarios, samples: &train }, 0).unwrap();
+    g.fit(
+        TrainingSet {
+            scenarios: &scenarios,
+            samples: &train,
+        },
+        0,
+    )
+    .unwrap();
     // Move the weights off the fit so every gradient entry is exercised.
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let theta: Vec<f64> = g.weights_vector().iter().map(|t| t + rng.random_range(-0.3..0.3)).collect();
+    let theta: Vec<f64> = g
+        .weights_vector()
+        .iter()
+        .map(|t| t + rng.random_range(-0.3..0.3))
+        .collect();
     g.set_weights_vector(&theta).unwrap();
     (h, scenarios, g, train)
 }
 
 fn mode_of(per_server: bool) -> AlphaMode {
-    if per_server { AlphaMode::PerServer } else { AlphaMode::PerType }
+    if per_server {
+        AlphaMode::PerServer
+    } else {
+        AlphaMode::PerType
+    }
 }
 
 proptest! {
@@ -386,4 +515,89 @@ proptest! {
             prop_assert!(rel_close(*a, *b, 1e-9), "{a} vs {b}");
         }
     }
+}
+
+/// Trained on runs of the built-in simulator, the surrogate predicts held-out runs of the
+/// same hall (alpha per type, two operating states).
+#[test]
+fn predicts_held_out_simulator_runs() {
+    use kalibre_core::Model;
+    use kalibre_dc::sim::SimConfig;
+    use kalibre_dc::HallModel;
+    let mode = AlphaMode::PerType;
+    let mut h = hall(SMALL, mode);
+    for t in &mut h.server_types {
+        t.alpha_cfm_per_w = kalibre_dc::hall::AlphaBounds {
+            initial: 0.12,
+            min: 0.06,
+            max: 0.4,
+        };
+    }
+    let model = HallModel::new(&h, SimConfig::default()).unwrap();
+    let scenarios: Vec<_> = (0..2)
+        .map(|i| state(&h, &format!("t{i}"), 40 + i))
+        .collect();
+    let mut g = graph(&h, mode, ThermalGraphSettings::default());
+    let space = g.layout().space().clone();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(8);
+    let run = |p: &[f64], s: usize| Sample {
+        snapshot: s,
+        params: p.to_vec(),
+        outputs: model.evaluate(&scenarios[s], p).unwrap().values,
+    };
+    let mut train = Vec::new();
+    let mut held_out = Vec::new();
+    for s in 0..scenarios.len() {
+        for base in [0.0, 1.0, 0.5] {
+            train.push(run(&space.from_unit(&vec![base; space.dim()]).unwrap(), s));
+        }
+        for _ in 0..3 {
+            train.push(run(
+                &space
+                    .from_unit(&random_unit(space.dim(), &mut rng))
+                    .unwrap(),
+                s,
+            ));
+        }
+        for _ in 0..2 {
+            held_out.push(run(
+                &space
+                    .from_unit(&random_unit(space.dim(), &mut rng))
+                    .unwrap(),
+                s,
+            ));
+        }
+    }
+    let fit = g
+        .fit(
+            TrainingSet {
+                scenarios: &scenarios,
+                samples: &train,
+            },
+            0,
+        )
+        .unwrap();
+    let (mut sum, mut count, mut worst) = ([0.0; 2], [0.0; 2], 0.0f64);
+    for s in &held_out {
+        let pred = g.predict(&scenarios[s.snapshot], &s.params);
+        for (k, (p, m)) in pred.iter().zip(&s.outputs).enumerate() {
+            let hot = usize::from(g.hot_mask()[k]);
+            sum[hot] += (p - m).abs();
+            count[hot] += 1.0;
+            worst = worst.max((p - m).abs());
+        }
+    }
+    let mae = (sum[0] + sum[1]) / (count[0] + count[1]);
+    eprintln!(
+        "train mse {}, held-out mae {mae} (cold {}, hot {}), max {worst}",
+        fit.train_mse,
+        sum[0] / count[0],
+        sum[1] / count[1]
+    );
+    // Measured (SimConfig::default, this seed): held-out MAE 0.94 C, max 2.9 C, over
+    // alphas spanning rises of 4-29 K; the graph's heating block is linear in P / alpha,
+    // while the simulated exhaust mixing is flow-weighted, so errors grow far from the
+    // training runs. A trainable adjacency fits the training runs better (mse 0.52 against
+    // 2.49 K^2) but not the held-out ones (MAE 0.96 C), as the paper's Fig. 7 found.
+    assert!(mae < 1.0, "held-out MAE {mae} C");
 }

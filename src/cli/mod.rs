@@ -1,5 +1,6 @@
 //! Subcommands of the `kalibre` tool.
 
+mod calibrate;
 mod error;
 mod simulate;
 mod synth;
@@ -23,6 +24,8 @@ enum Command {
     Synth(synth::SynthArgs),
     /// Run the built-in simulator on a hall's snapshots and write the predicted sensor readings.
     Simulate(simulate::SimulateArgs),
+    /// Calibrate a hall's parameters (server air flow rates, effects) against its measurements.
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 /// Runs a parsed command line.
@@ -30,6 +33,7 @@ pub fn run(cli: Cli) -> CliResult {
     match cli.command {
         Command::Synth(a) => synth::run(a),
         Command::Simulate(a) => simulate::run(a),
+        Command::Calibrate(a) => calibrate::run(a),
     }
 }
 

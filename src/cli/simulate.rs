@@ -80,8 +80,11 @@ pub fn sim_config(grid_m: Option<f64>) -> CliResult<SimConfig> {
                 "--grid-m: expected a positive cell size in metres, got {dx}"
             )));
         }
-        config.cell_m = dx;
+        config = config.with_cell_m(dx);
     }
+    config
+        .check()
+        .map_err(|e| CliError::Input(format!("--grid-m: {e}")))?;
     Ok(config)
 }
 
@@ -95,18 +98,14 @@ pub fn run(args: SimulateArgs) -> CliResult {
         Some(p) => load_params(p, space)?,
         None => space.initial(),
     };
-    if let Some(dir) = &args.vtk {
-        std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
-    }
     let mut labels = Vec::with_capacity(snaps.len());
     let mut predicted = Vec::with_capacity(snaps.len());
     for snap in &snaps {
         let state = &snap.state;
         let values = match &args.vtk {
             Some(dir) => {
-                let solution = model.solve_fields(state, &params)?;
-                let path = dir.join(format!("{}.vtk", sanitize(&state.label)));
-                kalibre_dc::sim::write_vtk(&path, model.simulator(), &solution)?;
+                let solution = model.solve(state, &params)?;
+                kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
                 solution.sensor_c().to_vec()
             }
             None => model
@@ -130,12 +129,4 @@ pub fn run(args: SimulateArgs) -> CliResult {
             .unwrap_or_default()
     );
     Ok(())
-}
-
-/// A snapshot label as a file name.
-fn sanitize(label: &str) -> String {
-    label
-        .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
-        .collect()
 }

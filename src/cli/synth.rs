@@ -52,14 +52,12 @@ pub fn run(args: SynthArgs) -> CliResult {
         .iter()
         .map(|e| synth::parse_effect_arg(e))
         .collect::<Result<Vec<_>, _>>()?;
-    let options = SynthOptions {
-        preset,
-        seed: args.seed,
-        effects,
-        noise_c: args.noise_c,
-        snapshots: args.snapshots,
-        ..SynthOptions::default()
-    };
+    let mut options = SynthOptions::new(preset, args.seed)
+        .with_noise_c(args.noise_c)
+        .with_snapshots(args.snapshots);
+    for e in effects {
+        options = options.with_effect(e);
+    }
     let out = synth::generate(&options)?;
     synth::write_dir(&args.out, &out)?;
     println!(

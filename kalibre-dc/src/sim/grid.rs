@@ -89,10 +89,12 @@ impl Grid {
         self.d[0] * self.d[1] * self.d[2]
     }
 
-    /// Cell indices along axis `a` whose centres lie in `[lo, hi)` (with tolerance).
+    /// Cell indices along axis `a` whose centres lie in `[lo, hi]` (with tolerance). A
+    /// centre exactly on a box edge counts as inside at both ends, so that mirrored
+    /// geometry maps onto mirrored cells.
     pub fn range_in(&self, a: usize, lo: f64, hi: f64) -> std::ops::Range<usize> {
         let first = ((lo - GEOM_EPS) / self.d[a] - 0.5).ceil().max(0.0) as usize;
-        let end = ((hi - GEOM_EPS) / self.d[a] - 0.5).ceil().max(0.0) as usize;
+        let end = (((hi + GEOM_EPS) / self.d[a] - 0.5).floor() + 1.0).max(0.0) as usize;
         first.min(self.n[a])..end.min(self.n[a]).max(first.min(self.n[a]))
     }
 
@@ -151,6 +153,8 @@ mod tests {
         let g = Grid::new([7.2, 4.8, 3.0], 0.2);
         assert_eq!(g.n, [36, 24, 15]);
         assert_eq!(g.range_in(0, 2.4, 3.0), 12..15);
+        assert_eq!(g.range_in(0, 0.0, 0.9), 0..5);
+        assert_eq!(g.range_in(0, 6.3, 7.2), 31..36);
         assert_eq!(g.overlapping(2, 0.0, 1.0), 0..5);
         assert_eq!(g.overlapping(2, 0.95, 1.05), 4..6);
         let c = g.idx(3, 4, 5);

@@ -107,7 +107,12 @@ pub(super) fn solve(
         .map(|k| state.setpoint_c[k] + mods.supply_offset_c.get(k).copied().unwrap_or(0.0))
         .collect();
     let open_share: f64 = mods.supply_openings.iter().map(|o| o.share).sum();
-    if !(0.0..1.0).contains(&open_share) || mods.supply_openings.iter().any(|o| o.share.is_nan() || o.share < 0.0) {
+    if !(0.0..1.0).contains(&open_share)
+        || mods
+            .supply_openings
+            .iter()
+            .any(|o| o.share.is_nan() || o.share < 0.0)
+    {
         return Err(Error::Simulation(format!(
             "supply openings take a share {open_share} of the supply; must be in [0, 1)"
         )));

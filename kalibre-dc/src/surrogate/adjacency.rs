@@ -165,7 +165,10 @@ impl Adjacency {
             )));
         }
         if hall.sensors.is_empty() {
-            return Err(Error::Mismatch(format!("hall `{}` has no sensor", hall.name)));
+            return Err(Error::Mismatch(format!(
+                "hall `{}` has no sensor",
+                hall.name
+            )));
         }
         let floor = settings.min_distance_m;
         let recip = |a: [f64; 3], b: [f64; 3]| 1.0 / distance(a, b).max(floor);

@@ -109,16 +109,25 @@ impl ThermalGraphSettings {
     /// Validates every setting, naming the first bad one.
     pub fn check(self) -> Result<Self> {
         if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
-            return Err(setting("learning_rate", format!("must be positive, got {}", self.learning_rate)));
+            return Err(setting(
+                "learning_rate",
+                format!("must be positive, got {}", self.learning_rate),
+            ));
         }
         if !(self.decay_rate > 0.0 && self.decay_rate <= 1.0) {
-            return Err(setting("decay_rate", format!("must lie in (0, 1], got {}", self.decay_rate)));
+            return Err(setting(
+                "decay_rate",
+                format!("must lie in (0, 1], got {}", self.decay_rate),
+            ));
         }
         if self.decay_every_epochs == 0 {
             return Err(setting("decay_every_epochs", "must be at least 1".into()));
         }
         if !(self.ridge.is_finite() && self.ridge >= 0.0) {
-            return Err(setting("ridge", format!("must be >= 0, got {}", self.ridge)));
+            return Err(setting(
+                "ridge",
+                format!("must be >= 0, got {}", self.ridge),
+            ));
         }
         self.adjacency.check()?;
         Ok(self)
@@ -272,13 +281,26 @@ impl ThermalGraph {
             )));
         }
         let bad = |v: &f64| !v.is_finite();
-        if scenario.setpoint_c.iter().chain(&scenario.fan_speed).chain(&scenario.power_w).any(bad) {
-            return Err(Error::Mismatch(format!("snapshot `{label}`: a non-finite input value")));
+        if scenario
+            .setpoint_c
+            .iter()
+            .chain(&scenario.fan_speed)
+            .chain(&scenario.power_w)
+            .any(bad)
+        {
+            return Err(Error::Mismatch(format!(
+                "snapshot `{label}`: a non-finite input value"
+            )));
         }
         if let Some(i) = params.iter().position(|v| !v.is_finite()) {
             return Err(Error::Mismatch(format!("parameter {i} is not finite")));
         }
-        if let Some(a) = self.layout.alpha_per_server(params).iter().find(|a| **a <= 0.0) {
+        if let Some(a) = self
+            .layout
+            .alpha_per_server(params)
+            .iter()
+            .find(|a| **a <= 0.0)
+        {
             return Err(Error::Mismatch(format!("alpha must be positive, got {a}")));
         }
         Ok(())
@@ -287,7 +309,11 @@ impl ThermalGraph {
     /// The hidden variables `(X_cold, X_hot)` per sensor (before the linear layers):
     /// the CRAC mix of setpoints (C) and the distance-weighted `P / alpha` (W per cfm/W,
     /// zero for cold-aisle sensors).
-    pub fn hidden(&self, scenario: &OperatingState, params: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
+    pub fn hidden(
+        &self,
+        scenario: &OperatingState,
+        params: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>)> {
         self.check_inputs(scenario, params)?;
         let n = self.hot.len();
         let (mut xc, mut xh) = (vec![0.0; n], vec![0.0; n]);

@@ -11,7 +11,6 @@
 //! - [`SurrogateTerm`]: the extension point for effect terms.
 
 mod adjacency;
-mod fastexp;
 mod graph;
 mod objective;
 mod penalty;
@@ -22,7 +21,6 @@ pub use adjacency::{Adjacency, AdjacencySettings, Csr};
 pub use graph::{ThermalGraph, ThermalGraphSettings};
 pub use objective::ThermalGraphObjective;
 pub use penalty::{
-    PenaltyReport, PenaltySettings, RiseBound, RiseViolation, TemperatureRisePenalty,
-    M3_S_PER_CFM,
+    PenaltyReport, PenaltySettings, RiseBound, RiseViolation, TemperatureRisePenalty, M3_S_PER_CFM,
 };
 pub use term::SurrogateTerm;

@@ -63,7 +63,7 @@ impl InverseMap {
         let u = u.clamp(0.0, 1.0);
         match self {
             InverseMap::Log { ln_lower, ln_ratio } => {
-                let inv = super::fastexp::exp(-(ln_lower + u * ln_ratio));
+                let inv = (-(ln_lower + u * ln_ratio)).exp();
                 (inv, -ln_ratio * inv)
             }
             InverseMap::Linear { lower, range } => {
@@ -115,7 +115,10 @@ pub struct ThermalGraphObjective<'a> {
 impl<'a> ThermalGraphObjective<'a> {
     /// The data term for a fitted graph against `observations` (their scenarios must fit
     /// the graph's hall).
-    pub fn new(graph: &'a ThermalGraph, observations: &'a Observations<OperatingState>) -> Result<Self> {
+    pub fn new(
+        graph: &'a ThermalGraph,
+        observations: &'a Observations<OperatingState>,
+    ) -> Result<Self> {
         let layout = &graph.layout;
         let space = layout.space();
         let dim = space.dim();
@@ -138,8 +141,10 @@ impl<'a> ThermalGraphObjective<'a> {
         let has_terms = !graph.terms.is_empty();
         let w = &graph.w;
         let ss = &graph.adjacency.ss;
-        let slot_map: Vec<InverseMap> =
-            slot_param.iter().map(|&p| InverseMap::new(&space.params()[p])).collect();
+        let slot_map: Vec<InverseMap> = slot_param
+            .iter()
+            .map(|&p| InverseMap::new(&space.params()[p]))
+            .collect();
         let contiguous = slot_param.windows(2).all(|w| w[1] == w[0] + 1);
         let log_slots = if contiguous && !slot_param.is_empty() {
             let logs: Option<Vec<(f64, f64)>> = slot_map
@@ -149,7 +154,13 @@ impl<'a> ThermalGraphObjective<'a> {
                     InverseMap::Linear { .. } => None,
                 })
                 .collect();
-            logs.map(|l| (slot_param[0], l.iter().map(|x| x.0).collect(), l.iter().map(|x| x.1).collect()))
+            logs.map(|l| {
+                (
+                    slot_param[0],
+                    l.iter().map(|x| x.0).collect(),
+                    l.iter().map(|x| x.1).collect(),
+                )
+            })
         } else {
             None
         };
@@ -257,12 +268,12 @@ impl<'a> ThermalGraphObjective<'a> {
             return None;
         }
         match &self.log_slots {
-            // Alpha per server on a log scale: a contiguous, branch-free loop that the
-            // compiler vectorises.
+            // Alpha on a log scale (always so in a `ParamLayout`): one `exp` per parameter,
+            // the logarithms taken once at construction.
             Some((start, c0, c1)) => {
                 let us = &u[*start..*start + c0.len()];
                 for i in 0..c0.len() {
-                    let v = super::fastexp::exp(c0[i] + us[i].clamp(0.0, 1.0) * c1[i]);
+                    let v = (c0[i] + us[i].clamp(0.0, 1.0) * c1[i]).exp();
                     inv[i] = v;
                     dinv[i] = c1[i] * v;
                 }
@@ -309,7 +320,10 @@ impl<'a> ThermalGraphObjective<'a> {
             }
             if !terms.is_empty() {
                 if row.snapshot != last_snapshot {
-                    f = self.graph.term_features(&self.observations.snapshots()[row.snapshot].scenario, &phys);
+                    f = self.graph.term_features(
+                        &self.observations.snapshots()[row.snapshot].scenario,
+                        &phys,
+                    );
                     last_snapshot = row.snapshot;
                 }
                 for tt in 0..terms.len() {
@@ -360,7 +374,12 @@ impl<'a> ThermalGraphObjective<'a> {
                 for (si, snap) in self.observations.snapshots().iter().enumerate() {
                     for (tt, term) in terms.iter().enumerate() {
                         ct.iter_mut().for_each(|c| *c = 0.0);
-                        for (row, c) in self.rows.iter().zip(&pred).filter(|(r, _)| r.snapshot == si) {
+                        for (row, c) in self
+                            .rows
+                            .iter()
+                            .zip(&pred)
+                            .filter(|(r, _)| r.snapshot == si)
+                        {
                             let i = tt * n + row.sensor;
                             ct[row.sensor] = c * w.e[i] / w.term_scale[i];
                         }

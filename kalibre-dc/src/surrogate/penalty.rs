@@ -84,7 +84,10 @@ impl PenaltySettings {
     /// Validates the settings.
     pub fn check(self) -> Result<Self> {
         if !(self.lower_c.is_finite() && self.lower_c >= 0.0) {
-            return Err(setting("lower_c", format!("must be >= 0, got {}", self.lower_c)));
+            return Err(setting(
+                "lower_c",
+                format!("must be >= 0, got {}", self.lower_c),
+            ));
         }
         if !(self.upper_c.is_finite() && self.upper_c > self.lower_c) {
             return Err(setting(
@@ -93,7 +96,10 @@ impl PenaltySettings {
             ));
         }
         if !(self.weight.is_finite() && self.weight >= 0.0) {
-            return Err(setting("weight", format!("must be >= 0, got {}", self.weight)));
+            return Err(setting(
+                "weight",
+                format!("must be >= 0, got {}", self.weight),
+            ));
         }
         for (name, v) in [
             ("air_density_kg_m3", self.air_density_kg_m3),
@@ -187,7 +193,9 @@ impl TemperatureRisePenalty {
             )));
         }
         if scenarios.is_empty() {
-            return Err(Error::Mismatch("the rise penalty needs at least one snapshot".into()));
+            return Err(Error::Mismatch(
+                "the rise penalty needs at least one snapshot".into(),
+            ));
         }
         let mut server_weight = vec![0.0; m];
         for s in scenarios {

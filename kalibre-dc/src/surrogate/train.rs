@@ -47,7 +47,12 @@ struct Standardised {
 }
 
 impl ThermalGraph {
-    fn standardise(&self, prep: &Prepared, cache: &[(Vec<f64>, Vec<f64>)], w: &Weights) -> Standardised {
+    fn standardise(
+        &self,
+        prep: &Prepared,
+        cache: &[(Vec<f64>, Vec<f64>)],
+        w: &Weights,
+    ) -> Standardised {
         let n = self.hot.len();
         let nt = self.terms.len();
         let mut st = Standardised {
@@ -59,7 +64,11 @@ impl ThermalGraph {
         for (s, (xc, xh)) in cache.iter().enumerate() {
             for k in 0..n {
                 st.xc.push((xc[k] - w.cold_mean[k]) / w.cold_scale[k]);
-                st.xh.push(if self.hot[k] { (xh[k] - w.hot_mean[k]) / w.hot_scale[k] } else { 0.0 });
+                st.xh.push(if self.hot[k] {
+                    (xh[k] - w.hot_mean[k]) / w.hot_scale[k]
+                } else {
+                    0.0
+                });
             }
             for i in 0..n * nt {
                 st.f.push((prep.f[s][i] - w.term_mean[i]) / w.term_scale[i]);
@@ -70,7 +79,13 @@ impl ThermalGraph {
 
     /// `L1` and its gradient with a fixed adjacency: the hidden variables are inputs, so
     /// an epoch is a few multiply-adds per sample and sensor.
-    fn loss_and_grad_fixed(&self, st: &Standardised, y: &[&[f64]], theta: &[f64], grad: &mut [f64]) -> f64 {
+    fn loss_and_grad_fixed(
+        &self,
+        st: &Standardised,
+        y: &[&[f64]],
+        theta: &[f64],
+        grad: &mut [f64],
+    ) -> f64 {
         let n = self.hot.len();
         let nt = self.terms.len();
         let samples = y.len();
@@ -187,7 +202,10 @@ impl ThermalGraph {
         }
         let n = self.hot.len();
         let w = &mut self.w;
-        for (i, v) in [&mut w.a, &mut w.b, &mut w.c, &mut w.d].into_iter().enumerate() {
+        for (i, v) in [&mut w.a, &mut w.b, &mut w.c, &mut w.d]
+            .into_iter()
+            .enumerate()
+        {
             v.copy_from_slice(&theta[i * n..(i + 1) * n]);
         }
         let e_end = 4 * n + w.e.len();
@@ -234,7 +252,12 @@ impl ThermalGraph {
     }
 
     /// Raw `X_cold`, `X_hot` of every sample with edge values `cs_val`, `ss_val`.
-    fn hidden_all(&self, prep: &Prepared, cs_val: &[f64], ss_val: &[f64]) -> Vec<(Vec<f64>, Vec<f64>)> {
+    fn hidden_all(
+        &self,
+        prep: &Prepared,
+        cs_val: &[f64],
+        ss_val: &[f64],
+    ) -> Vec<(Vec<f64>, Vec<f64>)> {
         let n = self.hot.len();
         (0..prep.scen.len())
             .map(|s| {
@@ -327,7 +350,10 @@ impl ThermalGraph {
     }
 
     /// Fits the weights on every sample (see the module docs).
-    pub(crate) fn fit_checked(&mut self, data: TrainingSet<'_, OperatingState>) -> Result<FitSummary> {
+    pub(crate) fn fit_checked(
+        &mut self,
+        data: TrainingSet<'_, OperatingState>,
+    ) -> Result<FitSummary> {
         let prep = self.prepare(data)?;
         let n = self.hot.len();
         let nt = self.terms.len();
@@ -353,20 +379,29 @@ impl ThermalGraph {
         for k in 0..n {
             let mut cols: Vec<(Vec<f64>, f64, usize)> = Vec::new(); // feature, prior, theta slot
             cols.push((
-                cache.iter().map(|c| (c.0[k] - w.cold_mean[k]) / w.cold_scale[k]).collect(),
+                cache
+                    .iter()
+                    .map(|c| (c.0[k] - w.cold_mean[k]) / w.cold_scale[k])
+                    .collect(),
                 w.cold_scale[k],
                 0,
             ));
             if self.hot[k] {
                 cols.push((
-                    cache.iter().map(|c| (c.1[k] - w.hot_mean[k]) / w.hot_scale[k]).collect(),
+                    cache
+                        .iter()
+                        .map(|c| (c.1[k] - w.hot_mean[k]) / w.hot_scale[k])
+                        .collect(),
                     0.0,
                     2,
                 ));
             }
             for t in 0..nt {
                 let i = t * n + k;
-                let f = prep.f.iter().map(|f| (f[i] - w.term_mean[i]) / w.term_scale[i]);
+                let f = prep
+                    .f
+                    .iter()
+                    .map(|f| (f[i] - w.term_mean[i]) / w.term_scale[i]);
                 cols.push((f.collect(), 0.0, 4 + t));
             }
             let ybar = prep.y.iter().map(|y| y[k]).sum::<f64>() / samples as f64;
@@ -377,7 +412,12 @@ impl ThermalGraph {
                 for q in 0..m {
                     g[p * m + q] = dot(&cols[p].0, &cols[q].0) + if p == q { lambda } else { 0.0 };
                 }
-                let xy: f64 = cols[p].0.iter().zip(&prep.y).map(|(x, y)| x * (y[k] - ybar)).sum();
+                let xy: f64 = cols[p]
+                    .0
+                    .iter()
+                    .zip(&prep.y)
+                    .map(|(x, y)| x * (y[k] - ybar))
+                    .sum();
                 rhs[p] = xy + lambda * cols[p].1;
             }
             let sol = solve_spd(&mut g, &mut rhs, m);
@@ -432,7 +472,9 @@ impl ThermalGraph {
                 theta[i] -= lr * (m1[i] / c1) / ((m2[i] / c2).sqrt() + eps);
             }
             if st.trainable_adjacency {
-                theta[omega_start..].iter_mut().for_each(|o| *o = o.max(0.0));
+                theta[omega_start..]
+                    .iter_mut()
+                    .for_each(|o| *o = o.max(0.0));
             }
         }
         self.set_weights_vector(&best.1)?;

@@ -56,7 +56,11 @@ pub fn hall(shape: Shape, mode: AlphaMode) -> Hall {
     let server_types = (0..shape.types)
         .map(|t| ServerType {
             id: format!("type-{t}"),
-            alpha_cfm_per_w: AlphaBounds { initial: 0.12, min: 0.01, max: 3.0 },
+            alpha_cfm_per_w: AlphaBounds {
+                initial: 0.12,
+                min: 0.01,
+                max: 3.0,
+            },
             extra: None,
         })
         .collect();
@@ -156,7 +160,10 @@ pub fn hall(shape: Shape, mode: AlphaMode) -> Hall {
     Hall {
         schema: HALL_SCHEMA.to_string(),
         name: "fixture".into(),
-        room: Room { size_m: [room_x, room_y, height], extra: None },
+        room: Room {
+            size_m: [room_x, room_y, height],
+            extra: None,
+        },
         server_types,
         cracs,
         tiles,
@@ -175,8 +182,14 @@ pub fn state(hall: &Hall, label: &str, seed: u64) -> OperatingState {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     OperatingState {
         label: label.to_string(),
-        setpoint_c: (0..hall.cracs.len()).map(|_| rng.random_range(17.0..21.0)).collect(),
-        fan_speed: (0..hall.cracs.len()).map(|_| rng.random_range(0.6..0.95)).collect(),
-        power_w: (0..hall.server_count()).map(|_| rng.random_range(150.0..450.0)).collect(),
+        setpoint_c: (0..hall.cracs.len())
+            .map(|_| rng.random_range(17.0..21.0))
+            .collect(),
+        fan_speed: (0..hall.cracs.len())
+            .map(|_| rng.random_range(0.6..0.95))
+            .collect(),
+        power_w: (0..hall.server_count())
+            .map(|_| rng.random_range(150.0..450.0))
+            .collect(),
     }
 }

@@ -1,0 +1,206 @@
+//! Offline HTML reports with SVG figures: what a calibration found, where the model
+//! still fails, and how the error fell.
+
+mod plan;
+mod svg;
+
+pub use plan::plan_svg;
+
+use std::fmt::Write;
+
+use kalibre_core::calibrate::Report;
+
+use crate::hall::Hall;
+use crate::snapshots::HallSnapshot;
+use crate::surrogate::PenaltyReport;
+use svg::{esc, Chart};
+
+const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#111}\
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}\
+th{background:#f3f4f6}td:first-child,th:first-child{text-align:left}\
+.grid{display:grid;grid-template-columns:repeat(auto-fit,minmax(420px,1fr));gap:1em}\
+.note{background:#fff7ed;border-left:4px solid #f97316;padding:.4em .8em}";
+
+/// Mean residual (model minus measurement) per sensor over the snapshots of the report.
+pub fn mean_residual_per_sensor(hall: &Hall, report: &Report) -> Vec<f64> {
+    let mut sum = vec![0.0; hall.sensors.len()];
+    let mut n = vec![0usize; hall.sensors.len()];
+    for r in &report.residuals {
+        if let Some(k) = hall.sensors.iter().position(|s| s.id == r.sensor) {
+            sum[k] += r.predicted_c - r.measured_c;
+            n[k] += 1;
+        }
+    }
+    sum.iter()
+        .zip(&n)
+        .map(|(s, &c)| if c > 0 { s / c as f64 } else { f64::NAN })
+        .collect()
+}
+
+/// The error per iteration: the model's MAE at each iteration and the best so far.
+pub fn history_svg(report: &Report) -> String {
+    let pts: Vec<(f64, f64)> = report
+        .history
+        .iter()
+        .filter_map(|h| h.mae_c.map(|m| (h.iteration as f64, m)))
+        .collect();
+    let best: Vec<(f64, f64)> = report
+        .history
+        .iter()
+        .filter_map(|h| h.best_mae_c.map(|m| (h.iteration as f64, m)))
+        .collect();
+    let mut ymax = pts.iter().chain(&best).map(|p| p.1).fold(0.0, f64::max);
+    if let Some(m) = report.initial.mae_c {
+        ymax = ymax.max(m);
+    }
+    let xmax = pts.iter().map(|p| p.0).fold(1.0, f64::max);
+    let mut c = Chart::new((520.0, 300.0), (0.0, xmax), (0.0, ymax * 1.05), "iteration", "MAE (C)");
+    if let Some(m) = report.initial.mae_c {
+        c.line(&[(0.0, m), (xmax, m)], "#9ca3af", true);
+        c.legend(2, "#9ca3af", "uncalibrated model");
+    }
+    c.line(&pts, "#f97316", false);
+    c.line(&best, "#2563eb", false);
+    for &(x, y) in &pts {
+        c.dot(x, y, 3.0, "#f97316", &format!("iteration {x}: {y:.3} C"));
+    }
+    c.legend(0, "#f97316", "model at the searched parameters");
+    c.legend(1, "#2563eb", "best so far");
+    c.finish()
+}
+
+/// Measured against predicted temperature, every sensor and snapshot of the best model.
+pub fn parity_svg(hall: &Hall, report: &Report) -> String {
+    let vals: Vec<f64> = report
+        .residuals
+        .iter()
+        .flat_map(|r| [r.measured_c, r.predicted_c])
+        .filter(|v| v.is_finite())
+        .collect();
+    let lo = vals.iter().cloned().fold(f64::INFINITY, f64::min).floor();
+    let hi = vals.iter().cloned().fold(f64::NEG_INFINITY, f64::max).ceil();
+    let mut c = Chart::new((420.0, 380.0), (lo, hi), (lo, hi), "measured (C)", "model (C)");
+    c.line(&[(lo, lo), (hi, hi)], "#9ca3af", true);
+    for r in &report.residuals {
+        let hot = hall
+            .sensors
+            .iter()
+            .find(|s| s.id == r.sensor)
+            .is_some_and(|s| s.aisle == crate::hall::Aisle::Hot);
+        let colour = if hot { "#dc2626" } else { "#2563eb" };
+        c.dot(
+            r.measured_c,
+            r.predicted_c,
+            3.5,
+            colour,
+            &format!(
+                "{} @ {}: measured {:.2}, model {:.2}",
+                r.sensor, r.snapshot, r.measured_c, r.predicted_c
+            ),
+        );
+    }
+    c.legend(0, "#2563eb", "cold aisle");
+    c.legend(1, "#dc2626", "hot aisle");
+    c.finish()
+}
+
+/// The HTML report of one calibration.
+pub fn calibration_html(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    report: &Report,
+    prior: &PenaltyReport,
+) -> String {
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>kalibre: {}</title><style>{STYLE}</style></head><body>",
+        esc(&hall.name)
+    );
+    let _ = write!(h, "<h1>Calibration of hall <code>{}</code></h1>", esc(&hall.name));
+    let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
+    let _ = write!(
+        h,
+        "<table><tr><th>measure</th><th>value</th></tr>\
+         <tr><td>MAE of the uncalibrated model (C)</td><td>{}</td></tr>\
+         <tr><td>best MAE (C)</td><td>{:.3} (iteration {})</td></tr>\
+         <tr><td>best RMSE / max abs (C)</td><td>{:.3} / {:.3}</td></tr>\
+         <tr><td>model runs</td><td>{} ({} new, {} from the journal, {} failed)</td></tr>\
+         <tr><td>snapshots x sensors</td><td>{} x {}</td></tr>\
+         <tr><td>stopped</td><td>{:?}</td></tr></table>",
+        fmt(report.initial.mae_c),
+        report.best.mae_c,
+        report.best.iteration,
+        report.best.rmse_c,
+        report.best.max_abs_c,
+        report.runs.total,
+        report.runs.new,
+        report.runs.cached,
+        report.runs.failed,
+        snaps.len(),
+        hall.sensors.len(),
+        report.stop_reason
+    );
+    if prior.binds {
+        let _ = write!(
+            h,
+            "<p class=\"note\">The temperature-rise prior binds at the best parameters: {} server(s) below and {} above [{}, {}] C. \
+             The data pull against the prior (a prior-data conflict): check the range before trusting these alphas.</p>",
+            prior.servers_below, prior.servers_above, prior.range_c[0], prior.range_c[1]
+        );
+    }
+    let residual = mean_residual_per_sensor(hall, report);
+    let scale = residual
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(0.5f64, |m, v| m.max(v.abs()));
+    let _ = write!(
+        h,
+        "<h2>Where the model fails</h2><p>Mean residual per sensor over all snapshots (best parameters).</p>{}",
+        plan_svg(hall, &residual, scale, "C")
+    );
+    let _ = write!(
+        h,
+        "<div class=\"grid\"><div><h2>Error per iteration</h2>{}</div><div><h2>Measured against model</h2>{}</div></div>",
+        history_svg(report),
+        parity_svg(hall, report)
+    );
+    h.push_str("<h2>Parameters</h2><table><tr><th>parameter</th><th>initial</th><th>calibrated</th></tr>");
+    for (name, v) in &report.best.params.0 {
+        let init = report.initial.params.get(name);
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{v:.5}</td></tr>",
+            esc(name),
+            init.map_or("-".into(), |i| format!("{i:.5}"))
+        );
+    }
+    h.push_str("</table>");
+    h.push_str("<h2>Residuals per sensor</h2><table><tr><th>sensor</th><th>aisle</th>");
+    for s in snaps {
+        let _ = write!(h, "<th>{} (C)</th>", esc(&s.state.label));
+    }
+    h.push_str("</tr>");
+    for sensor in &hall.sensors {
+        let _ = write!(h, "<tr><td>{}</td><td>{}</td>", esc(&sensor.id), sensor.aisle.as_str());
+        for s in snaps {
+            let r = report
+                .residuals
+                .iter()
+                .find(|r| r.sensor == sensor.id && r.snapshot == s.state.label);
+            let _ = match r {
+                Some(r) => write!(
+                    h,
+                    "<td title=\"measured {:.2}, model {:.2}\">{:+.2}</td>",
+                    r.measured_c,
+                    r.predicted_c,
+                    r.predicted_c - r.measured_c
+                ),
+                None => write!(h, "<td>-</td>"),
+            };
+        }
+        h.push_str("</tr>");
+    }
+    h.push_str("</table><p>Generated by kalibre.</p></body></html>");
+    h
+}
