@@ -90,6 +90,7 @@ fn surrogate_gradient_matches_finite_differences() {
                 snapshot: i,
                 params: vec![k, h],
                 outputs: sim.evaluate(s, &[k, h]).unwrap().values,
+                weight: 1.0,
             });
         }
     }

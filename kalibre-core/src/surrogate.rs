@@ -13,6 +13,9 @@ pub struct Sample {
     pub params: Vec<f64>,
     /// Model outputs.
     pub outputs: Vec<f64>,
+    /// Relative weight of the sample in the fit (1 is an ordinary sample; the calibrator
+    /// lowers the weight of runs far from the measurements when `Settings::focus` is set).
+    pub weight: f64,
 }
 
 /// Everything a surrogate is fitted on: the scenarios and the samples that refer to them.

@@ -82,6 +82,7 @@ fn setup() -> Setup {
                 snapshot: 0,
                 outputs: outputs(&p),
                 params: p,
+                weight: 1.0,
             });
         }
     }

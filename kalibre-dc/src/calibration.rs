@@ -11,7 +11,10 @@ use kalibre_core::{Calibrator, Model, Observe, RunStore, Settings};
 use crate::hall::{AlphaMode, Hall};
 use crate::sim::SimConfig;
 use crate::snapshots::{self, HallSnapshot};
-use crate::surrogate::{PenaltySettings, TemperatureRisePenalty, ThermalGraph, ThermalGraphSettings};
+use crate::surrogate::{
+    FlowBalance, FlowBalanceTerm, PenaltySettings, TemperatureRisePenalty, ThermalGraph,
+    ThermalGraphSettings,
+};
 use crate::{Error, HallModel, Result};
 
 /// Everything that shapes a hall calibration.
@@ -29,6 +32,8 @@ use crate::{Error, HallModel, Result};
 /// | `max_model_runs` | none | stop before exceeding this many model runs |
 /// | `max_wall_s` | none | stop after this much wall time |
 /// | `max_parallel_runs` | all threads | model runs at once |
+/// | `focus` | 1 | runs with `m` times the best MAE weigh `exp(-((m-1)/focus)^2/2)` in the fit |
+/// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
     /// Seed.
@@ -53,6 +58,10 @@ pub struct HallCalibrationSettings {
     pub max_wall_s: Option<f64>,
     /// Parallel model runs.
     pub max_parallel_runs: Option<usize>,
+    /// Add the mass-balance terms (recirculation, bypass) to the paper's thermal graph.
+    pub flow_balance_terms: bool,
+    /// Focus of the surrogate fit on runs near the measurements (see `kalibre_core::Settings`).
+    pub focus: Option<f64>,
 }
 
 impl Default for HallCalibrationSettings {
@@ -69,6 +78,8 @@ impl Default for HallCalibrationSettings {
             max_model_runs: None,
             max_wall_s: None,
             max_parallel_runs: None,
+            flow_balance_terms: true,
+            focus: Some(1.0),
         }
     }
 }
@@ -108,7 +119,12 @@ pub fn calibrate_hall<'o>(
             hall.name
         )));
     }
-    let surrogate = ThermalGraph::new(&hall, layout.clone(), settings.surrogate)?;
+    let mut surrogate = ThermalGraph::new(&hall, layout.clone(), settings.surrogate)?;
+    if settings.flow_balance_terms {
+        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
+            surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(&hall, &layout, kind)));
+        }
+    }
     let scenarios: Vec<_> = snaps.iter().map(|s| s.state.clone()).collect();
     let penalty = TemperatureRisePenalty::new(&hall, &layout, &scenarios, settings.penalty)?;
     let store = match journal {
@@ -135,6 +151,7 @@ pub fn calibrate_hall<'o>(
         max_wall_s: settings.max_wall_s,
         max_parallel_runs: settings.max_parallel_runs,
         regularizer_weight: settings.penalty.weight,
+        focus: settings.focus,
         ..Settings::default()
     };
     let mut calibrator = Calibrator::new(&model, surrogate, &observations, &space)

@@ -128,7 +128,11 @@ impl ParamLayout {
     }
 
     /// Adds a gradient with respect to per-server alpha into a gradient over parameters.
-    pub fn accumulate_alpha_gradient(&self, grad_alpha_per_server: &[f64], grad_params: &mut [f64]) {
+    pub fn accumulate_alpha_gradient(
+        &self,
+        grad_alpha_per_server: &[f64],
+        grad_params: &mut [f64],
+    ) {
         for (i, g) in self.alpha_index.iter().zip(grad_alpha_per_server) {
             if let Some(i) = i {
                 grad_params[*i] += g;

@@ -52,6 +52,7 @@ fn samples(truth: &ThermalGraph, scenarios: &[OperatingState], params: &[Vec<f64
                 snapshot: s,
                 params: p.clone(),
                 outputs: truth.predict(scen, p),
+                weight: 1.0,
             });
         }
     }
@@ -102,6 +103,7 @@ fn planted(hall: &Hall, mode: AlphaMode, scenarios: &[OperatingState], seed: u64
                 snapshot: si,
                 params: p.clone(),
                 outputs,
+                weight: 1.0,
             });
         }
     }
@@ -348,6 +350,7 @@ fn bad_training_data_is_a_clear_error() {
         snapshot: 0,
         params: p.clone(),
         outputs: vec![20.0; 3],
+        weight: 1.0,
     }];
     let err = g
         .fit(
@@ -363,6 +366,7 @@ fn bad_training_data_is_a_clear_error() {
         snapshot: 4,
         params: p,
         outputs: vec![],
+        weight: 1.0,
     }];
     assert!(g
         .fit(
@@ -544,6 +548,7 @@ fn predicts_held_out_simulator_runs() {
         snapshot: s,
         params: p.to_vec(),
         outputs: model.evaluate(&scenarios[s], p).unwrap().values,
+        weight: 1.0,
     };
     let mut train = Vec::new();
     let mut held_out = Vec::new();

@@ -125,7 +125,9 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         .map_err(|e| CliError::Input(format!("--adam-steps: {e}")))?;
     if let Some(t) = args.target_mae {
         if !(t.is_finite() && t >= 0.0) {
-            return Err(CliError::Input(format!("--target-mae: expected a finite value >= 0, got {t}")));
+            return Err(CliError::Input(format!(
+                "--target-mae: expected a finite value >= 0, got {t}"
+            )));
         }
     }
     let mut s = HallCalibrationSettings {
@@ -223,7 +225,12 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;
     std::fs::write(&report_path, json).map_err(|e| io_err(&report_path, e))?;
     let html_path = args.out.join("report.html");
-    let html = kalibre_dc::report::calibration_html(&hall, &snaps, &outcome.report, &outcome.penalty_report);
+    let html = kalibre_dc::report::calibration_html(
+        &hall,
+        &snaps,
+        &outcome.report,
+        &outcome.penalty_report,
+    );
     std::fs::write(&html_path, html).map_err(|e| io_err(&html_path, e))?;
     print_summary(&outcome.report, wall_s, &outcome.penalty_report);
     println!(
@@ -252,10 +259,22 @@ fn print_summary(report: &Report, wall_s: f64, penalty: &kalibre_dc::surrogate::
         report.best.iteration
     );
     println!("  {:<28} {}", "best RMSE", fmt_c(Some(report.best.rmse_c)));
-    println!("  {:<28} {}", "best max abs error", fmt_c(Some(report.best.max_abs_c)));
-    if let Some(rec) = report.history.iter().find(|h| h.iteration == report.best.iteration) {
+    println!(
+        "  {:<28} {}",
+        "best max abs error",
+        fmt_c(Some(report.best.max_abs_c))
+    );
+    if let Some(rec) = report
+        .history
+        .iter()
+        .find(|h| h.iteration == report.best.iteration)
+    {
         for (group, e) in &rec.per_group {
-            println!("  {:<28} {}", format!("best MAE, {group} aisle"), fmt_c(Some(e.mae_c)));
+            println!(
+                "  {:<28} {}",
+                format!("best MAE, {group} aisle"),
+                fmt_c(Some(e.mae_c))
+            );
         }
     }
     println!(

@@ -39,7 +39,8 @@ pub struct SimulateArgs {
 /// Reads parameter values by name from a JSON object or a report's `best.params`.
 pub fn load_params(path: &Path, space: &ParamSpace) -> CliResult<Vec<f64>> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
     let json: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| CliError::Input(format!("{file}: not valid JSON: {e}")))?;
     let (map, pointer) = match json.get("best").and_then(|b| b.get("params")) {
@@ -61,7 +62,9 @@ pub fn load_params(path: &Path, space: &ParamSpace) -> CliResult<Vec<f64>> {
             ))
         })?;
         let x = v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
-            CliError::Input(format!("{file}: {pointer}/{name}: expected a finite number"))
+            CliError::Input(format!(
+                "{file}: {pointer}/{name}: expected a finite number"
+            ))
         })?;
         values[i] = x;
     }
@@ -108,10 +111,12 @@ pub fn run(args: SimulateArgs) -> CliResult {
                 kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
                 solution.sensor_c().to_vec()
             }
-            None => model
-                .evaluate(state, &params)
-                .map_err(|e| CliError::Run(format!("snapshot `{}`: {e}", state.label)))?
-                .values,
+            None => {
+                model
+                    .evaluate(state, &params)
+                    .map_err(|e| CliError::Run(format!("snapshot `{}`: {e}", state.label)))?
+                    .values
+            }
         };
         labels.push(state.label.clone());
         predicted.push(values);

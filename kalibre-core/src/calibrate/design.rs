@@ -81,6 +81,7 @@ pub(crate) fn augment(
                 snapshot: sample.snapshot,
                 params: space.from_unit(&u)?,
                 outputs: sample.outputs.clone(),
+                weight: sample.weight,
             });
         }
     }
@@ -165,4 +166,53 @@ mod tests {
         assert!(distance(&u, &failed[0]) > 1e-9);
         assert!(u.iter().all(|x| (0.0..=1.0).contains(x)));
     }
+}
+
+/// Weights samples by how close their run came to the measurements of its snapshot: a
+/// run whose MAE is `m` times the best run's weighs `exp(-((m - 1) / width)^2 / 2)`, so
+/// far-off runs (an initial design at extreme bounds) stop dominating the fit while the
+/// runs near the answer shape it.
+pub(crate) fn focus<S>(
+    obs: &crate::Observations<S>,
+    samples: &[Sample],
+    width: f64,
+) -> Vec<Sample> {
+    let mae = |s: &Sample| {
+        let measured = &obs.snapshots()[s.snapshot].measured;
+        let (sum, n) = s
+            .outputs
+            .iter()
+            .zip(measured)
+            .filter_map(|(o, m)| m.map(|m| (o - m).abs()))
+            .fold((0.0, 0usize), |(a, n), e| (a + e, n + 1));
+        if n == 0 {
+            f64::NAN
+        } else {
+            sum / n as f64
+        }
+    };
+    let errors: Vec<f64> = samples.iter().map(mae).collect();
+    let mut best = vec![f64::INFINITY; obs.snapshots().len()];
+    for (s, e) in samples.iter().zip(&errors) {
+        if e.is_finite() {
+            best[s.snapshot] = best[s.snapshot].min(*e);
+        }
+    }
+    samples
+        .iter()
+        .zip(&errors)
+        .map(|(s, &e)| {
+            let b = best[s.snapshot].max(1e-12);
+            let w = if e.is_finite() {
+                let m = (e / b - 1.0) / width;
+                (-0.5 * m * m).exp()
+            } else {
+                0.0
+            };
+            Sample {
+                weight: s.weight * w,
+                ..s.clone()
+            }
+        })
+        .collect()
 }

@@ -348,6 +348,14 @@ where
             } else {
                 &state.samples
             };
+            let focused;
+            let samples: &[Sample] = match st.focus {
+                Some(width) => {
+                    focused = design::focus(obs, samples, width);
+                    &focused
+                }
+                None => samples,
+            };
             let t = Instant::now();
             let fit = self.surrogate.fit(
                 TrainingSet {

@@ -19,6 +19,7 @@ use crate::{Error, Result};
 /// | `regularizer_weight` | 1 | weight of the regulariser in the search loss (when one is given) | finite, >= 0 |
 /// | `duplicate_tol` | 1e-9 | max-norm distance in the unit box under which two points are the same | finite, >= 0 |
 /// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point, unit box | finite, > 0 |
+/// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1 | finite, > 0 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Settings {
@@ -44,6 +45,8 @@ pub struct Settings {
     pub duplicate_tol: f64,
     /// Standard deviation of the noise that moves a proposal off a failed point.
     pub perturb_sigma: f64,
+    /// Width of the fit's focus on runs close to the measurements (none: uniform weights).
+    pub focus: Option<f64>,
 }
 
 impl Default for Settings {
@@ -60,6 +63,7 @@ impl Default for Settings {
             regularizer_weight: 1.0,
             duplicate_tol: 1e-9,
             perturb_sigma: 0.05,
+            focus: None,
         }
     }
 }
@@ -111,6 +115,11 @@ impl Settings {
         non_negative("augment_sigma", self.augment_sigma)?;
         non_negative("regularizer_weight", self.regularizer_weight)?;
         non_negative("duplicate_tol", self.duplicate_tol)?;
+        if let Some(f) = self.focus {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(bad("focus", format!("must be finite and > 0, got {f}")));
+            }
+        }
         if !(self.perturb_sigma.is_finite() && self.perturb_sigma > 0.0) {
             return Err(bad(
                 "perturb_sigma",

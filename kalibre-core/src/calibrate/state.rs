@@ -59,6 +59,7 @@ impl State {
                         snapshot: s,
                         params: params.to_vec(),
                         outputs: o.values.clone(),
+                        weight: 1.0,
                     });
                     outputs.push(o.values);
                 }

@@ -54,7 +54,13 @@ pub fn history_svg(report: &Report) -> String {
         ymax = ymax.max(m);
     }
     let xmax = pts.iter().map(|p| p.0).fold(1.0, f64::max);
-    let mut c = Chart::new((520.0, 300.0), (0.0, xmax), (0.0, ymax * 1.05), "iteration", "MAE (C)");
+    let mut c = Chart::new(
+        (520.0, 300.0),
+        (0.0, xmax),
+        (0.0, ymax * 1.05),
+        "iteration",
+        "MAE (C)",
+    );
     if let Some(m) = report.initial.mae_c {
         c.line(&[(0.0, m), (xmax, m)], "#9ca3af", true);
         c.legend(2, "#9ca3af", "uncalibrated model");
@@ -78,8 +84,18 @@ pub fn parity_svg(hall: &Hall, report: &Report) -> String {
         .filter(|v| v.is_finite())
         .collect();
     let lo = vals.iter().cloned().fold(f64::INFINITY, f64::min).floor();
-    let hi = vals.iter().cloned().fold(f64::NEG_INFINITY, f64::max).ceil();
-    let mut c = Chart::new((420.0, 380.0), (lo, hi), (lo, hi), "measured (C)", "model (C)");
+    let hi = vals
+        .iter()
+        .cloned()
+        .fold(f64::NEG_INFINITY, f64::max)
+        .ceil();
+    let mut c = Chart::new(
+        (420.0, 380.0),
+        (lo, hi),
+        (lo, hi),
+        "measured (C)",
+        "model (C)",
+    );
     c.line(&[(lo, lo), (hi, hi)], "#9ca3af", true);
     for r in &report.residuals {
         let hot = hall
@@ -117,7 +133,11 @@ pub fn calibration_html(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>kalibre: {}</title><style>{STYLE}</style></head><body>",
         esc(&hall.name)
     );
-    let _ = write!(h, "<h1>Calibration of hall <code>{}</code></h1>", esc(&hall.name));
+    let _ = write!(
+        h,
+        "<h1>Calibration of hall <code>{}</code></h1>",
+        esc(&hall.name)
+    );
     let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
     let _ = write!(
         h,
@@ -165,7 +185,9 @@ pub fn calibration_html(
         history_svg(report),
         parity_svg(hall, report)
     );
-    h.push_str("<h2>Parameters</h2><table><tr><th>parameter</th><th>initial</th><th>calibrated</th></tr>");
+    h.push_str(
+        "<h2>Parameters</h2><table><tr><th>parameter</th><th>initial</th><th>calibrated</th></tr>",
+    );
     for (name, v) in &report.best.params.0 {
         let init = report.initial.params.get(name);
         let _ = write!(
@@ -182,7 +204,12 @@ pub fn calibration_html(
     }
     h.push_str("</tr>");
     for sensor in &hall.sensors {
-        let _ = write!(h, "<tr><td>{}</td><td>{}</td>", esc(&sensor.id), sensor.aisle.as_str());
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td>",
+            esc(&sensor.id),
+            sensor.aisle.as_str()
+        );
         for s in snaps {
             let r = report
                 .residuals

@@ -37,7 +37,13 @@ pub fn plan_svg(hall: &Hall, value_per_sensor: &[f64], scale: f64, unit: &str) -
         );
     };
     for t in &hall.tiles {
-        rect(&mut s, t.position_m, t.size_m, r##"fill="#dbeafe" stroke="#93c5fd""##, "tile");
+        rect(
+            &mut s,
+            t.position_m,
+            t.size_m,
+            r##"fill="#dbeafe" stroke="#93c5fd""##,
+            "tile",
+        );
     }
     for c in &hall.containment {
         let d = [c.max_m[0] - c.min_m[0], c.max_m[1] - c.min_m[1]];
@@ -83,7 +89,11 @@ pub fn plan_svg(hall: &Hall, value_per_sensor: &[f64], scale: f64, unit: &str) -
             sensor.id,
             sensor.aisle.as_str(),
             sensor.position_m[2],
-            if v.is_finite() { format!("{v:+.2} {unit}") } else { "no reading".into() }
+            if v.is_finite() {
+                format!("{v:+.2} {unit}")
+            } else {
+                "no reading".into()
+            }
         );
         if shape == "circle" {
             let _ = write!(

@@ -12,7 +12,11 @@ pub fn esc(s: &str) -> String {
 
 /// A diverging colour for `v` in `[-1, 1]`: blue (negative), white, red (positive).
 pub fn diverging(v: f64) -> String {
-    let v = if v.is_finite() { v.clamp(-1.0, 1.0) } else { 0.0 };
+    let v = if v.is_finite() {
+        v.clamp(-1.0, 1.0)
+    } else {
+        0.0
+    };
     let (r, g, b) = if v >= 0.0 {
         (255.0, 255.0 * (1.0 - v), 255.0 * (1.0 - v))
     } else {
@@ -94,7 +98,11 @@ impl Chart {
                 format!("{a:.1},{b:.1}")
             })
             .collect();
-        let dash = if dashed { r#" stroke-dasharray="5,4""# } else { "" };
+        let dash = if dashed {
+            r#" stroke-dasharray="5,4""#
+        } else {
+            ""
+        };
         let _ = write!(
             self.body,
             r#"<polyline fill="none" stroke="{colour}" stroke-width="2"{dash} points="{}"/>"#,

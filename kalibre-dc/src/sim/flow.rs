@@ -5,6 +5,7 @@ use rayon::prelude::*;
 
 use super::grid::Grid;
 use super::linalg::{Operator, CHUNK};
+use super::multigrid::StencilSpec;
 
 /// The symmetric pressure operator: `(A p)_c = sum_f g_f (p_c - p_nb) + g_out,c p_c`.
 pub(crate) struct PressureOp<'a> {
@@ -139,4 +140,23 @@ pub(crate) fn mass_imbalance(
             out
         })
         .collect()
+}
+
+/// The pressure operator as multigrid input (the same rows as [`PressureOp`]).
+pub(crate) fn pressure_spec(
+    grid: &Grid,
+    g: [&[f64]; 3],
+    g_outlet: &[f64],
+    solid: &[bool],
+) -> StencilSpec {
+    StencilSpec {
+        n: grid.n,
+        fp: Default::default(),
+        fm: Default::default(),
+        dif: [g[0].to_vec(), g[1].to_vec(), g[2].to_vec()],
+        sink_adv: Vec::new(),
+        sink_dif: g_outlet.to_vec(),
+        active: solid.iter().map(|s| !s).collect(),
+        links: Vec::new(),
+    }
 }

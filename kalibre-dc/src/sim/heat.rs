@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use super::grid::Grid;
 use super::linalg::{Operator, CHUNK};
+use super::multigrid::{Link, StencilSpec};
 use super::topology::Stencil;
 
 /// Air moved from one set of cells to another, leaving at the taken air's mixed
@@ -130,4 +131,44 @@ impl Operator for HeatOp<'_> {
 /// The stencil-weighted value of a cell field.
 pub(crate) fn stencil_value(st: &Stencil, field: &[f64]) -> f64 {
     st.iter().map(|&(c, w)| w * field[c]).sum()
+}
+
+/// The heat operator as multigrid input (the same rows as [`HeatOp::new`] builds).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn heat_spec(
+    grid: &Grid,
+    solid: &[bool],
+    flux: &[Vec<f64>; 3],
+    g: [&[f64]; 3],
+    diffusivity: f64,
+    outlet_flux: &[f64],
+    sink: &[f64],
+    transfers: &[Transfer],
+) -> StencilSpec {
+    let n = grid.len();
+    let part = |a: usize, f: fn(f64) -> f64| -> Vec<f64> {
+        (0..n)
+            .into_par_iter()
+            .map(|c| if g[a][c] > 0.0 { f(flux[a][c]) } else { 0.0 })
+            .collect()
+    };
+    let pos = |v: f64| v.max(0.0);
+    let neg = |v: f64| (-v).max(0.0);
+    StencilSpec {
+        n: grid.n,
+        fp: [part(0, pos), part(1, pos), part(2, pos)],
+        fm: [part(0, neg), part(1, neg), part(2, neg)],
+        dif: std::array::from_fn(|a| g[a].iter().map(|v| diffusivity * v.max(0.0)).collect()),
+        sink_adv: outlet_flux.iter().zip(sink).map(|(o, s)| o + s).collect(),
+        sink_dif: Vec::new(),
+        active: solid.iter().map(|s| !s).collect(),
+        links: transfers
+            .iter()
+            .map(|t| Link {
+                from: t.from.clone(),
+                to: t.to.clone(),
+                flow: t.flow_m3_s,
+            })
+            .collect(),
+    }
 }

@@ -1,5 +1,6 @@
-//! Matrix-free Krylov solvers: Jacobi-preconditioned CG (symmetric pressure system) and
-//! BiCGSTAB (advection-diffusion). Vector operations run on rayon in fixed chunks, and
+//! Matrix-free Krylov solvers: preconditioned CG (symmetric pressure system) and
+//! right-preconditioned BiCGSTAB (advection-diffusion), with a Jacobi or a multigrid
+//! preconditioner. Vector operations run on rayon in fixed chunks, and
 //! every reduction sums the per-chunk partial sums in chunk order, so results are
 //! bit-identical at any thread count.
 
@@ -14,6 +15,27 @@ pub(crate) trait Operator: Sync {
     fn apply(&self, x: &[f64], y: &mut [f64]);
     /// `1 / diag(A)` (1 on rows that are identities).
     fn inv_diag(&self) -> &[f64];
+}
+
+/// A preconditioner: `z ~ A^-1 r` (a fixed linear map; it may keep scratch space).
+pub(crate) trait Precond {
+    /// `z = M^-1 r`.
+    fn apply(&mut self, r: &[f64], z: &mut [f64]);
+}
+
+/// Diagonal (Jacobi) preconditioning.
+pub(crate) struct Jacobi<'a>(pub &'a [f64]);
+
+impl Precond for Jacobi<'_> {
+    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
+        z.par_chunks_mut(CHUNK)
+            .zip(r.par_chunks(CHUNK).zip(self.0.par_chunks(CHUNK)))
+            .for_each(|(z, (r, m))| {
+                for i in 0..z.len() {
+                    z[i] = r[i] * m[i];
+                }
+            });
+    }
 }
 
 /// Outcome of one linear solve.
@@ -39,23 +61,24 @@ fn norm(a: &[f64]) -> f64 {
     dot(a, a).sqrt()
 }
 
-/// Jacobi-preconditioned conjugate gradients; `x` holds the initial guess and the answer.
+/// Preconditioned conjugate gradients; `x` holds the initial guess and the answer.
 pub(crate) fn pcg(
     op: &dyn Operator,
+    pc: &mut dyn Precond,
     b: &[f64],
     x: &mut [f64],
     tol: f64,
     max_iter: usize,
 ) -> SolveStats {
     let n = b.len();
-    let minv = op.inv_diag();
     let mut r = vec![0.0; n];
     op.apply(x, &mut r);
     r.par_iter_mut()
         .zip(b.par_iter())
         .for_each(|(r, b)| *r = b - *r);
     let bnorm = norm(b).max(f64::MIN_POSITIVE);
-    let mut z: Vec<f64> = r.iter().zip(minv).map(|(r, m)| r * m).collect();
+    let mut z = vec![0.0; n];
+    pc.apply(&r, &mut z);
     let mut p = z.clone();
     let mut ap = vec![0.0; n];
     let mut rz = dot(&r, &z);
@@ -82,13 +105,7 @@ pub(crate) fn pcg(
         if rel <= tol {
             break;
         }
-        z.par_chunks_mut(CHUNK)
-            .zip(r.par_chunks(CHUNK).zip(minv.par_chunks(CHUNK)))
-            .for_each(|(z, (r, m))| {
-                for i in 0..z.len() {
-                    z[i] = r[i] * m[i];
-                }
-            });
+        pc.apply(&r, &mut z);
         let rz_new = dot(&r, &z);
         let beta = rz_new / rz;
         rz = rz_new;
@@ -106,16 +123,16 @@ pub(crate) fn pcg(
     }
 }
 
-/// Jacobi right-preconditioned BiCGSTAB; `x` holds the initial guess and the answer.
+/// Right-preconditioned BiCGSTAB; `x` holds the initial guess and the answer.
 pub(crate) fn bicgstab(
     op: &dyn Operator,
+    pc: &mut dyn Precond,
     b: &[f64],
     x: &mut [f64],
     tol: f64,
     max_iter: usize,
 ) -> SolveStats {
     let n = b.len();
-    let minv = op.inv_diag();
     let mut r = vec![0.0; n];
     op.apply(x, &mut r);
     r.par_iter_mut()
@@ -140,15 +157,13 @@ pub(crate) fn bicgstab(
         let beta = (rho_new / rho) * (alpha / omega);
         rho = rho_new;
         p.par_chunks_mut(CHUNK)
-            .zip(phat.par_chunks_mut(CHUNK))
             .zip(r.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
-            .zip(minv.par_chunks(CHUNK))
-            .for_each(|(((p, ph), (r, v)), m)| {
+            .for_each(|(p, (r, v))| {
                 for i in 0..p.len() {
                     p[i] = r[i] + beta * (p[i] - omega * v[i]);
-                    ph[i] = p[i] * m[i];
                 }
             });
+        pc.apply(&p, &mut phat);
         op.apply(&phat, &mut v);
         let r0v = dot(&r0, &v);
         if r0v == 0.0 || !r0v.is_finite() {
@@ -156,13 +171,10 @@ pub(crate) fn bicgstab(
         }
         alpha = rho / r0v;
         s.par_chunks_mut(CHUNK)
-            .zip(shat.par_chunks_mut(CHUNK))
             .zip(r.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
-            .zip(minv.par_chunks(CHUNK))
-            .for_each(|(((s, sh), (r, v)), m)| {
+            .for_each(|(s, (r, v))| {
                 for i in 0..s.len() {
                     s[i] = r[i] - alpha * v[i];
-                    sh[i] = s[i] * m[i];
                 }
             });
         it += 1;
@@ -175,6 +187,7 @@ pub(crate) fn bicgstab(
             rel = snorm;
             break;
         }
+        pc.apply(&s, &mut shat);
         op.apply(&shat, &mut t);
         let tt = dot(&t, &t);
         omega = if tt > 0.0 { dot(&t, &s) / tt } else { 0.0 };

@@ -13,8 +13,10 @@
 //!   server's exhaust is its flow-weighted mean intake plus `P / (rho cp Q)`, coupled
 //!   inside the linear operator. Sensors read trilinear interpolation of cell centres.
 //! * The grid topology is built once in [`Simulator::new`]; each [`Simulator::solve`]
-//!   assembles sources and coefficients and runs Jacobi-preconditioned CG (pressure) and
-//!   BiCGSTAB (temperature), matrix-free, bit-identical at any thread count.
+//!   assembles sources and coefficients and runs CG (pressure) and BiCGSTAB (temperature),
+//!   matrix-free, preconditioned by geometric multigrid ([`Preconditioner`]), bit-identical
+//!   at any thread count. The pressure hierarchy depends on the topology only and is built
+//!   once too (again per run only when effects open containment panels).
 //!
 //! Effects ([`crate::effects::Effect`]) change a run through [`SimMods`].
 
@@ -24,12 +26,13 @@ mod grid;
 mod heat;
 mod linalg;
 mod mods;
+mod multigrid;
 mod run;
 mod solution;
 mod topology;
 mod vtk;
 
-pub use config::SimConfig;
+pub use config::{Preconditioner, SimConfig};
 pub use grid::Grid;
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
@@ -50,6 +53,9 @@ pub struct Simulator {
     hall: Hall,
     config: SimConfig,
     topo: topology::Topology,
+    /// Multigrid of the pressure operator without wall openings (it depends on the
+    /// topology only), built once.
+    pressure_mg: Option<multigrid::Multigrid>,
 }
 
 impl Simulator {
@@ -57,10 +63,19 @@ impl Simulator {
     pub fn new(hall: &Hall, config: SimConfig) -> Result<Self> {
         config.check()?;
         let topo = topology::Topology::build(hall, &config)?;
+        let pressure_mg = (config.preconditioner == Preconditioner::Multigrid).then(|| {
+            let g = [
+                topo.g[0].as_slice(),
+                topo.g[1].as_slice(),
+                topo.g[2].as_slice(),
+            ];
+            run::pressure_multigrid(&topo.grid, g, &topo.g_outlet, &topo.solid)
+        });
         Ok(Simulator {
             hall: hall.clone(),
             config,
             topo,
+            pressure_mg,
         })
     }
 
@@ -116,5 +131,9 @@ impl Simulator {
 
     pub(crate) fn topo(&self) -> &topology::Topology {
         &self.topo
+    }
+
+    pub(crate) fn pressure_mg(&self) -> Option<&multigrid::Multigrid> {
+        self.pressure_mg.as_ref()
     }
 }

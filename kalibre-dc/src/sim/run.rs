@@ -3,10 +3,13 @@
 
 use std::borrow::Cow;
 
-use super::flow::{face_fluxes, PressureOp};
-use super::heat::{stencil_value, HeatOp, Transfer};
-use super::linalg::{bicgstab, pcg};
+use super::config::Preconditioner;
+use super::flow::{face_fluxes, pressure_spec, PressureOp};
+use super::grid::Grid;
+use super::heat::{heat_spec, stencil_value, HeatOp, Transfer};
+use super::linalg::{bicgstab, pcg, Jacobi, Operator, SolveStats};
 use super::mods::{SimMods, WallSide};
+use super::multigrid::Multigrid;
 use super::solution::Solution;
 use super::topology::{open_face_g, Stencil};
 use super::{Simulator, M3_S_PER_CFM};
@@ -80,6 +83,24 @@ fn check_inputs(
         }
     }
     Ok(())
+}
+
+/// Gauss-Seidel sweeps before and after each coarse correction.
+const PRESSURE_SWEEPS: usize = 1;
+const HEAT_SWEEPS: usize = 1;
+
+/// The pressure multigrid for face conductances `g`.
+pub(super) fn pressure_multigrid(
+    grid: &Grid,
+    g: [&[f64]; 3],
+    g_outlet: &[f64],
+    solid: &[bool],
+) -> Multigrid {
+    Multigrid::build(
+        pressure_spec(grid, g, g_outlet, solid),
+        true,
+        PRESSURE_SWEEPS,
+    )
 }
 
 pub(super) fn solve(
@@ -309,9 +330,31 @@ pub(super) fn solve(
     let gref = [g[0].as_slice(), g[1].as_slice(), g[2].as_slice()];
 
     // Pressure.
-    let pop = PressureOp::new(grid, gref, &topo.g_outlet, &topo.solid);
     let mut p = vec![0.0; n];
-    let pstats = pcg(&pop, &source, &mut p, cfg.pressure_tol, cfg.max_iterations);
+    let (ptol, pmax) = (cfg.pressure_tol, cfg.max_iterations);
+    let pstats = match (cfg.preconditioner, sim.pressure_mg()) {
+        (Preconditioner::Multigrid, Some(mg)) => {
+            let owned;
+            let mg = if mods.wall_openings.is_empty() {
+                mg
+            } else {
+                owned = pressure_multigrid(grid, gref, &topo.g_outlet, &topo.solid);
+                &owned
+            };
+            pcg(mg, &mut mg.workspace(), &source, &mut p, ptol, pmax)
+        }
+        _ => {
+            let pop = PressureOp::new(grid, gref, &topo.g_outlet, &topo.solid);
+            pcg(
+                &pop,
+                &mut Jacobi(pop.inv_diag()),
+                &source,
+                &mut p,
+                ptol,
+                pmax,
+            )
+        }
+    };
     if pstats.rel_residual.is_nan() || pstats.rel_residual > cfg.pressure_tol {
         return Err(Error::Simulation(format!(
             "pressure solve did not converge: relative residual {:.3e} after {} iterations",
@@ -338,16 +381,6 @@ pub(super) fn solve(
             *v = 0.0;
         }
     }
-    let hop = HeatOp::new(
-        grid,
-        &topo.solid,
-        &flux,
-        gref,
-        cfg.diffusivity_m2_s,
-        &outlet_flux,
-        &sink_all,
-        &transfers,
-    );
     let t_supply_mean = if supply_q > 0.0 {
         inflows.iter().map(|f| f.flow_m3_s * f.temp_c).sum::<f64>() / supply_q
     } else {
@@ -358,7 +391,22 @@ pub(super) fn solve(
         .iter()
         .map(|s| if *s { 0.0 } else { t_supply_mean })
         .collect();
-    let hstats = bicgstab(&hop, &rhs, &mut temp, cfg.heat_tol, cfg.max_iterations);
+    let hstats = heat_solve(
+        cfg.preconditioner,
+        HeatInputs {
+            grid,
+            solid: &topo.solid,
+            flux: &flux,
+            g: gref,
+            diffusivity: cfg.diffusivity_m2_s,
+            outlet_flux: &outlet_flux,
+            sink: &sink_all,
+            transfers: &transfers,
+        },
+        &rhs,
+        &mut temp,
+        (cfg.heat_tol, cfg.max_iterations),
+    );
     if hstats.rel_residual.is_nan() || hstats.rel_residual > cfg.heat_tol {
         return Err(Error::Simulation(format!(
             "temperature solve did not converge: relative residual {:.3e} after {} iterations",
@@ -427,4 +475,55 @@ pub(super) fn solve(
         pressure_stats: pstats,
         heat_stats: hstats,
     })
+}
+
+/// What the heat operator is built from.
+struct HeatInputs<'a> {
+    grid: &'a Grid,
+    solid: &'a [bool],
+    flux: &'a [Vec<f64>; 3],
+    g: [&'a [f64]; 3],
+    diffusivity: f64,
+    outlet_flux: &'a [f64],
+    sink: &'a [f64],
+    transfers: &'a [Transfer],
+}
+
+/// The temperature solve with the chosen preconditioner.
+fn heat_solve(
+    pc: Preconditioner,
+    h: HeatInputs,
+    rhs: &[f64],
+    temp: &mut [f64],
+    (tol, max_iter): (f64, usize),
+) -> SolveStats {
+    match pc {
+        Preconditioner::Multigrid => {
+            let spec = heat_spec(
+                h.grid,
+                h.solid,
+                h.flux,
+                h.g,
+                h.diffusivity,
+                h.outlet_flux,
+                h.sink,
+                h.transfers,
+            );
+            let mg = Multigrid::build(spec, false, HEAT_SWEEPS);
+            bicgstab(&mg, &mut mg.workspace(), rhs, temp, tol, max_iter)
+        }
+        Preconditioner::Jacobi => {
+            let hop = HeatOp::new(
+                h.grid,
+                h.solid,
+                h.flux,
+                h.g,
+                h.diffusivity,
+                h.outlet_flux,
+                h.sink,
+                h.transfers,
+            );
+            bicgstab(&hop, &mut Jacobi(hop.inv_diag()), rhs, temp, tol, max_iter)
+        }
+    }
 }

@@ -11,6 +11,7 @@
 //! - [`SurrogateTerm`]: the extension point for effect terms.
 
 mod adjacency;
+mod flow_balance;
 mod graph;
 mod objective;
 mod penalty;
@@ -18,6 +19,7 @@ mod term;
 mod train;
 
 pub use adjacency::{Adjacency, AdjacencySettings, Csr};
+pub use flow_balance::{FlowBalance, FlowBalanceTerm};
 pub use graph::{ThermalGraph, ThermalGraphSettings};
 pub use objective::ThermalGraphObjective;
 pub use penalty::{

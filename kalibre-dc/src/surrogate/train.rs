@@ -34,6 +34,8 @@ struct Prepared<'a> {
     /// Raw term features per sample.
     f: Vec<Vec<f64>>,
     y: Vec<&'a [f64]>,
+    /// Sample weights, scaled to mean 1.
+    wt: Vec<f64>,
 }
 
 /// Standardised hidden variables and term features of every sample (`[s * n + k]`,
@@ -83,6 +85,7 @@ impl ThermalGraph {
         &self,
         st: &Standardised,
         y: &[&[f64]],
+        wt: &[f64],
         theta: &[f64],
         grad: &mut [f64],
     ) -> f64 {
@@ -113,8 +116,8 @@ impl ThermalGraph {
                     t += e[tt * n + k] * f[tt * n + k];
                 }
                 let r = t - ys[k];
-                loss += r * r;
-                let g = 2.0 * r * norm;
+                loss += wt[s] * r * r;
+                let g = 2.0 * wt[s] * r * norm;
                 ga[k] += g * xc[k];
                 gb[k] += g;
                 gc[k] += g * hm * xh[k];
@@ -137,6 +140,7 @@ impl ThermalGraph {
             h: Vec::new(),
             f: Vec::new(),
             y: Vec::new(),
+            wt: Vec::new(),
         };
         for (i, s) in data.samples.iter().enumerate() {
             let scen = data.scenarios.get(s.snapshot).ok_or_else(|| {
@@ -158,7 +162,20 @@ impl ThermalGraph {
             p.f.push(self.term_features(scen, &s.params));
             p.scen.push(scen);
             p.y.push(&s.outputs);
+            if !(s.weight.is_finite() && s.weight >= 0.0) {
+                return Err(Error::Mismatch(format!(
+                    "training sample {i}: weight {} is not finite and >= 0",
+                    s.weight
+                )));
+            }
+            p.wt.push(s.weight);
         }
+        let total: f64 = p.wt.iter().sum();
+        if total <= 0.0 {
+            return Err(Error::Mismatch("every training sample has weight 0".into()));
+        }
+        let scale = p.wt.len() as f64 / total;
+        p.wt.iter_mut().for_each(|w| *w *= scale);
         Ok(p)
     }
 
@@ -246,7 +263,7 @@ impl ThermalGraph {
         } else {
             let cache = self.hidden_all(&prep, &self.adjacency.cs.val, &self.adjacency.ss.val);
             let st = self.standardise(&prep, &cache, &self.w);
-            self.loss_and_grad_fixed(&st, &prep.y, &theta, &mut grad)
+            self.loss_and_grad_fixed(&st, &prep.y, &prep.wt, &theta, &mut grad)
         };
         Ok((loss, grad))
     }
@@ -313,8 +330,8 @@ impl ThermalGraph {
                     t += e[i] * (f[i] - scaling.term_mean[i]) / scaling.term_scale[i];
                 }
                 let r = t - prep.y[s][k];
-                loss += r * r * norm;
-                let g = 2.0 * r * norm;
+                loss += prep.wt[s] * r * r * norm;
+                let g = 2.0 * prep.wt[s] * r * norm;
                 grad[k] += g * xcs;
                 grad[n + k] += g;
                 if self.hot[k] {
@@ -364,13 +381,14 @@ impl ThermalGraph {
         // Standardisation over samples.
         let mut w = Weights::unfitted(n, nt);
         for k in 0..n {
-            (w.cold_mean[k], w.cold_scale[k]) = mean_scale(cache.iter().map(|c| c.0[k]));
+            let wt = &prep.wt;
+            (w.cold_mean[k], w.cold_scale[k]) = mean_scale(cache.iter().map(|c| c.0[k]), wt);
             if self.hot[k] {
-                (w.hot_mean[k], w.hot_scale[k]) = mean_scale(cache.iter().map(|c| c.1[k]));
+                (w.hot_mean[k], w.hot_scale[k]) = mean_scale(cache.iter().map(|c| c.1[k]), wt);
             }
             for t in 0..nt {
                 let i = t * n + k;
-                (w.term_mean[i], w.term_scale[i]) = mean_scale(prep.f.iter().map(|f| f[i]));
+                (w.term_mean[i], w.term_scale[i]) = mean_scale(prep.f.iter().map(|f| f[i]), wt);
             }
         }
 
@@ -404,19 +422,28 @@ impl ThermalGraph {
                     .map(|f| (f[i] - w.term_mean[i]) / w.term_scale[i]);
                 cols.push((f.collect(), 0.0, 4 + t));
             }
-            let ybar = prep.y.iter().map(|y| y[k]).sum::<f64>() / samples as f64;
+            // Weighted mean (weights average 1); the columns are centred with the same weights.
+            let ybar = prep
+                .y
+                .iter()
+                .zip(&prep.wt)
+                .map(|(y, w)| w * y[k])
+                .sum::<f64>()
+                / samples as f64;
             let m = cols.len();
             let mut g = vec![0.0; m * m];
             let mut rhs = vec![0.0; m];
             for p in 0..m {
                 for q in 0..m {
-                    g[p * m + q] = dot(&cols[p].0, &cols[q].0) + if p == q { lambda } else { 0.0 };
+                    g[p * m + q] =
+                        wdot(&cols[p].0, &cols[q].0, &prep.wt) + if p == q { lambda } else { 0.0 };
                 }
                 let xy: f64 = cols[p]
                     .0
                     .iter()
                     .zip(&prep.y)
-                    .map(|(x, y)| x * (y[k] - ybar))
+                    .zip(&prep.wt)
+                    .map(|((x, y), w)| w * x * (y[k] - ybar))
                     .sum();
                 rhs[p] = xy + lambda * cols[p].1;
             }
@@ -449,7 +476,7 @@ impl ThermalGraph {
         let fixed = (!st.trainable_adjacency).then(|| self.standardise(&prep, &cache, &scaling));
         for epoch in 0..=st.epochs {
             let loss = match &fixed {
-                Some(f) => self.loss_and_grad_fixed(f, &prep.y, &theta, &mut grad),
+                Some(f) => self.loss_and_grad_fixed(f, &prep.y, &prep.wt, &theta, &mut grad),
                 None => self.loss_and_grad(&prep, &scaling, &theta, &mut grad),
             };
             if !loss.is_finite() {
@@ -486,19 +513,24 @@ impl ThermalGraph {
     }
 }
 
-/// Mean and standard deviation over samples; a feature that does not vary is scaled by
-/// its magnitude instead, so a later change is measured relative to its training value.
-fn mean_scale(v: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+/// Weighted mean and standard deviation over samples (weights average 1); a feature that
+/// does not vary is scaled by its magnitude instead, so a later change is measured
+/// relative to its training value.
+fn mean_scale(v: impl Iterator<Item = f64> + Clone, wt: &[f64]) -> (f64, f64) {
     let n = v.clone().count().max(1) as f64;
-    let mean = v.clone().sum::<f64>() / n;
-    let var = v.map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
+    let mean = v.clone().zip(wt).map(|(x, w)| w * x).sum::<f64>() / n;
+    let var = v
+        .zip(wt)
+        .map(|(x, w)| w * (x - mean) * (x - mean))
+        .sum::<f64>()
+        / n;
     let sd = var.sqrt();
     let mag = mean.abs().max(1.0);
     (mean, if sd > 1e-9 * mag { sd } else { mag })
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+fn wdot(a: &[f64], b: &[f64], w: &[f64]) -> f64 {
+    a.iter().zip(b).zip(w).map(|((x, y), w)| w * x * y).sum()
 }
 
 /// Solves a small symmetric positive definite system by Gaussian elimination with
@@ -550,9 +582,9 @@ mod tests {
 
     #[test]
     fn constant_feature_is_scaled_by_magnitude() {
-        let (m, s) = mean_scale([250.0, 250.0, 250.0].into_iter());
+        let (m, s) = mean_scale([250.0, 250.0, 250.0].into_iter(), &[1.0; 3]);
         assert_eq!((m, s), (250.0, 250.0));
-        let (m, s) = mean_scale([1.0, 3.0].into_iter());
+        let (m, s) = mean_scale([1.0, 3.0].into_iter(), &[1.0; 2]);
         assert_eq!((m, s), (2.0, 1.0));
     }
 }

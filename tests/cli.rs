@@ -1,0 +1,267 @@
+//! End-to-end tests of the `kalibre` command-line tool on the small OpenFOAM development
+//! hall shipped in `data/openfoam` (24 sensors, 3 snapshots, about 11k cells at 0.2 m).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn kalibre() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_kalibre"))
+}
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/openfoam")
+        .join(name)
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("kalibre-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn run(cmd: &mut Command) -> Output {
+    cmd.output().expect("the kalibre binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A bad input gives exit code 2 and one readable error line naming what is wrong.
+fn assert_input_error(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "stderr: {err}");
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "one error line, got: {err}");
+    assert!(lines[0].starts_with("kalibre: error: "), "{err}");
+    assert!(err.contains(needle), "`{needle}` not in: {err}");
+}
+
+#[test]
+fn simulate_writes_predictions_and_vtk() {
+    let dir = tmp("simulate");
+    let hall = data("of-dev-clean/hall.json");
+    let snaps = data("of-dev-clean/snapshots.csv");
+    let params = dir.join("params.json");
+    std::fs::write(
+        &params,
+        r#"{ "alpha/web": 0.13, "alpha/db": 0.17, "alpha/gpu": 0.12 }"#,
+    )
+    .unwrap();
+    let out = dir.join("pred.csv");
+    let o = run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--params")
+        .arg(&params)
+        .arg("--out")
+        .arg(&out)
+        .arg("--vtk")
+        .arg(dir.join("vtk")));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(&out).unwrap();
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows[0], "snapshot,kind,id,value");
+    assert_eq!(rows.len(), 1 + 3 * 24);
+    assert!(rows[1..].iter().all(|r| r.contains(",sensor_c,")));
+    // Every reading lies between the coldest setpoint and a plausible exhaust temperature.
+    for r in &rows[1..] {
+        let v: f64 = r.rsplit(',').next().unwrap().parse().unwrap();
+        assert!((17.0..60.0).contains(&v), "implausible reading {r}");
+    }
+    for label in ["t0", "t1", "t2"] {
+        let vtk = std::fs::read_to_string(dir.join("vtk").join(format!("{label}.vtk"))).unwrap();
+        assert!(vtk.starts_with("# vtk DataFile"));
+        assert!(vtk.contains("temperature_c") && vtk.contains("velocity_m_s"));
+    }
+}
+
+#[test]
+fn bad_inputs_give_one_line_and_exit_code_2() {
+    let dir = tmp("bad");
+    let hall = data("of-dev-clean/hall.json");
+    let snaps = data("of-dev-clean/snapshots.csv");
+    let out = dir.join("pred.csv");
+    // A missing hall file.
+    let o = run(kalibre()
+        .args([
+            "simulate",
+            "--hall",
+            "/nonexistent/hall.json",
+            "--snapshots",
+        ])
+        .arg(&snaps)
+        .arg("--out")
+        .arg(&out));
+    assert_input_error(&o, "/nonexistent/hall.json");
+    // A malformed hall: a sensor with NaN written as a string.
+    let bad_hall = dir.join("bad-hall.json");
+    let text = std::fs::read_to_string(&hall).unwrap().replacen(
+        "\"rated_flow_m3_s\": 3.95",
+        "\"rated_flow_m3_s\": -1",
+        1,
+    );
+    std::fs::write(&bad_hall, text).unwrap();
+    let o = run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(&bad_hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(&out));
+    assert_input_error(&o, "/cracs/0/rated_flow_m3_s");
+    // An unknown parameter in --params.
+    let params = dir.join("params.json");
+    std::fs::write(&params, r#"{ "alpha/nosuchtype": 0.1 }"#).unwrap();
+    let o = run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--params")
+        .arg(&params)
+        .arg("--out")
+        .arg(&out));
+    assert_input_error(&o, "alpha/nosuchtype");
+    // A parameter outside its bounds.
+    std::fs::write(&params, r#"{ "alpha/web": 7.5 }"#).unwrap();
+    let o = run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--params")
+        .arg(&params)
+        .arg("--out")
+        .arg(&out));
+    assert_input_error(&o, "alpha/web");
+    // A negative grid size.
+    let o = run(kalibre()
+        .args(["calibrate", "--grid-m", "-0.2", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "--grid-m");
+    // Snapshots of another hall: an unknown id.
+    let bad_snaps = dir.join("snaps.csv");
+    std::fs::write(
+        &bad_snaps,
+        "snapshot,kind,id,value\nt0,setpoint_c,crac-9,18\n",
+    )
+    .unwrap();
+    let o = run(kalibre()
+        .args(["calibrate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&bad_snaps)
+        .arg("--out")
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "crac-9");
+    // An unknown preset.
+    let o = run(kalibre()
+        .args(["synth", "--preset", "hall-z", "--out"])
+        .arg(dir.join("synth")));
+    assert_input_error(&o, "hall-z");
+}
+
+fn journal_lines(path: &Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_default()
+        .lines()
+        .map(str::to_owned)
+        .collect()
+}
+
+fn calibrate_cmd(out: &Path) -> Command {
+    let mut c = kalibre();
+    c.args([
+        "calibrate",
+        "--iterations",
+        "3",
+        "--seed",
+        "7",
+        "--threads",
+        "1",
+        "--hall",
+    ])
+    .arg(data("of-dev-clean/hall.json"))
+    .arg("--snapshots")
+    .arg(data("of-dev-clean/snapshots.csv"))
+    .arg("--out")
+    .arg(out);
+    c
+}
+
+/// Killing `kalibre calibrate` mid-run and starting it again repeats no finished model run,
+/// and the resumed calibration ends where an uninterrupted one does.
+#[test]
+fn calibrate_resumes_after_kill_without_repeating_runs() {
+    let whole = tmp("whole");
+    let o = run(&mut calibrate_cmd(&whole));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(whole.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["schema"], "kalibre.report/1");
+    let total = report["runs"]["total"].as_u64().unwrap() as usize;
+    assert!(
+        total >= 12,
+        "initial design of 4 points x 3 snapshots at least"
+    );
+    assert!(whole.join("report.html").exists());
+    let html = std::fs::read_to_string(whole.join("report.html")).unwrap();
+    assert!(html.contains("<svg") && html.contains("Where the model fails"));
+
+    // Start again, kill once a few runs are journaled, then resume.
+    let cut = tmp("cut");
+    let journal = cut.join("runs.jsonl");
+    let mut child = calibrate_cmd(&cut).spawn().unwrap();
+    let start = Instant::now();
+    while journal_lines(&journal).len() < 5 && start.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let done_before = journal_lines(&journal)
+        .iter()
+        .filter(|l| serde_json::from_str::<serde_json::Value>(l).is_ok())
+        .count();
+    assert!(
+        done_before >= 5 && done_before < total,
+        "killed mid-run ({done_before} of {total})"
+    );
+    let o = run(&mut calibrate_cmd(&cut));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let resumed: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cut.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        resumed["runs"]["cached"].as_u64().unwrap() as usize,
+        done_before
+    );
+    assert_eq!(
+        resumed["runs"]["new"].as_u64().unwrap() as usize,
+        total - done_before,
+        "no finished run is repeated"
+    );
+    assert_eq!(
+        resumed["best"], report["best"],
+        "same result as the uninterrupted run"
+    );
+    // Each (snapshot, parameters) appears once in the journal.
+    let mut keys: Vec<String> = journal_lines(&journal)
+        .iter()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .map(|v| format!("{}|{}", v["scenario"], v["params"]))
+        .collect();
+    let n = keys.len();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), n, "a run was repeated");
+    assert_eq!(n, total);
+}
