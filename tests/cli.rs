@@ -142,7 +142,7 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
     assert_input_error(&o, "alpha/web");
     // A negative grid size.
     let o = run(kalibre()
-        .args(["calibrate", "--grid-m", "-0.2", "--hall"])
+        .args(["calibrate", "--grid-m=-0.2", "--hall"])
         .arg(&hall)
         .arg("--snapshots")
         .arg(&snaps)

@@ -1,5 +1,6 @@
 //! Simulator benchmark (harness = false): prints cells, iterations, seconds and peak
-//! memory for a demo-sized and a hall-a-sized hall over grid sizes, then the realism
+//! memory for a demo-sized and a hall-a-sized hall over grid sizes (multigrid, plus the
+//! Jacobi reference at the default grid), then the realism
 //! check against the OpenFOAM development datasets.
 //!
 //! `cargo bench -p kalibre-dc --bench sim` (each case runs in a child process so that its
@@ -15,7 +16,7 @@ use std::time::Instant;
 
 use kalibre_dc::effects::from_spec;
 use kalibre_dc::hall::{EffectSpec, Hall};
-use kalibre_dc::sim::{SimConfig, Simulator};
+use kalibre_dc::sim::{Preconditioner, SimConfig, Simulator};
 use kalibre_dc::snapshots::OperatingState;
 use serde_json::Value;
 
@@ -40,12 +41,19 @@ fn run_case(spec: &str) {
     let name = it.next().unwrap_or("demo");
     let cell: f64 = it.next().and_then(|v| v.parse().ok()).unwrap_or(0.2);
     let reps: usize = it.next().and_then(|v| v.parse().ok()).unwrap_or(5);
+    let pc = match it.next() {
+        Some("jacobi") => Preconditioner::Jacobi,
+        _ => Preconditioner::Multigrid,
+    };
     let (hall, power) = match name {
         "hall-a" => (sim_halls::hall_a(), 250.0),
         _ => (sim_halls::demo_hall(), 400.0),
     };
     let t0 = Instant::now();
-    let sim = Simulator::new(&hall, SimConfig::default().with_cell_m(cell)).expect("topology");
+    let cfg = SimConfig::default()
+        .with_cell_m(cell)
+        .with_preconditioner(pc);
+    let sim = Simulator::new(&hall, cfg).expect("topology");
     let setup_s = t0.elapsed().as_secs_f64();
     let state = sim_halls::varied_state(&hall, 18.0, 0.9, power);
     let alpha = vec![0.12; hall.server_count()];
@@ -60,7 +68,12 @@ fn run_case(spec: &str) {
     times.sort_by(|a, b| a.total_cmp(b));
     let sol = last.expect("at least one rep");
     println!(
-        "{name}\t{cell}\t{}\t{}\t{}\t{}\t{}\t{:.4}\t{:.4}\t{:.1}\t{:.2e}",
+        "{name}\t{cell}\t{}\t{}\t{}\t{}\t{}\t{}\t{:.4}\t{:.4}\t{:.1}\t{:.2e}",
+        if pc == Preconditioner::Jacobi {
+            "Jacobi"
+        } else {
+            "multigrid"
+        },
         sim.grid().len(),
         sim.fluid_cells(),
         hall.server_count(),
@@ -91,9 +104,12 @@ fn perf_table(quick: bool) {
     for c in hall_a {
         cases.push(format!("hall-a:{c}:5"));
     }
+    // The Jacobi reference at the default grid: the solver before multigrid.
+    cases.push("demo:0.2:3:jacobi".into());
+    cases.push("hall-a:0.2:3:jacobi".into());
     let exe = std::env::current_exe().expect("current exe");
-    println!("| hall | cell m | cells | fluid | servers | CG iter | BiCGSTAB iter | solve s (median) | setup s | peak MB | energy err |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| hall | cell m | preconditioner | cells | fluid | servers | CG iter | BiCGSTAB iter | solve s (median) | setup s | peak MB | energy err |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for case in cases {
         let out = Command::new(&exe)
             .env(CASE_ENV, &case)

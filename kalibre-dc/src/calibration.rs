@@ -33,6 +33,9 @@ use crate::{Error, HallModel, Result};
 /// | `max_wall_s` | none | stop after this much wall time |
 /// | `max_parallel_runs` | all threads | model runs at once |
 /// | `focus` | 1 | runs with `m` times the best MAE weigh `exp(-((m-1)/focus)^2/2)` in the fit |
+/// | `explore_on_repeat` | 0.015 | a repeated proposal is moved by this much noise (unit box, about 9% in alpha) rather than ending the loop |
+/// | `output_correction` | false | search the surrogate corrected to match the model at the best run (beyond the paper) |
+/// | `trust_region` | none | search within this distance (unit box) of the best point; grows on success, shrinks on failure |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
@@ -62,6 +65,12 @@ pub struct HallCalibrationSettings {
     pub flow_balance_terms: bool,
     /// Focus of the surrogate fit on runs near the measurements (see `kalibre_core::Settings`).
     pub focus: Option<f64>,
+    /// Noise (unit box) that moves a repeated proposal instead of stopping.
+    pub explore_on_repeat: Option<f64>,
+    /// Correct the surrogate to the model at the best run before each search.
+    pub output_correction: bool,
+    /// Initial trust-region radius of the search (unit box).
+    pub trust_region: Option<f64>,
 }
 
 impl Default for HallCalibrationSettings {
@@ -80,6 +89,9 @@ impl Default for HallCalibrationSettings {
             max_parallel_runs: None,
             flow_balance_terms: true,
             focus: Some(1.0),
+            explore_on_repeat: Some(0.015),
+            output_correction: false,
+            trust_region: None,
         }
     }
 }
@@ -152,6 +164,9 @@ pub fn calibrate_hall<'o>(
         max_parallel_runs: settings.max_parallel_runs,
         regularizer_weight: settings.penalty.weight,
         focus: settings.focus,
+        explore_on_repeat: settings.explore_on_repeat,
+        output_correction: settings.output_correction,
+        trust_region: settings.trust_region,
         ..Settings::default()
     };
     let mut calibrator = Calibrator::new(&model, surrogate, &observations, &space)

@@ -32,8 +32,8 @@ impl fmt::Display for CliError {
 impl From<kalibre_dc::Error> for CliError {
     fn from(e: kalibre_dc::Error) -> Self {
         match e {
+            // Reading a hall or snapshot file that is not there is bad input too.
             kalibre_dc::Error::Simulation(_) => CliError::Run(e.to_string()),
-            kalibre_dc::Error::Io { .. } => CliError::Run(e.to_string()),
             _ => CliError::Input(e.to_string()),
         }
     }

@@ -14,6 +14,7 @@ pub(crate) enum Stream {
     Fit = 2,
     Search = 3,
     Perturb = 4,
+    Explore = 5,
 }
 
 fn splitmix64(mut z: u64) -> u64 {
@@ -119,55 +120,6 @@ pub(crate) fn perturb(
     u
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn reflect_stays_in_box_and_is_identity_inside() {
-        for &x in &[-2.7, -0.3, 0.0, 0.25, 1.0, 1.4, 3.9] {
-            let r = reflect(x);
-            assert!((0.0..=1.0).contains(&r), "{x} -> {r}");
-        }
-        assert_eq!(reflect(0.25), 0.25);
-        assert!((reflect(1.25) - 0.75).abs() < 1e-15);
-        assert!((reflect(-0.25) - 0.25).abs() < 1e-15);
-    }
-
-    #[test]
-    fn seeds_differ_by_stream_and_iteration() {
-        let a = derive_seed(7, 1, Stream::Fit);
-        assert_ne!(a, derive_seed(7, 1, Stream::Search));
-        assert_ne!(a, derive_seed(7, 2, Stream::Fit));
-        assert_ne!(a, derive_seed(8, 1, Stream::Fit));
-        assert_eq!(a, derive_seed(7, 1, Stream::Fit));
-    }
-
-    #[test]
-    fn design_dedupes_an_initial_value_at_the_midpoint() {
-        use crate::Scale;
-        let s = ParamSpace::new()
-            .with("a", 0.0, 2.0, 1.0, Scale::Linear)
-            .unwrap();
-        let (pts, idx) = initial_design(&s).unwrap();
-        assert_eq!(pts.len(), 3);
-        assert_eq!(idx, 2);
-        let s = ParamSpace::new()
-            .with("a", 0.0, 2.0, 0.3, Scale::Linear)
-            .unwrap();
-        let (pts, idx) = initial_design(&s).unwrap();
-        assert_eq!((pts.len(), idx), (4, 3));
-    }
-
-    #[test]
-    fn perturb_leaves_the_failed_point() {
-        let failed = vec![vec![0.5, 0.5]];
-        let u = perturb(&[0.5, 0.5], &failed, 1e-9, 0.05, 3);
-        assert!(distance(&u, &failed[0]) > 1e-9);
-        assert!(u.iter().all(|x| (0.0..=1.0).contains(x)));
-    }
-}
-
 /// Weights samples by how close their run came to the measurements of its snapshot: a
 /// run whose MAE is `m` times the best run's weighs `exp(-((m - 1) / width)^2 / 2)`, so
 /// far-off runs (an initial design at extreme bounds) stop dominating the fit while the
@@ -215,4 +167,53 @@ pub(crate) fn focus<S>(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reflect_stays_in_box_and_is_identity_inside() {
+        for &x in &[-2.7, -0.3, 0.0, 0.25, 1.0, 1.4, 3.9] {
+            let r = reflect(x);
+            assert!((0.0..=1.0).contains(&r), "{x} -> {r}");
+        }
+        assert_eq!(reflect(0.25), 0.25);
+        assert!((reflect(1.25) - 0.75).abs() < 1e-15);
+        assert!((reflect(-0.25) - 0.25).abs() < 1e-15);
+    }
+
+    #[test]
+    fn seeds_differ_by_stream_and_iteration() {
+        let a = derive_seed(7, 1, Stream::Fit);
+        assert_ne!(a, derive_seed(7, 1, Stream::Search));
+        assert_ne!(a, derive_seed(7, 2, Stream::Fit));
+        assert_ne!(a, derive_seed(8, 1, Stream::Fit));
+        assert_eq!(a, derive_seed(7, 1, Stream::Fit));
+    }
+
+    #[test]
+    fn design_dedupes_an_initial_value_at_the_midpoint() {
+        use crate::Scale;
+        let s = ParamSpace::new()
+            .with("a", 0.0, 2.0, 1.0, Scale::Linear)
+            .unwrap();
+        let (pts, idx) = initial_design(&s).unwrap();
+        assert_eq!(pts.len(), 3);
+        assert_eq!(idx, 2);
+        let s = ParamSpace::new()
+            .with("a", 0.0, 2.0, 0.3, Scale::Linear)
+            .unwrap();
+        let (pts, idx) = initial_design(&s).unwrap();
+        assert_eq!((pts.len(), idx), (4, 3));
+    }
+
+    #[test]
+    fn perturb_leaves_the_failed_point() {
+        let failed = vec![vec![0.5, 0.5]];
+        let u = perturb(&[0.5, 0.5], &failed, 1e-9, 0.05, 3);
+        assert!(distance(&u, &failed[0]) > 1e-9);
+        assert!(u.iter().all(|x| (0.0..=1.0).contains(x)));
+    }
 }

@@ -8,6 +8,7 @@ mod report;
 mod runner;
 mod settings;
 mod state;
+mod trust;
 
 pub use report::{
     Best, Errors, Initial, IterationRecord, NamedValues, Report, Residual, RunCounts,
@@ -316,6 +317,7 @@ where
         let scenarios: Vec<M::Scenario> =
             obs.snapshots().iter().map(|s| s.scenario.clone()).collect();
         let mut history = Vec::new();
+        let mut radius = st.trust_region;
         let mut iteration = 0;
         let stop = loop {
             let best_score = state.best.as_ref().map(|b| b.score);
@@ -380,14 +382,50 @@ where
                 None => design_units[initial_idx].clone(),
             };
             let mut objective = SurrogateObjective::new(&self.surrogate, obs, space);
+            if st.output_correction {
+                if let Some(best) = &state.best {
+                    let offsets = obs
+                        .snapshots()
+                        .iter()
+                        .zip(&best.outputs)
+                        .map(|(snap, model)| {
+                            let sur = self.surrogate.predict(&snap.scenario, &best.params);
+                            model.iter().zip(sur).map(|(m, s)| m - s).collect()
+                        })
+                        .collect();
+                    objective = objective.with_offsets(offsets);
+                }
+            }
             if let Some(reg) = self.regularizer {
                 objective = objective.with_regularizer(reg, st.regularizer_weight);
             }
-            let outcome = self.searcher.search(
-                &objective,
-                &start,
-                derive_seed(st.seed, iteration, Stream::Search),
-            )?;
+            let region = match (radius, &state.best) {
+                (Some(r), Some(b)) => Some(trust::SubBox::around(&objective, &b.unit, r)),
+                _ => None,
+            };
+            let mut outcome = match &region {
+                Some(sub) => {
+                    let mut o = self.searcher.search(
+                        sub,
+                        &sub.to_inner(&start),
+                        derive_seed(st.seed, iteration, Stream::Search),
+                    )?;
+                    if o.best_unit.len() == space.dim() {
+                        o.best_unit = sub.to_outer(&o.best_unit);
+                    }
+                    o
+                }
+                None => self.searcher.search(
+                    &objective,
+                    &start,
+                    derive_seed(st.seed, iteration, Stream::Search),
+                )?,
+            };
+            outcome.best_unit.iter_mut().for_each(|u| {
+                if u.is_finite() {
+                    *u = u.clamp(0.0, 1.0)
+                }
+            });
             let search_s = t.elapsed().as_secs_f64();
             // The data term alone: the rest of the loss is the regulariser's (a prior that
             // binds at the optimum shows as a gap between the two).
@@ -434,7 +472,31 @@ where
                 perturbed = true;
             }
             if near(&state.ok_units, &unit) {
-                break StopReason::Converged;
+                // The surrogate has nothing new to say here: stop, or sample near the
+                // proposal so the next fit learns the neighbourhood.
+                let Some(sigma) = st.explore_on_repeat else {
+                    break StopReason::Converged;
+                };
+                let known: Vec<Vec<f64>> = state
+                    .ok_units
+                    .iter()
+                    .chain(&state.failed_units)
+                    .cloned()
+                    .collect();
+                let moved = design::perturb(
+                    &unit,
+                    &known,
+                    st.duplicate_tol,
+                    sigma,
+                    derive_seed(st.seed, iteration, Stream::Explore),
+                );
+                self.emit(Event::Perturbed {
+                    iteration,
+                    from_unit: &unit,
+                    to_unit: &moved,
+                });
+                unit = moved;
+                perturbed = true;
             }
 
             // Steps 3 and 4: run at every snapshot, validate.
@@ -446,6 +508,17 @@ where
                 .unwrap_or_default();
             let model_s = t.elapsed().as_secs_f64();
             let eval = state.absorb(&self.validator, obs, iteration, &unit, &params, results);
+            if let Some(r) = radius.as_mut() {
+                let improved = state
+                    .best
+                    .as_ref()
+                    .is_some_and(|b| b.iteration == iteration);
+                *r = if improved {
+                    (*r * 2.0).min(1.0)
+                } else {
+                    (*r * 0.5).max(1e-3)
+                };
+            }
             let v = eval.validation.as_ref();
             let record = IterationRecord {
                 iteration,

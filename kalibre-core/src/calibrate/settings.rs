@@ -19,6 +19,9 @@ use crate::{Error, Result};
 /// | `regularizer_weight` | 1 | weight of the regulariser in the search loss (when one is given) | finite, >= 0 |
 /// | `duplicate_tol` | 1e-9 | max-norm distance in the unit box under which two points are the same | finite, >= 0 |
 /// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point, unit box | finite, > 0 |
+/// | `explore_on_repeat` | none | when the search proposes a point already run: none stops (converged); a sigma moves the proposal with that much seeded noise (unit box) and goes on | finite, > 0 |
+/// | `output_correction` | false | search the surrogate plus, per snapshot and output, the model's outputs minus the surrogate's at the best run (the corrected surrogate matches the model there) | bool |
+/// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1 | finite, > 0 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -47,6 +50,12 @@ pub struct Settings {
     pub perturb_sigma: f64,
     /// Width of the fit's focus on runs close to the measurements (none: uniform weights).
     pub focus: Option<f64>,
+    /// Noise (unit box) that moves a repeated proposal; none: a repeat stops the loop.
+    pub explore_on_repeat: Option<f64>,
+    /// Correct the surrogate to match the model at the best run before each search.
+    pub output_correction: bool,
+    /// Initial trust-region radius (unit box); none searches the whole box.
+    pub trust_region: Option<f64>,
 }
 
 impl Default for Settings {
@@ -64,6 +73,9 @@ impl Default for Settings {
             duplicate_tol: 1e-9,
             perturb_sigma: 0.05,
             focus: None,
+            explore_on_repeat: None,
+            output_correction: false,
+            trust_region: None,
         }
     }
 }
@@ -115,6 +127,19 @@ impl Settings {
         non_negative("augment_sigma", self.augment_sigma)?;
         non_negative("regularizer_weight", self.regularizer_weight)?;
         non_negative("duplicate_tol", self.duplicate_tol)?;
+        if let Some(s) = self.explore_on_repeat {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(bad(
+                    "explore_on_repeat",
+                    format!("must be finite and > 0, got {s}"),
+                ));
+            }
+        }
+        if let Some(r) = self.trust_region {
+            if !(r.is_finite() && r > 0.0 && r <= 1.0) {
+                return Err(bad("trust_region", format!("must be in (0, 1], got {r}")));
+            }
+        }
         if let Some(f) = self.focus {
             if !(f.is_finite() && f > 0.0) {
                 return Err(bad("focus", format!("must be finite and > 0, got {f}")));

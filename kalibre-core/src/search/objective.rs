@@ -19,6 +19,8 @@ pub struct SurrogateObjective<'a, Su: Surrogate> {
     space: &'a ParamSpace,
     regularizer: Option<(&'a dyn Regularizer, f64)>,
     measured_count: f64,
+    /// Per snapshot, per output: added to the surrogate's prediction (output correction).
+    offsets: Option<Vec<Vec<f64>>>,
 }
 
 impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
@@ -35,7 +37,26 @@ impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
             space,
             regularizer: None,
             measured_count,
+            offsets: None,
         }
+    }
+
+    /// Adds a fixed offset per snapshot and output to every prediction: with the model's
+    /// outputs minus the surrogate's at the best run so far, the corrected surrogate
+    /// matches the model there exactly (zero-order consistency, as in trust-region model
+    /// management), and the search follows the surrogate's slopes from the model's answer.
+    pub fn with_offsets(mut self, offsets: Vec<Vec<f64>>) -> Self {
+        self.offsets = Some(offsets);
+        self
+    }
+
+    fn offset(&self, snapshot: usize, output: usize) -> f64 {
+        self.offsets
+            .as_ref()
+            .and_then(|o| o.get(snapshot))
+            .and_then(|o| o.get(output))
+            .copied()
+            .unwrap_or(0.0)
     }
 
     /// Adds `weight * regularizer(params)`.
@@ -47,11 +68,12 @@ impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
     /// The data term (mean squared error) alone, at physical parameters.
     pub fn data_mse(&self, params: &[f64]) -> f64 {
         let mut sum = 0.0;
-        for snap in self.observations.snapshots() {
+        for (s, snap) in self.observations.snapshots().iter().enumerate() {
             let pred = self.surrogate.predict(&snap.scenario, params);
-            for (p, m) in pred.iter().zip(&snap.measured) {
+            for (k, (p, m)) in pred.iter().zip(&snap.measured).enumerate() {
                 if let Some(m) = m {
-                    sum += (p - m) * (p - m);
+                    let r = p + self.offset(s, k) - m;
+                    sum += r * r;
                 }
             }
         }
@@ -87,13 +109,19 @@ where
         };
         let mut cost = 0.0;
         let mut grad_phys = vec![0.0; params.len()];
-        for snap in self.observations.snapshots() {
+        for (s, snap) in self.observations.snapshots().iter().enumerate() {
             let pred = self.surrogate.predict(&snap.scenario, &params);
             let mut cotangent = vec![0.0; pred.len()];
-            for ((c, p), m) in cotangent.iter_mut().zip(&pred).zip(&snap.measured) {
+            for (k, ((c, p), m)) in cotangent
+                .iter_mut()
+                .zip(&pred)
+                .zip(&snap.measured)
+                .enumerate()
+            {
                 if let Some(m) = m {
-                    cost += (p - m) * (p - m);
-                    *c = 2.0 * (p - m) / self.measured_count;
+                    let r = p + self.offset(s, k) - m;
+                    cost += r * r;
+                    *c = 2.0 * r / self.measured_count;
                 }
             }
             let g = self.surrogate.vjp(&snap.scenario, &params, &cotangent);

@@ -61,6 +61,16 @@ fn norm(a: &[f64]) -> f64 {
     dot(a, a).sqrt()
 }
 
+/// Per-chunk partial sums added in chunk order (deterministic at any thread count).
+fn sum_parts<const K: usize>(parts: Vec<[f64; K]>) -> [f64; K] {
+    parts.iter().fold([0.0; K], |mut acc, p| {
+        for k in 0..K {
+            acc[k] += p[k];
+        }
+        acc
+    })
+}
+
 /// Preconditioned conjugate gradients; `x` holds the initial guess and the answer.
 pub(crate) fn pcg(
     op: &dyn Operator,
@@ -91,17 +101,24 @@ pub(crate) fn pcg(
             break;
         }
         let alpha = rz / pap;
-        x.par_chunks_mut(CHUNK)
-            .zip(r.par_chunks_mut(CHUNK))
-            .zip(p.par_chunks(CHUNK).zip(ap.par_chunks(CHUNK)))
-            .for_each(|((x, r), (p, ap))| {
-                for i in 0..x.len() {
-                    x[i] += alpha * p[i];
-                    r[i] -= alpha * ap[i];
-                }
-            });
+        // The update and the new residual norm in one pass.
+        let [rr] = sum_parts(
+            x.par_chunks_mut(CHUNK)
+                .zip(r.par_chunks_mut(CHUNK))
+                .zip(p.par_chunks(CHUNK).zip(ap.par_chunks(CHUNK)))
+                .map(|((x, r), (p, ap))| {
+                    let mut rr = 0.0;
+                    for i in 0..x.len() {
+                        x[i] += alpha * p[i];
+                        r[i] -= alpha * ap[i];
+                        rr += r[i] * r[i];
+                    }
+                    [rr]
+                })
+                .collect(),
+        );
         it += 1;
-        rel = norm(&r) / bnorm;
+        rel = rr.sqrt() / bnorm;
         if rel <= tol {
             break;
         }
@@ -148,9 +165,10 @@ pub(crate) fn bicgstab(
     let mut shat = vec![0.0; n];
     let mut t = vec![0.0; n];
     let mut rel = norm(&r) / bnorm;
+    let mut r0r = dot(&r0, &r);
     let mut it = 0;
     while rel > tol && it < max_iter {
-        let rho_new = dot(&r0, &r);
+        let rho_new = r0r;
         if rho_new == 0.0 || !rho_new.is_finite() {
             break;
         }
@@ -170,15 +188,21 @@ pub(crate) fn bicgstab(
             break;
         }
         alpha = rho / r0v;
-        s.par_chunks_mut(CHUNK)
-            .zip(r.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
-            .for_each(|(s, (r, v))| {
-                for i in 0..s.len() {
-                    s[i] = r[i] - alpha * v[i];
-                }
-            });
+        let [ss] = sum_parts(
+            s.par_chunks_mut(CHUNK)
+                .zip(r.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
+                .map(|(s, (r, v))| {
+                    let mut ss = 0.0;
+                    for i in 0..s.len() {
+                        s[i] = r[i] - alpha * v[i];
+                        ss += s[i] * s[i];
+                    }
+                    [ss]
+                })
+                .collect(),
+        );
         it += 1;
-        let snorm = norm(&s) / bnorm;
+        let snorm = ss.sqrt() / bnorm;
         if snorm <= tol {
             x.par_iter_mut()
                 .zip(phat.par_iter())
@@ -189,19 +213,41 @@ pub(crate) fn bicgstab(
         }
         pc.apply(&s, &mut shat);
         op.apply(&shat, &mut t);
-        let tt = dot(&t, &t);
-        omega = if tt > 0.0 { dot(&t, &s) / tt } else { 0.0 };
-        x.par_chunks_mut(CHUNK)
-            .zip(r.par_chunks_mut(CHUNK))
-            .zip(phat.par_chunks(CHUNK).zip(shat.par_chunks(CHUNK)))
-            .zip(s.par_chunks(CHUNK).zip(t.par_chunks(CHUNK)))
-            .for_each(|(((x, r), (ph, sh)), (s, t))| {
-                for i in 0..x.len() {
-                    x[i] += alpha * ph[i] + omega * sh[i];
-                    r[i] = s[i] - omega * t[i];
-                }
-            });
-        rel = norm(&r) / bnorm;
+        let [tt, ts] = sum_parts(
+            t.par_chunks(CHUNK)
+                .zip(s.par_chunks(CHUNK))
+                .map(|(t, s)| {
+                    let (mut tt, mut ts) = (0.0, 0.0);
+                    for i in 0..t.len() {
+                        tt += t[i] * t[i];
+                        ts += t[i] * s[i];
+                    }
+                    [tt, ts]
+                })
+                .collect(),
+        );
+        omega = if tt > 0.0 { ts / tt } else { 0.0 };
+        // The update, the residual norm and the next `r0 . r` in one pass.
+        let [rr, r0r_new] = sum_parts(
+            x.par_chunks_mut(CHUNK)
+                .zip(r.par_chunks_mut(CHUNK))
+                .zip(phat.par_chunks(CHUNK).zip(shat.par_chunks(CHUNK)))
+                .zip(s.par_chunks(CHUNK).zip(t.par_chunks(CHUNK)))
+                .zip(r0.par_chunks(CHUNK))
+                .map(|((((x, r), (ph, sh)), (s, t)), r0)| {
+                    let (mut rr, mut r0r) = (0.0, 0.0);
+                    for i in 0..x.len() {
+                        x[i] += alpha * ph[i] + omega * sh[i];
+                        r[i] = s[i] - omega * t[i];
+                        rr += r[i] * r[i];
+                        r0r += r0[i] * r[i];
+                    }
+                    [rr, r0r]
+                })
+                .collect(),
+        );
+        r0r = r0r_new;
+        rel = rr.sqrt() / bnorm;
         if omega == 0.0 {
             break;
         }

@@ -21,6 +21,7 @@
 //! Effects ([`crate::effects::Effect`]) change a run through [`SimMods`].
 
 mod config;
+mod dense;
 mod flow;
 mod grid;
 mod heat;
