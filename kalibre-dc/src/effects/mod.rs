@@ -6,9 +6,10 @@
 //! registry). A downstream crate adds a kind by implementing [`Effect`] and
 //! [`EffectFactory`] and registering the factory.
 //!
-//! Built-in kinds (fields documented in each module):
-//! [`containment_leakage`](leakage), [`bypass`](bypass), [`crac_supply_offset`](offset),
-//! [`rack_recirculation`](recirculation).
+//! Built-in kinds (fields documented on each type):
+//! `containment_leakage` ([`ContainmentLeakage`]), `bypass` ([`Bypass`]),
+//! `crac_supply_offset` ([`CracSupplyOffset`]), `rack_recirculation`
+//! ([`RackRecirculationEffect`]).
 //!
 //! Every parameter field takes the same shape: `"<name>": initial value` (optional, with
 //! a default) and `"<name>_bounds": [lower, upper]` (optional, with default bounds that

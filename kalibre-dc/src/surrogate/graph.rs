@@ -403,7 +403,7 @@ impl ThermalGraph {
 impl Surrogate for ThermalGraph {
     type Scenario = OperatingState;
 
-    /// Fits on all samples (see [`super::train`]); full-batch training uses no randomness,
+    /// Fits on all samples (least-squares start, then Adam); full-batch training uses no randomness,
     /// so `seed` does not change the result.
     fn fit(
         &mut self,
