@@ -81,6 +81,21 @@ fn simulate_writes_predictions_and_vtk() {
     }
 }
 
+/// `kalibre simulate` on a hall and snapshots, with optional parameters.
+fn simulate(hall: &Path, snaps: &Path, params: Option<&Path>, out: &Path) -> Output {
+    let mut c = kalibre();
+    c.args(["simulate", "--hall"])
+        .arg(hall)
+        .arg("--snapshots")
+        .arg(snaps)
+        .arg("--out")
+        .arg(out);
+    if let Some(p) = params {
+        c.arg("--params").arg(p);
+    }
+    run(&mut c)
+}
+
 #[test]
 fn bad_inputs_give_one_line_and_exit_code_2() {
     let dir = tmp("bad");
@@ -88,18 +103,9 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
     let snaps = data("of-dev-clean/snapshots.csv");
     let out = dir.join("pred.csv");
     // A missing hall file.
-    let o = run(kalibre()
-        .args([
-            "simulate",
-            "--hall",
-            "/nonexistent/hall.json",
-            "--snapshots",
-        ])
-        .arg(&snaps)
-        .arg("--out")
-        .arg(&out));
+    let o = simulate(Path::new("/nonexistent/hall.json"), &snaps, None, &out);
     assert_input_error(&o, "/nonexistent/hall.json");
-    // A malformed hall: a sensor with NaN written as a string.
+    // A malformed hall: a negative rated flow.
     let bad_hall = dir.join("bad-hall.json");
     let text = std::fs::read_to_string(&hall).unwrap().replacen(
         "\"rated_flow_m3_s\": 3.95",
@@ -107,38 +113,16 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
         1,
     );
     std::fs::write(&bad_hall, text).unwrap();
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&bad_hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(&out));
+    let o = simulate(&bad_hall, &snaps, None, &out);
     assert_input_error(&o, "/cracs/0/rated_flow_m3_s");
     // An unknown parameter in --params.
     let params = dir.join("params.json");
     std::fs::write(&params, r#"{ "alpha/nosuchtype": 0.1 }"#).unwrap();
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--params")
-        .arg(&params)
-        .arg("--out")
-        .arg(&out));
+    let o = simulate(&hall, &snaps, Some(&params), &out);
     assert_input_error(&o, "alpha/nosuchtype");
     // A parameter outside its bounds.
     std::fs::write(&params, r#"{ "alpha/web": 7.5 }"#).unwrap();
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--params")
-        .arg(&params)
-        .arg("--out")
-        .arg(&out));
+    let o = simulate(&hall, &snaps, Some(&params), &out);
     assert_input_error(&o, "alpha/web");
     // A negative grid size.
     let o = run(kalibre()
