@@ -100,6 +100,7 @@
 
 pub mod calibrate;
 mod data;
+pub mod diagnose;
 mod error;
 pub mod external;
 mod model;

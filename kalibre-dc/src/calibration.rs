@@ -34,8 +34,8 @@ use crate::{Error, HallModel, Result};
 /// | `max_parallel_runs` | all threads | model runs at once |
 /// | `focus` | 1 | runs with `m` times the best MAE weigh `exp(-((m-1)/focus)^2/2)` in the fit |
 /// | `explore_on_repeat` | 0.015 | a repeated proposal is moved by this much noise (unit box, about 9% in alpha) rather than ending the loop |
-/// | `output_correction` | false | search the surrogate corrected to match the model at the best run (beyond the paper) |
-/// | `trust_region` | none | search within this distance (unit box) of the best point; grows on success, shrinks on failure |
+/// | `output_correction` | true | search the surrogate corrected to match the model at the best run (beyond the paper) |
+/// | `trust_region` | 0.1 | search within this distance (unit box) of the best point; grows on success, shrinks on failure |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
@@ -90,8 +90,8 @@ impl Default for HallCalibrationSettings {
             flow_balance_terms: true,
             focus: Some(1.0),
             explore_on_repeat: Some(0.015),
-            output_correction: false,
-            trust_region: None,
+            output_correction: true,
+            trust_region: Some(0.1),
         }
     }
 }

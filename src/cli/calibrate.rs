@@ -90,6 +90,25 @@ pub struct CalibrateArgs {
     /// Plausible server temperature rise range, `LOW,HIGH` in C (the paper: 5,15).
     #[arg(long = "rise-range", default_value = "5,15")]
     rise_range: String,
+    /// Weight the surrogate's fit towards runs near the measurements: a run with `m` times
+    /// the best run's MAE weighs exp(-((m-1)/FOCUS)^2/2); 0 turns it off (every run weighs 1).
+    #[arg(long, default_value_t = 1.0)]
+    focus: f64,
+    /// When the search proposes a point already run, move it by this much noise (unit box)
+    /// and go on; 0 stops the calibration there instead (converged).
+    #[arg(long = "explore", default_value_t = 0.015)]
+    explore: f64,
+    /// Search the surrogate corrected to match the model at the best run so far
+    /// (`true` or `false`).
+    #[arg(long = "output-correction", default_value_t = true, action = clap::ArgAction::Set)]
+    output_correction: bool,
+    /// Search only within this distance (unit box) of the best point, growing after a
+    /// step that improved the model and shrinking after one that did not; 0: whole box.
+    #[arg(long = "trust-region", default_value_t = 0.1)]
+    trust_region: f64,
+    /// Leave out the surrogate's mass-balance terms (recirculation and bypass), as in the paper.
+    #[arg(long = "paper-surrogate")]
+    paper_surrogate: bool,
     /// No progress bars (they are off anyway when stderr is not a terminal).
     #[arg(long)]
     quiet: bool,
@@ -148,6 +167,25 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         ..HallCalibrationSettings::default()
     };
     s.surrogate = s.surrogate.with_epochs(args.epochs);
+    let positive = |name: &str, v: f64| -> CliResult<Option<f64>> {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(CliError::Input(format!(
+                "--{name}: expected a finite value >= 0, got {v}"
+            )));
+        }
+        Ok((v > 0.0).then_some(v))
+    };
+    s.focus = positive("focus", args.focus)?;
+    s.explore_on_repeat = positive("explore", args.explore)?;
+    s.trust_region = positive("trust-region", args.trust_region)?;
+    if s.trust_region.is_some_and(|r| r > 1.0) {
+        return Err(CliError::Input(format!(
+            "--trust-region: expected at most 1 (the unit box), got {}",
+            args.trust_region
+        )));
+    }
+    s.output_correction = args.output_correction;
+    s.flow_balance_terms = !args.paper_surrogate;
     Ok(s)
 }
 

@@ -1,0 +1,296 @@
+//! Diagnosis: which missing parameters would explain what a calibrated model still gets
+//! wrong?
+//!
+//! From the residuals `r` (model minus measurement) of a calibrated model over all
+//! snapshots, the Jacobian `J` of those outputs with respect to the calibrated
+//! parameters, and candidate hypotheses (each a Jacobian block `H` for parameters the
+//! model does not have, linearised at 0, the effect absent), every hypothesis is refit
+//! jointly with the current parameters by linearised least squares,
+//! `min ||r + J dp + H dq||^2 (+ ridge on dq)`, and scored:
+//!
+//! - **explained fraction**: `1 - RSS_h / RSS_0`, with `RSS_0` the refit of `dp` alone
+//!   (so what recalibrating the current parameters could still do is not credited);
+//! - **predicted MAE**: mean `|r + J dp + H dq|`, the error after adding it (to first order);
+//! - **BIC change**: `RSS/sigma^2 + k ln n` with a known noise sigma, else
+//!   `n ln(RSS/n) + k ln n`, `k` the rank `H` adds to `J`;
+//! - **held-out improvement**: the fraction of held-out squared error removed when both
+//!   fits are made without the held-out rows (leave one snapshot out with two or more
+//!   snapshots, else K folds over outputs);
+//! - **inert** when no parameter, moved to the far end of its range, changes the outputs
+//!   by [`DiagnoseSettings::inert_snr`] noise sigmas;
+//! - **identifiable** unless the hypothesis is (nearly) in the span of `J`, its own
+//!   columns are (nearly) dependent, or another hypothesis spans the same directions;
+//! - **significant** when the BIC falls by at least the threshold, the held-out error
+//!   falls by at least the threshold, and it is neither inert nor unidentifiable.
+//!
+//! Results are sorted best first: significant ones, then by BIC change.
+//!
+//! ```
+//! use kalibre_core::diagnose::{diagnose, DiagnoseSettings, Hypothesis, HypothesisParam, Residuals, RowInfo};
+//! use ndarray::Array2;
+//!
+//! # fn main() -> kalibre_core::Result<()> {
+//! // Eight sensors in two snapshots; the model has an offset, the data also a gradient.
+//! let rows: Vec<RowInfo> = (0..16)
+//!     .map(|i| RowInfo { output: format!("s{}", i % 8), group: "cold".into(), snapshot: format!("t{}", i / 8) })
+//!     .collect();
+//! let x: Vec<f64> = (0..16).map(|i| (i % 8) as f64).collect();
+//! let wiggle = |i: usize| 0.01 * if (i * 7) % 3 == 0 { 1.0 } else { -0.5 };
+//! let r: Vec<f64> = (0..16).map(|i| -0.3 * x[i] + 1.05 + wiggle(i)).collect();
+//! let res = Residuals::new(rows, r, Array2::ones((16, 1)), vec!["offset_c".into()])?;
+//! let slope = Hypothesis::new("slope", vec![HypothesisParam::bounded("slope_c", 0.0, 1.0)], Array2::from_shape_fn((16, 1), |(i, _)| x[i]));
+//! let d = diagnose(&res, &[slope], &DiagnoseSettings::new().with_noise_sigma(0.01))?;
+//! assert!(d.hypotheses[0].significant);
+//! assert!((d.hypotheses[0].fitted.get("slope_c").unwrap() - 0.3).abs() < 0.01);
+//! # Ok(())
+//! # }
+//! ```
+
+mod heldout;
+mod identify;
+mod input;
+mod linalg;
+mod settings;
+
+pub use heldout::HeldOutScheme;
+pub use input::{measured_rows, Hypothesis, HypothesisParam, Residuals, RowInfo};
+pub use settings::DiagnoseSettings;
+
+use serde::{Deserialize, Serialize};
+
+use crate::calibrate::NamedValues;
+use crate::{Error, Result};
+use linalg::{lstsq, orthonormal_basis, residual_after};
+
+/// Schema tag of a serialised [`Diagnosis`].
+pub const DIAGNOSIS_SCHEMA: &str = "kalibre.core.diagnosis/1";
+
+/// The outcome of a diagnosis.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// Schema tag, [`DIAGNOSIS_SCHEMA`].
+    pub schema: String,
+    /// Mean absolute residual as given.
+    pub mae: f64,
+    /// Mean absolute residual after refitting the current parameters alone (linearised):
+    /// the floor without a new parameter.
+    pub refit_mae: f64,
+    /// Noise sigma used (given or estimated).
+    pub noise_sigma: f64,
+    /// Whether `noise_sigma` was estimated.
+    pub noise_sigma_estimated: bool,
+    /// How rows were held out.
+    pub held_out: HeldOutScheme,
+    /// Number of held-out folds.
+    pub held_out_folds: usize,
+    /// Root-mean-square held-out residual with the current parameters alone refit.
+    pub held_out_rmse: f64,
+    /// One result per hypothesis, best first.
+    pub hypotheses: Vec<HypothesisResult>,
+}
+
+impl Diagnosis {
+    /// The significant hypotheses, best first (empty: no significant missing effect).
+    pub fn significant(&self) -> impl Iterator<Item = &HypothesisResult> {
+        self.hypotheses.iter().filter(|h| h.significant)
+    }
+}
+
+/// How well one hypothesis explains the residuals.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HypothesisResult {
+    /// Hypothesis name.
+    pub name: String,
+    /// Fraction of the residual sum of squares (after refitting the current parameters)
+    /// it removes, in [0, 1].
+    pub explained_fraction: f64,
+    /// Predicted MAE after adding it (refit residual).
+    pub predicted_mae: f64,
+    /// BIC change against the current parameters alone (negative: better).
+    pub delta_bic: f64,
+    /// Fraction of held-out squared error removed (negative: worse out of sample).
+    pub held_out_improvement: f64,
+    /// Significant: see the module documentation.
+    pub significant: bool,
+    /// The outputs hardly move over its parameter range.
+    pub inert: bool,
+    /// The data can tell it apart from the current parameters and other hypotheses.
+    pub identifiable: bool,
+    /// Smallest singular value of its unit columns outside the current parameters' span.
+    pub independence: f64,
+    /// Largest movement of the outputs (2-norm over rows) one parameter makes over its
+    /// range, in noise sigmas.
+    pub movement_sigma: f64,
+    /// Other hypotheses spanning the same directions (beyond the current parameters).
+    pub collinear_with: Vec<String>,
+    /// Rank it adds to the current parameters (the `k` of the BIC).
+    pub added_rank: usize,
+    /// Fitted values of its parameters (offsets from 0, the effect absent).
+    pub fitted: NamedValues,
+    /// Whether every fitted value lies in its parameter's range.
+    pub in_range: bool,
+    /// Change of the current parameters in the joint refit.
+    pub current_change: NamedValues,
+}
+
+fn columns(m: &ndarray::Array2<f64>) -> Vec<Vec<f64>> {
+    m.columns().into_iter().map(|c| c.to_vec()).collect()
+}
+
+fn sum_sq(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum()
+}
+
+fn mean_abs(v: &[f64]) -> f64 {
+    v.iter().map(|x| x.abs()).sum::<f64>() / v.len() as f64
+}
+
+/// Ranks `hypotheses` as explanations of what `res` leaves unexplained.
+pub fn diagnose(
+    res: &Residuals,
+    hypotheses: &[Hypothesis],
+    settings: &DiagnoseSettings,
+) -> Result<Diagnosis> {
+    settings.check()?;
+    for (i, h) in hypotheses.iter().enumerate() {
+        if hypotheses[..i].iter().any(|o| o.name == h.name) {
+            return Err(Error::Mismatch(format!(
+                "hypothesis `{}` appears twice",
+                h.name
+            )));
+        }
+        h.check(res)?;
+    }
+    let r = res.residuals();
+    let n = r.len();
+    let neg_r: Vec<f64> = r.iter().map(|v| -v).collect();
+    let jcols = columns(res.jacobian());
+    let p = jcols.len();
+    let jrefs: Vec<&[f64]> = jcols.iter().map(Vec::as_slice).collect();
+    let base = lstsq(&jrefs, &neg_r, &vec![0.0; p]);
+    let e0 = residual_after(&jrefs, &base.x, r);
+    let rss0 = sum_sq(&e0);
+    let (sigma, estimated) = match settings.noise_sigma {
+        Some(s) => (s, false),
+        None => {
+            if n <= base.rank || rss0 == 0.0 {
+                return Err(Error::Mismatch(format!(
+                    "cannot estimate the noise: {n} residuals, {} fitted exactly by the current \
+                     parameters; give noise_sigma",
+                    if rss0 == 0.0 { "all" } else { "too few not" }
+                )));
+            }
+            ((rss0 / (n - base.rank) as f64).sqrt(), true)
+        }
+    };
+    let ln_n = (n as f64).ln();
+    let bic = |rss: f64, k: usize| -> f64 {
+        let fit = if estimated {
+            // Floor keeps an exact fit finite (it still scores as far better).
+            n as f64 * (rss.max(rss0 * 1e-12) / n as f64).ln()
+        } else {
+            rss / (sigma * sigma)
+        };
+        fit + k as f64 * ln_n
+    };
+    let bic0 = bic(rss0, 0);
+    let (scheme, folds) = heldout::folds(res.rows(), settings.output_folds)?;
+    let held0 = heldout::held_out_sse(&jcols, &vec![0.0; p], r, &folds);
+
+    let qj = orthonormal_basis(&jcols, 1e-8);
+    let hcols: Vec<Vec<Vec<f64>>> = hypotheses.iter().map(|h| columns(&h.jacobian)).collect();
+    let perps: Vec<identify::Perp> = hcols.iter().map(|c| identify::perp(&qj, c)).collect();
+    let alone: Vec<bool> = perps
+        .iter()
+        .map(|q| q.independence >= settings.min_independence)
+        .collect();
+    let mut collinear: Vec<Vec<String>> = vec![Vec::new(); hypotheses.len()];
+    for a in 0..hypotheses.len() {
+        for b in a + 1..hypotheses.len() {
+            if !(alone[a] && alone[b]) {
+                continue;
+            }
+            if let Some(d) = identify::span_distance(&perps[a].basis, &perps[b].basis) {
+                if d < settings.min_independence {
+                    collinear[a].push(hypotheses[b].name.clone());
+                    collinear[b].push(hypotheses[a].name.clone());
+                }
+            }
+        }
+    }
+
+    let mut results = Vec::with_capacity(hypotheses.len());
+    for (i, h) in hypotheses.iter().enumerate() {
+        let mut cols = jcols.clone();
+        cols.extend(hcols[i].iter().cloned());
+        let mut ridge = vec![0.0; p];
+        ridge.extend(
+            h.params
+                .iter()
+                .map(|q| settings.prior_weight * (sigma / q.reach()).powi(2)),
+        );
+        let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+        let sol = lstsq(&refs, &neg_r, &ridge);
+        let e = residual_after(&refs, &sol.x, r);
+        let rss = sum_sq(&e);
+        let added_rank = sol.rank.saturating_sub(base.rank);
+        let held = heldout::held_out_sse(&cols, &ridge, r, &folds);
+        let held_out_improvement = if held0 > 0.0 { 1.0 - held / held0 } else { 0.0 };
+        let movement_sigma = hcols[i]
+            .iter()
+            .zip(&h.params)
+            .map(|(c, q)| sum_sq(c).sqrt() * q.reach() / sigma)
+            .fold(0.0, f64::max);
+        let inert = movement_sigma < settings.inert_snr;
+        let identifiable = alone[i] && collinear[i].is_empty();
+        let delta_bic = bic(rss, added_rank) - bic0;
+        let significant = delta_bic <= -settings.bic_threshold
+            && held_out_improvement >= settings.min_held_out_improvement
+            && !inert
+            && identifiable;
+        let dq = &sol.x[p..];
+        let names: Vec<String> = h.params.iter().map(|q| q.name.clone()).collect();
+        let in_range = dq
+            .iter()
+            .zip(&h.params)
+            .all(|(v, q)| *v >= q.lower && *v <= q.upper);
+        results.push(HypothesisResult {
+            name: h.name.clone(),
+            explained_fraction: if rss0 > 0.0 {
+                (1.0 - rss / rss0).clamp(0.0, 1.0)
+            } else {
+                0.0
+            },
+            predicted_mae: mean_abs(&e),
+            delta_bic,
+            held_out_improvement,
+            significant,
+            inert,
+            identifiable,
+            independence: perps[i].independence,
+            movement_sigma,
+            collinear_with: std::mem::take(&mut collinear[i]),
+            added_rank,
+            fitted: NamedValues::new(&names, dq),
+            in_range,
+            current_change: NamedValues::new(res.params(), &sol.x[..p]),
+        });
+    }
+    results.sort_by(|a, b| {
+        b.significant
+            .cmp(&a.significant)
+            .then(a.delta_bic.total_cmp(&b.delta_bic))
+            .then_with(|| a.name.cmp(&b.name))
+    });
+    Ok(Diagnosis {
+        schema: DIAGNOSIS_SCHEMA.into(),
+        mae: mean_abs(r),
+        refit_mae: mean_abs(&e0),
+        noise_sigma: sigma,
+        noise_sigma_estimated: estimated,
+        held_out: scheme,
+        held_out_folds: folds.len(),
+        held_out_rmse: (held0 / n as f64).sqrt(),
+        hypotheses: results,
+    })
+}
