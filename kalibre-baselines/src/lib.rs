@@ -12,7 +12,11 @@
 //!   a sensor, raise the air flow of the servers near it, and vice versa.
 //!
 //! The model-in-the-loop baselines return a [`BaselineReport`] with a history of
-//! (model runs, MAE) per iteration.
+//! (model runs, MAE) per iteration; the MLP returns the core's
+//! [`kalibre_core::Report`] like any calibration. On halls of thousands of servers give
+//! the MLP [`InputLevel::Rack`] inputs (power and mean alpha per rack): on `hall-a`
+//! (2,240 servers) one fit of 192 samples took 1.2 s with rack inputs (340) and 12 s
+//! with server inputs (4,500), release build.
 //!
 //! # Example
 //!
@@ -28,6 +32,17 @@
 //! let es = OnePlusOneEs::default().with_seed(1).with_max_iterations(50);
 //! let report = run_es(&model, &obs, model.layout().space(), &es, None)?;
 //! assert!(report.best_mae_c <= report.initial_mae_c);
+//!
+//! // The vanilla MLP in the four-step loop, where the thermal graph would be.
+//! use kalibre_baselines::{Mlp, MlpSettings};
+//! use kalibre_core::Calibrator;
+//! let mlp = Mlp::new(&hall, model.layout().clone(), MlpSettings::default())?;
+//! let space = model.layout().space().clone();
+//! let calibrated = Calibrator::new(&model, mlp, &obs, &space)
+//!     .with_seed(1)
+//!     .with_max_iterations(10)
+//!     .run()?;
+//! assert!(calibrated.best.mae_c.is_finite());
 //! # Ok(())
 //! # }
 //! ```

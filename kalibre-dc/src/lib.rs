@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod calibration;
+pub mod diagnosis;
 pub mod effects;
 mod error;
 pub mod hall;

@@ -21,7 +21,10 @@
 //! - **identifiable** unless the hypothesis is (nearly) in the span of `J`, its own
 //!   columns are (nearly) dependent, or another hypothesis spans the same directions;
 //! - **significant** when the BIC falls by at least the threshold, the held-out error
-//!   falls by at least the threshold, and it is neither inert nor unidentifiable.
+//!   falls by at least the threshold, the fitted values lie within the parameters' ranges
+//!   (a negative leak is no explanation), and it is neither inert nor in the span of `J`;
+//!   among alternatives collinear with each other only the best is significant (the
+//!   lowest BIC, or within 2 of it the most modest fitted change relative to its range).
 //!
 //! Results are sorted best first: significant ones, then by BIC change.
 //!
@@ -220,6 +223,8 @@ pub fn diagnose(
     }
 
     let mut results = Vec::with_capacity(hypotheses.len());
+
+    let mut modesty: Vec<f64> = Vec::new();
     for (i, h) in hypotheses.iter().enumerate() {
         let mut cols = jcols.clone();
         cols.extend(hcols[i].iter().cloned());
@@ -244,16 +249,25 @@ pub fn diagnose(
         let inert = movement_sigma < settings.inert_snr;
         let identifiable = alone[i] && collinear[i].is_empty();
         let delta_bic = bic(rss, added_rank) - bic0;
-        let significant = delta_bic <= -settings.bic_threshold
-            && held_out_improvement >= settings.min_held_out_improvement
-            && !inert
-            && identifiable;
+        // Collinearity with another hypothesis does not disqualify here: the best of a
+        // group of indistinguishable alternatives is chosen below.
         let dq = &sol.x[p..];
-        let names: Vec<String> = h.params.iter().map(|q| q.name.clone()).collect();
         let in_range = dq
             .iter()
             .zip(&h.params)
             .all(|(v, q)| *v >= q.lower && *v <= q.upper);
+        let significant = delta_bic <= -settings.bic_threshold
+            && held_out_improvement >= settings.min_held_out_improvement
+            && !inert
+            && alone[i]
+            && in_range;
+        let names: Vec<String> = h.params.iter().map(|q| q.name.clone()).collect();
+        modesty.push(
+            dq.iter()
+                .zip(&h.params)
+                .map(|(v, q)| (v / q.reach()).abs())
+                .fold(0.0, f64::max),
+        );
         results.push(HypothesisResult {
             name: h.name.clone(),
             explained_fraction: if rss0 > 0.0 {
@@ -275,6 +289,30 @@ pub fn diagnose(
             in_range,
             current_change: NamedValues::new(res.params(), &sol.x[..p]),
         });
+    }
+    // Among alternatives the data cannot tell apart (collinear, BIC within 2 of the
+    // group's best), only the most modest one (smallest fitted change relative to its
+    // range) stays significant; the others are listed in its `collinear_with`.
+    let keep: Vec<bool> = (0..results.len())
+        .map(|i| {
+            let a = &results[i];
+            !a.significant
+                || !results.iter().enumerate().any(|(j, b)| {
+                    j != i
+                        && b.significant
+                        && a.collinear_with.contains(&b.name)
+                        && b.delta_bic <= a.delta_bic + 2.0
+                        && (modesty[j], &b.name) < (modesty[i], &a.name)
+                        && a.delta_bic <= b.delta_bic + 2.0
+                        || (j != i
+                            && b.significant
+                            && a.collinear_with.contains(&b.name)
+                            && b.delta_bic < a.delta_bic - 2.0)
+                })
+        })
+        .collect();
+    for (r, k) in results.iter_mut().zip(keep) {
+        r.significant &= k;
     }
     results.sort_by(|a, b| {
         b.significant
