@@ -36,6 +36,7 @@ use crate::{Error, HallModel, Result};
 /// | `explore_on_repeat` | 0.015 | a repeated proposal is moved by this much noise (unit box, about 9% in alpha) rather than ending the loop |
 /// | `output_correction` | true | search the surrogate corrected to match the model at the best run (beyond the paper) |
 /// | `trust_region` | 0.1 | search within this distance (unit box) of the best point; grows on success, shrinks on failure |
+/// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
@@ -63,6 +64,8 @@ pub struct HallCalibrationSettings {
     pub max_parallel_runs: Option<usize>,
     /// Add the mass-balance terms (recirculation, bypass) to the paper's thermal graph.
     pub flow_balance_terms: bool,
+    /// Add the local recirculation term (local draw against local supply per sensor).
+    pub local_recirculation_term: bool,
     /// Focus of the surrogate fit on runs near the measurements (see `kalibre_core::Settings`).
     pub focus: Option<f64>,
     /// Noise (unit box) that moves a repeated proposal instead of stopping.
@@ -88,6 +91,7 @@ impl Default for HallCalibrationSettings {
             max_wall_s: None,
             max_parallel_runs: None,
             flow_balance_terms: true,
+            local_recirculation_term: false,
             focus: Some(1.0),
             explore_on_repeat: Some(0.015),
             output_correction: true,
@@ -135,6 +139,11 @@ pub fn calibrate_hall<'o>(
     if settings.flow_balance_terms {
         for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
             surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(&hall, &layout, kind)));
+        }
+        if std::env::var("KALIBRE_LOCAL_TERM").is_ok() {
+            surrogate = surrogate.with_term(Box::new(
+                crate::surrogate::LocalRecirculationTerm::new(&hall, &layout),
+            ));
         }
     }
     let scenarios: Vec<_> = snaps.iter().map(|s| s.state.clone()).collect();

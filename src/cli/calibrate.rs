@@ -109,6 +109,10 @@ pub struct CalibrateArgs {
     /// Leave out the surrogate's mass-balance terms (recirculation and bypass), as in the paper.
     #[arg(long = "paper-surrogate")]
     paper_surrogate: bool,
+    /// Add the surrogate's local recirculation term (draw of the servers near each sensor
+    /// against the supply openings near it).
+    #[arg(long = "local-recirculation")]
+    local_recirculation: bool,
     /// No progress bars (they are off anyway when stderr is not a terminal).
     #[arg(long)]
     quiet: bool,
@@ -186,6 +190,7 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
     }
     s.output_correction = args.output_correction;
     s.flow_balance_terms = !args.paper_surrogate;
+    s.local_recirculation_term = args.local_recirculation;
     Ok(s)
 }
 

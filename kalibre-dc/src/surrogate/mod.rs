@@ -13,6 +13,7 @@
 mod adjacency;
 mod flow_balance;
 mod graph;
+mod local_flow;
 mod objective;
 mod penalty;
 mod term;
@@ -21,6 +22,7 @@ mod train;
 pub use adjacency::{Adjacency, AdjacencySettings, Csr};
 pub use flow_balance::{FlowBalance, FlowBalanceTerm};
 pub use graph::{ThermalGraph, ThermalGraphSettings};
+pub use local_flow::{LocalRecirculationTerm, LOCAL_RADIUS_M};
 pub use objective::ThermalGraphObjective;
 pub use penalty::{
     PenaltyReport, PenaltySettings, RiseBound, RiseViolation, TemperatureRisePenalty, M3_S_PER_CFM,

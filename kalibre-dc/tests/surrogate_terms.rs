@@ -1,0 +1,100 @@
+//! The mass-balance surrogate terms: hand-written vector-Jacobian products against
+//! central finite differences, per type and per server, across the recirculation kink.
+
+use kalibre_dc::hall::{AlphaMode, Hall};
+use kalibre_dc::snapshots::load_snapshots;
+use kalibre_dc::surrogate::{FlowBalance, FlowBalanceTerm, LocalRecirculationTerm, SurrogateTerm};
+use kalibre_dc::ParamLayout;
+
+fn hall() -> Hall {
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
+    Hall::load(&dir.join("hall.json")).unwrap()
+}
+
+fn check(term: &dyn SurrogateTerm, hall: &Hall, layout: &ParamLayout, params: &[f64]) {
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
+    let snaps = load_snapshots(hall, &dir.join("snapshots.csv")).unwrap();
+    let n = hall.sensors.len();
+    let cot: Vec<f64> = (0..n)
+        .map(|k| ((k * 7 % 5) as f64 - 2.0) * 0.3 + 0.1)
+        .collect();
+    for snap in &snaps {
+        let s = &snap.state;
+        let mut grad = vec![0.0; params.len()];
+        term.features_vjp(s, params, &cot, &mut grad);
+        let f = |p: &[f64]| {
+            let mut out = vec![0.0; n];
+            term.features(s, p, &mut out);
+            out.iter().zip(&cot).map(|(a, b)| a * b).sum::<f64>()
+        };
+        for i in 0..params.len() {
+            let h = 1e-6 * params[i];
+            let (mut p, mut m) = (params.to_vec(), params.to_vec());
+            p[i] += h;
+            m[i] -= h;
+            let fd = (f(&p) - f(&m)) / (2.0 * h);
+            let tol = 1e-5 * fd.abs().max(1e-3);
+            assert!(
+                (fd - grad[i]).abs() <= tol,
+                "{} param {i} snapshot {}: fd {fd} vs {}",
+                term.name(),
+                s.label,
+                grad[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn mass_balance_terms_match_finite_differences() {
+    let mut hall = hall();
+    for mode in [AlphaMode::PerType, AlphaMode::PerServer] {
+        hall.calibrate.alpha = mode;
+        let layout = ParamLayout::new(&hall, &[]).unwrap();
+        let dim = layout.space().dim();
+        let terms: Vec<Box<dyn SurrogateTerm>> = vec![
+            Box::new(FlowBalanceTerm::new(
+                &hall,
+                &layout,
+                FlowBalance::Recirculation,
+            )),
+            Box::new(FlowBalanceTerm::new(&hall, &layout, FlowBalance::Bypass)),
+            Box::new(LocalRecirculationTerm::new(&hall, &layout)),
+        ];
+        // Below, near and above the point where the servers draw the supply (about 0.14 cfm/W).
+        for base in [0.09, 0.13, 0.14, 0.16, 0.25] {
+            let params: Vec<f64> = (0..dim)
+                .map(|i| base * (1.0 + 0.03 * (i % 4) as f64))
+                .collect();
+            for t in &terms {
+                check(t.as_ref(), &hall, &layout, &params);
+            }
+        }
+    }
+}
+
+#[test]
+fn local_recirculation_is_zero_when_supply_is_ample_and_grows_with_draw() {
+    let hall = hall();
+    let layout = ParamLayout::new(&hall, &[]).unwrap();
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
+    let snaps = load_snapshots(&hall, &dir.join("snapshots.csv")).unwrap();
+    let term = LocalRecirculationTerm::new(&hall, &layout);
+    let n = hall.sensors.len();
+    let feature = |alpha: f64| {
+        let mut out = vec![0.0; n];
+        term.features(
+            &snaps[0].state,
+            &vec![alpha; layout.space().dim()],
+            &mut out,
+        );
+        out
+    };
+    let (low, high) = (feature(0.05), feature(0.4));
+    assert!(low.iter().all(|v| *v < 0.05), "{low:?}");
+    assert!(high.iter().zip(&low).all(|(h, l)| h >= l));
+    assert!(high.iter().any(|v| *v > 1.0), "{high:?}");
+}
