@@ -249,3 +249,54 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert_eq!(keys.len(), n, "a run was repeated");
     assert_eq!(n, total);
 }
+
+/// `kalibre diagnose --json` prints the `kalibre.diagnosis/1` schema, and a calibration
+/// of another hall is refused with a clear message.
+#[test]
+fn diagnose_prints_json_and_refuses_another_halls_calibration() {
+    let dir = tmp("diagnose");
+    let cal = dir.join("cal");
+    let o = run(kalibre()
+        .args(["calibrate", "--iterations", "1", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
+        .arg("--out")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(kalibre()
+        .args(["diagnose", "--json", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
+        .arg("--calibration")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let d: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    assert_eq!(d["schema"], "kalibre.diagnosis/1");
+    assert!(d["mae_c"].as_f64().is_some_and(|m| m > 0.0));
+    let hyps = d["hypotheses"].as_array().unwrap();
+    assert!(!hyps.is_empty());
+    for h in hyps {
+        for key in [
+            "effect",
+            "explained_fraction",
+            "predicted_mae_c",
+            "significant",
+            "inert",
+            "identifiable",
+        ] {
+            assert!(!h[key].is_null(), "{key} missing in {h}");
+        }
+        assert_eq!(h["suggestion"]["kind"], h["effect"]);
+    }
+    // The same geometry under another name is another hall: refused.
+    let o = run(kalibre()
+        .args(["diagnose", "--hall"])
+        .arg(data("of-dev-crac-offset/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-crac-offset/snapshots.csv"))
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "runs of another model");
+}

@@ -1,6 +1,7 @@
 //! Subcommands of the `kalibre` tool.
 
 mod calibrate;
+mod diagnose;
 mod error;
 mod simulate;
 mod synth;
@@ -26,6 +27,8 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Calibrate a hall's parameters (server air flow rates, effects) against its measurements.
     Calibrate(calibrate::CalibrateArgs),
+    /// Show where a calibrated model fails and rank the physical effects that may be missing.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 /// Runs a parsed command line.
@@ -34,6 +37,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Synth(a) => synth::run(a),
         Command::Simulate(a) => simulate::run(a),
         Command::Calibrate(a) => calibrate::run(a),
+        Command::Diagnose(a) => diagnose::run(a),
     }
 }
 

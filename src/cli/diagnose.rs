@@ -1,0 +1,192 @@
+//! `kalibre diagnose`: where a calibrated hall model fails, and which physical effect is
+//! missing.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use clap::Args;
+use kalibre_core::calibrate::Report;
+use kalibre_core::Model;
+use kalibre_dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
+use kalibre_dc::effects::EffectRegistry;
+use kalibre_dc::hall::Hall;
+use kalibre_dc::snapshots;
+use kalibre_dc::HallModel;
+
+use super::simulate::sim_config;
+use super::{with_threads, CliError, CliResult};
+
+/// Options of `kalibre diagnose`.
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// The hall (`hall.json`) that was calibrated.
+    #[arg(long)]
+    hall: PathBuf,
+    /// The measurements it was calibrated against (`snapshots.csv`).
+    #[arg(long)]
+    snapshots: PathBuf,
+    /// The calibration directory (`report.json`, `runs.jsonl`) of `kalibre calibrate`.
+    #[arg(long)]
+    calibration: PathBuf,
+    /// Print the diagnosis as JSON (`kalibre.diagnosis/1`) instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Grid cell size of the built-in simulator that supplies the Jacobians (m); use the
+    /// calibration's.
+    #[arg(long = "grid-m")]
+    grid_m: Option<f64>,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
+
+/// Runs `kalibre diagnose`.
+pub fn run(args: DiagnoseArgs) -> CliResult {
+    let hall = Hall::load(&args.hall)?;
+    let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
+    let report_path = args.calibration.join("report.json");
+    let text = std::fs::read_to_string(&report_path)
+        .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
+    let report: Report = serde_json::from_str(&text).map_err(|e| {
+        CliError::Input(format!(
+            "{}: not a kalibre report: {e}",
+            report_path.display()
+        ))
+    })?;
+    let sim = sim_config(args.grid_m)?;
+    let model = HallModel::new(&hall, sim.clone())?;
+    let space = model.layout().space();
+    let names: Vec<&str> = report
+        .best
+        .params
+        .0
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .collect();
+    if names != space.names().iter().map(String::as_str).collect::<Vec<_>>() {
+        return Err(CliError::Input(format!(
+            "{}: calibrated parameters ({}) do not match hall `{}` ({}): this calibration is of another hall",
+            report_path.display(),
+            names.join(", "),
+            hall.name,
+            space.names().join(", ")
+        )));
+    }
+    // The journal names the model it ran: refuse a calibration of another hall or grid.
+    let journal = args.calibration.join("runs.jsonl");
+    if let Ok(lines) = std::fs::read_to_string(&journal) {
+        let fp = model.fingerprint();
+        let other = lines
+            .lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .find(|v| v["fingerprint"].as_str().is_some_and(|f| f != fp));
+        if other.is_some() {
+            return Err(CliError::Input(format!(
+                "{}: runs of another model (a different hall.json, effects or --grid-m) than `{}`",
+                journal.display(),
+                args.hall.display()
+            )));
+        }
+    }
+    let params = report.best.params.values();
+    let settings = HallDiagnosisSettings {
+        sim,
+        ..HallDiagnosisSettings::default()
+    };
+    let d = with_threads(args.threads, || {
+        diagnose_hall(
+            &hall,
+            &snaps,
+            &params,
+            &EffectRegistry::builtin(),
+            &settings,
+        )
+    })??;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&d.to_json())
+                .map_err(|e| CliError::Run(format!("JSON: {e}")))?
+        );
+        return Ok(());
+    }
+    print_where_it_fails(&hall, &report);
+    println!(
+        "\nmissing effects, best first (MAE now {:.3} C):",
+        d.diagnosis.mae
+    );
+    let significant: Vec<_> = d.diagnosis.significant().collect();
+    if significant.is_empty() {
+        println!("  no significant missing effect");
+    }
+    for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
+        let flags = [
+            (h.significant, "significant"),
+            (h.inert, "inert"),
+            (!h.identifiable, "not identifiable"),
+        ]
+        .iter()
+        .filter(|f| f.0)
+        .map(|f| f.1)
+        .collect::<Vec<_>>()
+        .join(", ");
+        println!(
+            "  {:<48} explains {:>4.0}%  predicted MAE {:.3} C  {}",
+            h.name,
+            100.0 * h.explained_fraction,
+            h.predicted_mae,
+            flags
+        );
+        if h.significant {
+            let entry = serde_json::to_string(s).unwrap_or_default();
+            println!("    add to hall.json \"effects\": {entry}");
+        }
+    }
+    Ok(())
+}
+
+/// The worst sensors and the residual by aisle and snapshot, in words.
+fn print_where_it_fails(hall: &Hall, report: &Report) {
+    println!("where the calibrated model fails (model minus measurement):");
+    let mut by_sensor: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
+    let mut by_group: BTreeMap<(String, String), (f64, usize)> = BTreeMap::new();
+    for r in &report.residuals {
+        let e = r.predicted_c - r.measured_c;
+        let s = by_sensor.entry(r.sensor.as_str()).or_default();
+        s.0 += e;
+        s.1 += 1;
+        let aisle = hall
+            .sensors
+            .iter()
+            .find(|s| s.id == r.sensor)
+            .map_or("?", |s| s.aisle.as_str());
+        let g = by_group
+            .entry((aisle.to_string(), r.snapshot.clone()))
+            .or_default();
+        g.0 += e;
+        g.1 += 1;
+    }
+    let mut worst: Vec<(&str, f64)> = by_sensor
+        .iter()
+        .map(|(k, (s, n))| (*k, s / *n as f64))
+        .collect();
+    worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+    for (sensor, mean) in worst.iter().take(5) {
+        let s = hall.sensors.iter().find(|s| s.id == *sensor);
+        let (aisle, pos) = s.map_or(("?", [0.0; 3]), |s| (s.aisle.as_str(), s.position_m));
+        println!(
+            "  {sensor:<12} {aisle:>4} aisle at ({:.1}, {:.1}, {:.1}) m: the model reads {:.2} C {}",
+            pos[0],
+            pos[1],
+            pos[2],
+            mean.abs(),
+            if *mean > 0.0 { "too warm" } else { "too cold" }
+        );
+    }
+    for ((aisle, snap), (s, n)) in &by_group {
+        println!(
+            "  {aisle:>4} aisle, snapshot {snap:<6} mean residual {:+.2} C",
+            s / *n as f64
+        );
+    }
+}
