@@ -21,29 +21,18 @@ use crate::{Error, HallModel, Result};
 ///
 /// | Name | Default | Meaning |
 /// |---|---|---|
-/// | `seed` | 1 | seed of every random choice (augmentation, search) |
-/// | `iterations` | 10 | four-step iterations after the initial design |
+/// | `core` | [`HallCalibrationSettings::loop_defaults`] | the generic loop's [`Settings`] (seed, iterations, budgets, fit focus, exploration, output correction, trust region); its `regularizer_weight` is taken from `penalty.weight` |
 /// | `alpha_mode` | the hall's `calibrate.alpha` | per type, per server or fixed |
 /// | `sim` | [`SimConfig::default`] | the built-in simulator (grid, tolerances) |
 /// | `surrogate` | [`ThermalGraphSettings::default`] | Adam lr 0.1, decay 0.8, 150 epochs, fixed adjacency |
 /// | `penalty` | [`PenaltySettings::default`] | rise range [5, 15] C, weight 1 |
 /// | `searcher` | [`Hybrid::default`] | DE (population 10, crossover 0.6, 100 generations), then Adam |
-/// | `target_mae_c` | none | stop once the model's MAE is at most this |
-/// | `max_model_runs` | none | stop before exceeding this many model runs |
-/// | `max_wall_s` | none | stop after this much wall time |
-/// | `max_parallel_runs` | all threads | model runs at once |
-/// | `focus` | 1 | runs with `m` times the best MAE weigh `exp(-((m-1)/focus)^2/2)` in the fit |
-/// | `explore_on_repeat` | 0.015 | a repeated proposal is moved by this much noise (unit box, about 9% in alpha) rather than ending the loop |
-/// | `output_correction` | true | search the surrogate corrected to match the model at the best run (beyond the paper) |
-/// | `trust_region` | 0.1 | search within this distance (unit box) of the best point; grows on success, shrinks on failure |
-/// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
+/// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
-    /// Seed.
-    pub seed: u64,
-    /// Iterations after the initial design.
-    pub iterations: usize,
+    /// The generic loop's settings; `target_score` is a target MAE (C).
+    pub core: Settings,
     /// Override of the hall's `calibrate.alpha`.
     pub alpha_mode: Option<AlphaMode>,
     /// Simulator configuration.
@@ -54,48 +43,42 @@ pub struct HallCalibrationSettings {
     pub penalty: PenaltySettings,
     /// The search on the surrogate.
     pub searcher: Hybrid,
-    /// Target MAE (C).
-    pub target_mae_c: Option<f64>,
-    /// Model-run budget.
-    pub max_model_runs: Option<usize>,
-    /// Wall-clock budget (s).
-    pub max_wall_s: Option<f64>,
-    /// Parallel model runs.
-    pub max_parallel_runs: Option<usize>,
     /// Add the mass-balance terms (recirculation, bypass) to the paper's thermal graph.
     pub flow_balance_terms: bool,
     /// Add the local recirculation term (local draw against local supply per sensor).
     pub local_recirculation_term: bool,
-    /// Focus of the surrogate fit on runs near the measurements (see `kalibre_core::Settings`).
-    pub focus: Option<f64>,
-    /// Noise (unit box) that moves a repeated proposal instead of stopping.
-    pub explore_on_repeat: Option<f64>,
-    /// Correct the surrogate to the model at the best run before each search.
-    pub output_correction: bool,
-    /// Initial trust-region radius of the search (unit box).
-    pub trust_region: Option<f64>,
+}
+
+impl HallCalibrationSettings {
+    /// The loop settings for halls: seed 1, 10 iterations, fits focused on runs near the
+    /// measurements (`focus` 1), a repeated proposal moved by 0.015 in the unit box (about
+    /// 9% in alpha) rather than ending the loop, and the surrogate corrected to the model
+    /// at the best run and searched within a trust region of 0.1 (both beyond the paper;
+    /// the variants are measured in docs/performance.md).
+    pub fn loop_defaults() -> Settings {
+        Settings {
+            seed: 1,
+            max_iterations: 10,
+            focus: Some(1.0),
+            explore_on_repeat: Some(0.015),
+            output_correction: true,
+            trust_region: Some(0.1),
+            ..Settings::default()
+        }
+    }
 }
 
 impl Default for HallCalibrationSettings {
     fn default() -> Self {
         HallCalibrationSettings {
-            seed: 1,
-            iterations: 10,
+            core: Self::loop_defaults(),
             alpha_mode: None,
             sim: SimConfig::default(),
             surrogate: ThermalGraphSettings::default(),
             penalty: PenaltySettings::default(),
             searcher: Hybrid::default(),
-            target_mae_c: None,
-            max_model_runs: None,
-            max_wall_s: None,
-            max_parallel_runs: None,
             flow_balance_terms: true,
             local_recirculation_term: false,
-            focus: Some(1.0),
-            explore_on_repeat: Some(0.015),
-            output_correction: true,
-            trust_region: Some(0.1),
         }
     }
 }
@@ -165,18 +148,8 @@ pub fn calibrate_hall<'o>(
         None => RunStore::in_memory(model.fingerprint()),
     };
     let core_settings = Settings {
-        seed: settings.seed,
-        max_iterations: settings.iterations,
-        target_score: settings.target_mae_c,
-        max_model_runs: settings.max_model_runs,
-        max_wall_s: settings.max_wall_s,
-        max_parallel_runs: settings.max_parallel_runs,
         regularizer_weight: settings.penalty.weight,
-        focus: settings.focus,
-        explore_on_repeat: settings.explore_on_repeat,
-        output_correction: settings.output_correction,
-        trust_region: settings.trust_region,
-        ..Settings::default()
+        ..settings.core.clone()
     };
     let mut calibrator = Calibrator::new(&model, surrogate, &observations, &space)
         .with_settings(core_settings)

@@ -118,6 +118,20 @@ pub struct CalibrateArgs {
     quiet: bool,
 }
 
+/// The command-line flag of a loop setting, for error messages.
+fn flag_of(setting: &str) -> &str {
+    match setting {
+        "max_iterations" => "iterations",
+        "target_score" => "target-mae",
+        "max_model_runs" => "max-runs",
+        "max_wall_s" => "max-wall-s",
+        "max_parallel_runs" => "parallel-runs",
+        "explore_on_repeat" => "explore",
+        "trust_region" => "trust-region",
+        other => other,
+    }
+}
+
 /// Builds the hall calibration settings from the arguments.
 fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
     let (lo, hi) = args
@@ -146,16 +160,28 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         .with_steps(args.adam_steps)
         .build()
         .map_err(|e| CliError::Input(format!("--adam-steps: {e}")))?;
-    if let Some(t) = args.target_mae {
-        if !(t.is_finite() && t >= 0.0) {
-            return Err(CliError::Input(format!(
-                "--target-mae: expected a finite value >= 0, got {t}"
-            )));
-        }
-    }
-    let mut s = HallCalibrationSettings {
+    let core = kalibre_core::Settings {
         seed: args.seed,
-        iterations: args.iterations,
+        max_iterations: args.iterations,
+        target_score: args.target_mae,
+        max_model_runs: args.max_runs,
+        max_wall_s: args.max_wall_s,
+        max_parallel_runs: args.parallel_runs,
+        // 0 turns an option off; anything else is checked below with the loop's own rules.
+        focus: (args.focus != 0.0).then_some(args.focus),
+        explore_on_repeat: (args.explore != 0.0).then_some(args.explore),
+        trust_region: (args.trust_region != 0.0).then_some(args.trust_region),
+        output_correction: args.output_correction,
+        ..HallCalibrationSettings::loop_defaults()
+    };
+    core.check().map_err(|e| match e {
+        kalibre_core::Error::InvalidSetting { name, reason } => {
+            CliError::Input(format!("--{}: {reason}", flag_of(&name)))
+        }
+        other => CliError::Input(other.to_string()),
+    })?;
+    let mut s = HallCalibrationSettings {
+        core,
         alpha_mode: args.alpha.map(|a| match a {
             AlphaArg::PerType => AlphaMode::PerType,
             AlphaArg::PerServer => AlphaMode::PerServer,
@@ -164,33 +190,11 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         sim: sim_config(args.grid_m)?,
         penalty,
         searcher: Hybrid::new(de, adam),
-        target_mae_c: args.target_mae,
-        max_model_runs: args.max_runs,
-        max_wall_s: args.max_wall_s,
-        max_parallel_runs: args.parallel_runs,
+        flow_balance_terms: !args.paper_surrogate,
+        local_recirculation_term: args.local_recirculation,
         ..HallCalibrationSettings::default()
     };
     s.surrogate = s.surrogate.with_epochs(args.epochs);
-    let positive = |name: &str, v: f64| -> CliResult<Option<f64>> {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(CliError::Input(format!(
-                "--{name}: expected a finite value >= 0, got {v}"
-            )));
-        }
-        Ok((v > 0.0).then_some(v))
-    };
-    s.focus = positive("focus", args.focus)?;
-    s.explore_on_repeat = positive("explore", args.explore)?;
-    s.trust_region = positive("trust-region", args.trust_region)?;
-    if s.trust_region.is_some_and(|r| r > 1.0) {
-        return Err(CliError::Input(format!(
-            "--trust-region: expected at most 1 (the unit box), got {}",
-            args.trust_region
-        )));
-    }
-    s.output_correction = args.output_correction;
-    s.flow_balance_terms = !args.paper_surrogate;
-    s.local_recirculation_term = args.local_recirculation;
     Ok(s)
 }
 

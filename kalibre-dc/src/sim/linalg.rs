@@ -71,6 +71,17 @@ fn sum_parts<const K: usize>(parts: Vec<[f64; K]>) -> [f64; K] {
     })
 }
 
+/// The residual `b - A x` of the initial guess, and `|b|` (floored above zero) for the
+/// relative stopping test.
+fn initial_residual(op: &dyn Operator, b: &[f64], x: &[f64]) -> (Vec<f64>, f64) {
+    let mut r = vec![0.0; b.len()];
+    op.apply(x, &mut r);
+    r.par_iter_mut()
+        .zip(b.par_iter())
+        .for_each(|(r, b)| *r = b - *r);
+    (r, norm(b).max(f64::MIN_POSITIVE))
+}
+
 /// Preconditioned conjugate gradients; `x` holds the initial guess and the answer.
 pub(crate) fn pcg(
     op: &dyn Operator,
@@ -81,12 +92,7 @@ pub(crate) fn pcg(
     max_iter: usize,
 ) -> SolveStats {
     let n = b.len();
-    let mut r = vec![0.0; n];
-    op.apply(x, &mut r);
-    r.par_iter_mut()
-        .zip(b.par_iter())
-        .for_each(|(r, b)| *r = b - *r);
-    let bnorm = norm(b).max(f64::MIN_POSITIVE);
+    let (mut r, bnorm) = initial_residual(op, b, x);
     let mut z = vec![0.0; n];
     pc.apply(&r, &mut z);
     let mut p = z.clone();
@@ -150,12 +156,7 @@ pub(crate) fn bicgstab(
     max_iter: usize,
 ) -> SolveStats {
     let n = b.len();
-    let mut r = vec![0.0; n];
-    op.apply(x, &mut r);
-    r.par_iter_mut()
-        .zip(b.par_iter())
-        .for_each(|(r, b)| *r = b - *r);
-    let bnorm = norm(b).max(f64::MIN_POSITIVE);
+    let (mut r, bnorm) = initial_residual(op, b, x);
     let r0 = r.clone();
     let (mut rho, mut alpha, mut omega) = (1.0, 1.0, 1.0);
     let mut v = vec![0.0; n];
