@@ -11,6 +11,7 @@ use kalibre_dc::hall::AlphaMode;
 use kalibre_dc::ParamLayout;
 use ndarray::Array2;
 use proptest::prelude::*;
+use proptest::test_runner::RngSeed;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -31,7 +32,7 @@ fn check_weight_gradients(activation: Activation, seed: u64) {
     let (x, y) = (random_matrix(&mut rng, 6, 5), random_matrix(&mut rng, 6, 3));
     let w: Vec<f64> = (0..6).map(|_| rng.random_range(0.2..2.0)).collect();
     let idx = [0, 2, 3, 5];
-    let (_, grads) = loss_and_gradients(&net, &x, &y, &w, &idx);
+    let (base_loss, grads) = loss_and_gradients(&net, &x, &y, &w, &idx);
     let analytic = flatten(&grads);
     assert_eq!(analytic.len(), net.parameter_count());
     let h = 1e-6;
@@ -44,8 +45,21 @@ fn check_weight_gradients(activation: Activation, seed: u64) {
         net.set_flat(&p);
         let down = loss_and_gradients(&net, &x, &y, &w, &idx).0;
         let fd = (up - down) / (2.0 * h);
+        // A ReLU kink inside [w - h, w + h] makes the two one-sided slopes differ; there
+        // the backprop value (a one-sided derivative) must lie between them instead.
+        let (right, left) = ((up - base_loss) / h, (base_loss - down) / h);
+        let tol = 1e-6 * (1.0 + fd.abs());
+        if (right - left).abs() > 1e-3 * (1.0 + fd.abs()) {
+            let (lo, hi) = (right.min(left), right.max(left));
+            assert!(
+                analytic[i] >= lo - 1e-3 && analytic[i] <= hi + 1e-3,
+                "{activation:?} weight {i} at a kink: slopes {left}..{right}, backprop {}",
+                analytic[i]
+            );
+            continue;
+        }
         assert!(
-            (fd - analytic[i]).abs() <= 1e-6 * (1.0 + fd.abs()),
+            (fd - analytic[i]).abs() <= tol,
             "{activation:?} weight {i}: finite difference {fd}, backprop {}",
             analytic[i]
         );
@@ -82,6 +96,7 @@ fn check_input_gradients(activation: Activation, seed: u64) {
 proptest! {
     #![proptest_config(ProptestConfig {
         cases: 12,
+        rng_seed: RngSeed::Fixed(7),
         failure_persistence: None,
         ..ProptestConfig::default()
     })]
@@ -284,4 +299,10 @@ fn mlp_in_the_calibration_loop_improves_on_the_initial_mae() {
     let again = run(1);
     assert_eq!(again.best.mae_c, r.best.mae_c);
     assert_eq!(again.best.params, r.best.params);
+}
+
+/// The case CI once drew: a weight whose finite-difference interval straddles a ReLU kink.
+#[test]
+fn relu_weight_gradient_at_a_kink() {
+    check_weight_gradients(Activation::Relu, 3_729_338_369_254_490_304);
 }

@@ -6,6 +6,7 @@ mod search_support;
 use kalibre_core::search::{Adam, DifferentialEvolution, Hybrid, PopulationEval};
 use kalibre_core::{Error, Objective, SearchOutcome, Searcher};
 use proptest::prelude::*;
+use proptest::test_runner::RngSeed;
 use search_support::*;
 
 fn de_small() -> DifferentialEvolution {
@@ -42,7 +43,12 @@ fn bits(o: &SearchOutcome) -> Vec<u64> {
 // ---------------------------------------------------------------- gradients
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(48))]
+    #![proptest_config(ProptestConfig {
+        cases: 48,
+        rng_seed: RngSeed::Fixed(48),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     /// Every hand-written gradient of the test functions against central differences.
     #[test]
@@ -75,7 +81,12 @@ proptest! {
 // ---------------------------------------------------------------- bounds
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(24))]
+    #![proptest_config(ProptestConfig {
+        cases: 24,
+        rng_seed: RngSeed::Fixed(24),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     /// Whatever the objective pulls towards (an optimum inside, outside or far outside
     /// the box), every searcher evaluates only points of the unit box, counts each

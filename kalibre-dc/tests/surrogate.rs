@@ -14,6 +14,7 @@ use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::surrogate::*;
 use kalibre_dc::ParamLayout;
 use proptest::prelude::*;
+use proptest::test_runner::RngSeed;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -447,7 +448,12 @@ fn mode_of(per_server: bool) -> AlphaMode {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(12))]
+    #![proptest_config(ProptestConfig {
+        cases: 12,
+        rng_seed: RngSeed::Fixed(12),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     #[test]
     fn vjp_matches_finite_differences(seed in 0u64..1000, per_server in any::<bool>()) {
