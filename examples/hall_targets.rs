@@ -47,17 +47,27 @@ fn main() {
         let s = synth::generate(&SynthOptions::new(preset, 1)).expect("synth");
         let synth_s = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let cal = calibrate_hall(
-            &s.hall,
-            &s.snapshots,
-            &HallCalibrationSettings::default(),
-            None,
-            Vec::new(),
-        )
-        .expect("calibration");
+        let settings = HallCalibrationSettings::default();
+        let cal = calibrate_hall(&s.hall, &s.snapshots, &settings, None, Vec::new())
+            .expect("calibration");
         let cal_s = t.elapsed().as_secs_f64();
         let r = &cal.report;
         let reference = s.truth.reference.as_ref().expect("reference runs");
+        // The issue's target counts the ten four-step iterations only (at most 14 runs per
+        // snapshot): the best loop iteration, before the polish stage's model runs.
+        let loop_iterations = settings.core.max_iterations;
+        let loop_best = r
+            .history
+            .iter()
+            .filter(|h| h.iteration <= loop_iterations && h.mae_c.is_some())
+            .min_by(|a, b| {
+                a.mae_c
+                    .unwrap_or(f64::MAX)
+                    .total_cmp(&b.mae_c.unwrap_or(f64::MAX))
+            })
+            .expect("at least one loop iteration");
+        let loop_mae = loop_best.mae_c.unwrap_or(f64::NAN);
+        let loop_runs_per_snapshot = loop_best.model_runs / s.snapshots.len();
         let mut types = Vec::new();
         for (ty, truth) in &s.truth.alpha_type_cfm_per_w {
             let seen = s.hall.servers().any(|sv| {
@@ -67,19 +77,19 @@ fn main() {
                             || distance(sv.exhaust_centre(), sensor.position_m) < SEEN_WITHIN_M
                     })
             });
-            let found = r
-                .best
-                .params
-                .get(&format!("alpha/{ty}"))
-                .unwrap_or(f64::NAN);
+            let key = format!("alpha/{ty}");
+            let found = loop_best.params.get(&key).unwrap_or(f64::NAN);
+            let polished = r.best.params.get(&key).unwrap_or(f64::NAN);
             types.push(json!({
                 "type": ty, "true": truth, "found": found,
                 "error_pct": 100.0 * (found - truth) / truth, "seen": seen,
+                "polished": polished, "polished_error_pct": 100.0 * (polished - truth) / truth,
             }));
         }
         let runs_per_snapshot = r.runs.total / s.snapshots.len();
         println!(
-            "{name}: initial MAE {:.3} C, best {:.3} C (iteration {}), model at truth {:.3} C, \
+            "{name}: initial MAE {:.3} C, after 10 iterations {loop_mae:.3} C ({loop_runs_per_snapshot} \
+             runs per snapshot), after the polish {:.3} C (iteration {}), model at truth {:.3} C, \
              noise only {:.3} C, {} runs per snapshot, synth {synth_s:.0} s, calibration {cal_s:.0} s",
             r.initial.mae_c.unwrap_or(f64::NAN),
             r.best.mae_c,
@@ -90,11 +100,13 @@ fn main() {
         );
         for t in &types {
             println!(
-                "  {:<16} true {:.4} found {:.4} ({:+.1}%){}",
+                "  {:<16} true {:.4} found {:.4} ({:+.1}%), polished {:.4} ({:+.1}%){}",
                 t["type"].as_str().unwrap_or(""),
                 t["true"].as_f64().unwrap_or(f64::NAN),
                 t["found"].as_f64().unwrap_or(f64::NAN),
                 t["error_pct"].as_f64().unwrap_or(f64::NAN),
+                t["polished"].as_f64().unwrap_or(f64::NAN),
+                t["polished_error_pct"].as_f64().unwrap_or(f64::NAN),
                 if t["seen"].as_bool() == Some(true) {
                     ""
                 } else {
@@ -102,7 +114,7 @@ fn main() {
                 }
             );
         }
-        let pass_mae = r.best.mae_c <= 0.45 && r.best.mae_c <= reference.model_at_truth_mae_c + 0.1;
+        let pass_mae = loop_mae <= 0.45 && loop_mae <= reference.model_at_truth_mae_c + 0.1;
         let pass_alpha = types.iter().all(|t| {
             t["seen"].as_bool() != Some(true)
                 || t["error_pct"].as_f64().is_some_and(|e| e.abs() <= 10.0)
@@ -114,7 +126,8 @@ fn main() {
         );
         results.push(json!({
             "preset": name, "seed": 1,
-            "initial_mae_c": r.initial.mae_c, "best_mae_c": r.best.mae_c,
+            "initial_mae_c": r.initial.mae_c, "loop_best_mae_c": loop_mae,
+            "loop_runs_per_snapshot": loop_runs_per_snapshot, "best_mae_c": r.best.mae_c,
             "best_iteration": r.best.iteration, "model_at_truth_mae_c": reference.model_at_truth_mae_c,
             "noise_only_mae_c": reference.noise_only_mae_c, "model_runs": r.runs.total,
             "runs_per_snapshot": runs_per_snapshot, "synth_s": synth_s, "calibration_s": cal_s,

@@ -1,7 +1,6 @@
 //! Diagnosis on `demo` with a hidden effect, at the true alphas (so the residual is the
 //! hidden effect, the model's grid error and noise): the diagnosis names the effect.
-//! (Calibrating alpha first is the user's path; with the present calibration accuracy on
-//! `demo` the alpha error still dominates the residual, see docs/performance.md.)
+//! (The user's path, calibrating alpha first, is tested end to end in tests/acceptance.rs.)
 
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
 use kalibre::dc::effects::EffectRegistry;

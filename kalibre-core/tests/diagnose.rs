@@ -500,3 +500,69 @@ fn works_without_calibrated_parameters() {
     assert!((best.fitted.get("a/q0").unwrap() + 0.4).abs() < 0.05);
     assert_eq!(d.significant().count(), 1);
 }
+
+/// A model error the model's numerics could produce (known per-row uncertainty) earns a
+/// hypothesis that explains it no credit; the same residuals without the uncertainty do.
+#[test]
+fn known_model_uncertainty_is_not_taken_for_a_missing_effect() {
+    let p = Problem::new(23, 3, 40);
+    let n = p.n;
+    // Rows 0..6 carry a model error of about 1.5 (e.g. a grid effect near one sensor); a
+    // hypothesis `local` moves exactly those rows.
+    let local: Vec<f64> = (0..n).map(|i| if i % 40 < 2 { 1.0 } else { 0.0 }).collect();
+    let r: Vec<f64> = (0..n)
+        .map(|i| 0.3 * p.j[0][i] + p.noise[i] + if local[i] > 0.0 { 1.5 } else { 0.0 })
+        .collect();
+    let res = Residuals::new(
+        p.rows.clone(),
+        r,
+        matrix(n, &p.j),
+        vec!["alpha/a".into(), "alpha/b".into()],
+    )
+    .unwrap();
+    let hyps = vec![hyp1("local", &local), hyp1("b", &p.b)];
+    let plain = diagnose(&res, &hyps, &DiagnoseSettings::new()).unwrap();
+    assert!(find(&plain, "local").significant, "{plain:?}");
+    let u: Vec<f64> = local.iter().map(|l| 1.5 * l).collect();
+    let weighed = diagnose(
+        &res.clone().with_uncertainty(u).unwrap(),
+        &hyps,
+        &DiagnoseSettings::new(),
+    )
+    .unwrap();
+    assert!(weighed.significant().next().is_none(), "{weighed:?}");
+    // The noise estimate leaves the uncertain rows out: close to the true sigma.
+    assert!(
+        (weighed.noise_sigma - SIGMA).abs() < 0.3 * SIGMA,
+        "{}",
+        weighed.noise_sigma
+    );
+    // MAEs are reported in output units, unweighted.
+    assert!((weighed.mae - plain.mae).abs() < 1e-12);
+    // Wrong-length or negative uncertainties are refused by name.
+    assert!(res.clone().with_uncertainty(vec![0.0; n - 1]).is_err());
+    let mut bad = vec![0.0; n];
+    bad[3] = -1.0;
+    let e = res.with_uncertainty(bad).unwrap_err().to_string();
+    assert!(e.contains("uncertainty of output"), "{e}");
+}
+
+/// Least squares can lower the RSS by trading a few large residuals for many small ones;
+/// such a hypothesis raises the MAE and is not significant.
+#[test]
+fn a_hypothesis_that_raises_the_mae_is_not_significant() {
+    let p = Problem::new(29, 3, 40);
+    let n = p.n;
+    // Two large outliers; the hypothesis shifts every row by the same amount, which trims
+    // the outliers (lower RSS) but moves every other row off its noise.
+    let r: Vec<f64> = (0..n)
+        .map(|i| p.noise[i] + if i % 60 == 0 { 12.0 } else { 0.0 })
+        .collect();
+    let res = Residuals::new(p.rows.clone(), r, Array2::zeros((n, 0)), vec![]).unwrap();
+    let shift = vec![1.0; n];
+    let d = diagnose(&res, &[hyp1("shift", &shift)], &DiagnoseSettings::new()).unwrap();
+    let h = find(&d, "shift");
+    assert!(h.explained_fraction > 0.0, "{h:?}");
+    assert!(h.predicted_mae > d.refit_mae, "{h:?} vs {}", d.refit_mae);
+    assert!(!h.significant, "{h:?}");
+}

@@ -8,12 +8,13 @@ use kalibre_core::calibrate::Report;
 use kalibre_core::search::Hybrid;
 use kalibre_core::{Calibrator, Model, Observe, RunStore, Settings};
 
+use crate::effects::{EffectRegistry, SurrogateTerm};
 use crate::hall::{AlphaMode, Hall};
 use crate::sim::SimConfig;
 use crate::snapshots::{self, HallSnapshot};
 use crate::surrogate::{
-    FlowBalance, FlowBalanceTerm, PenaltySettings, TemperatureRisePenalty, ThermalGraph,
-    ThermalGraphSettings,
+    EffectLinearTerm, FlowBalance, FlowBalanceTerm, PenaltySettings, TemperatureRisePenalty,
+    ThermalGraph, ThermalGraphSettings,
 };
 use crate::{Error, HallModel, Result};
 
@@ -29,6 +30,7 @@ use crate::{Error, HallModel, Result};
 /// | `searcher` | [`Hybrid::default`] | DE (population 10, crossover 0.6, 100 generations), then Adam |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 /// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
+/// | `polish_max_params` | 64 | the loop's polish stage (`core.polish_iterations`, 8 by default) runs only when there are at most this many parameters: each of its Jacobians costs `params + 1` model runs per snapshot (per-server alpha on a real hall would need thousands); above it the report's settings show `polish_iterations` 0 |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
     /// The generic loop's settings; `target_score` is a target MAE (C).
@@ -47,6 +49,8 @@ pub struct HallCalibrationSettings {
     pub flow_balance_terms: bool,
     /// Add the local recirculation term (local draw against local supply per sensor).
     pub local_recirculation_term: bool,
+    /// Most parameters for which the polish stage runs.
+    pub polish_max_params: usize,
 }
 
 impl HallCalibrationSettings {
@@ -54,7 +58,9 @@ impl HallCalibrationSettings {
     /// measurements (`focus` 1), a repeated proposal moved by 0.015 in the unit box (about
     /// 9% in alpha) rather than ending the loop, and the surrogate corrected to the model
     /// at the best run and searched within a trust region of 0.1 (both beyond the paper;
-    /// the variants are measured in docs/performance.md).
+    /// the variants are measured in docs/performance.md); then up to 8 Levenberg-Marquardt
+    /// steps on the model itself (the built-in simulator is cheap; the surrogate alone
+    /// stalls a few tenths of a degree above what the model can reach).
     pub fn loop_defaults() -> Settings {
         Settings {
             seed: 1,
@@ -63,6 +69,7 @@ impl HallCalibrationSettings {
             explore_on_repeat: Some(0.015),
             output_correction: true,
             trust_region: Some(0.1),
+            polish_iterations: 8,
             ..Settings::default()
         }
     }
@@ -79,6 +86,7 @@ impl Default for HallCalibrationSettings {
             searcher: Hybrid::default(),
             flow_balance_terms: true,
             local_recirculation_term: false,
+            polish_max_params: 64,
         }
     }
 }
@@ -104,12 +112,33 @@ pub fn calibrate_hall<'o>(
     journal: Option<&Path>,
     observers: Vec<Box<dyn Observe + 'o>>,
 ) -> Result<HallCalibration> {
+    calibrate_hall_with_registry(
+        hall,
+        snaps,
+        settings,
+        &EffectRegistry::builtin(),
+        journal,
+        observers,
+    )
+}
+
+/// [`calibrate_hall`] with `hall.effects` built by `registry` (downstream effect kinds).
+/// Each effect parameter whose effect asks for [`SurrogateTerm::LearnedLinear`] gets an
+/// [`EffectLinearTerm`] in the surrogate, so that the search can move it.
+pub fn calibrate_hall_with_registry<'o>(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    settings: &HallCalibrationSettings,
+    registry: &EffectRegistry,
+    journal: Option<&Path>,
+    observers: Vec<Box<dyn Observe + 'o>>,
+) -> Result<HallCalibration> {
     let mut hall = hall.clone();
     if let Some(mode) = settings.alpha_mode {
         hall.calibrate.alpha = mode;
     }
     let observations = snapshots::to_observations(&hall, snaps)?;
-    let model = HallModel::new(&hall, settings.sim.clone())?;
+    let model = HallModel::with_registry(&hall, settings.sim.clone(), registry)?;
     let layout = model.layout().clone();
     let space = layout.space().clone();
     if space.is_empty() {
@@ -123,10 +152,18 @@ pub fn calibrate_hall<'o>(
         for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
             surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(&hall, &layout, kind)));
         }
-        if std::env::var("KALIBRE_LOCAL_TERM").is_ok() {
+        if settings.local_recirculation_term {
             surrogate = surrogate.with_term(Box::new(
                 crate::surrogate::LocalRecirculationTerm::new(&hall, &layout),
             ));
+        }
+    }
+    for (e, effect) in model.effects().iter().enumerate() {
+        if effect.surrogate_term() == SurrogateTerm::LearnedLinear {
+            for i in layout.effect_range(e) {
+                surrogate = surrogate
+                    .with_term(Box::new(EffectLinearTerm::new(space.names()[i].clone(), i)));
+            }
         }
     }
     let scenarios: Vec<_> = snaps.iter().map(|s| s.state.clone()).collect();
@@ -149,6 +186,11 @@ pub fn calibrate_hall<'o>(
     };
     let core_settings = Settings {
         regularizer_weight: settings.penalty.weight,
+        polish_iterations: if space.dim() <= settings.polish_max_params {
+            settings.core.polish_iterations
+        } else {
+            0
+        },
         ..settings.core.clone()
     };
     let mut calibrator = Calibrator::new(&model, surrogate, &observations, &space)

@@ -24,6 +24,7 @@ use crate::{Error, ParamLayout, Result};
 /// | `sim` | [`SimConfig::default`] | the simulator that supplies the Jacobians |
 /// | `unit_step` | 0.01 | finite-difference step of calibrated parameters (unit box) |
 /// | `effect_step` | 0.05 | finite-difference step of effect parameters (share of their range) |
+/// | `refine_factor` | 0.5 | the model's own discretisation error, estimated by one more solve per snapshot on a grid this much finer, is each sensor's model uncertainty (no hypothesis earns credit for what the grid alone could produce); none: no such solve |
 /// | `diagnose` | [`DiagnoseSettings::default`] | ranking, significance, held-out check |
 #[derive(Debug, Clone)]
 pub struct HallDiagnosisSettings {
@@ -33,6 +34,8 @@ pub struct HallDiagnosisSettings {
     pub unit_step: f64,
     /// Step of effect parameters as a share of their range.
     pub effect_step: f64,
+    /// Cell size of the refined grid relative to `sim.cell_m` (in (0, 1)), or none.
+    pub refine_factor: Option<f64>,
     /// The generic diagnosis settings.
     pub diagnose: DiagnoseSettings,
 }
@@ -43,6 +46,7 @@ impl Default for HallDiagnosisSettings {
             sim: SimConfig::default(),
             unit_step: 0.01,
             effect_step: 0.05,
+            refine_factor: Some(0.5),
             diagnose: DiagnoseSettings::default(),
         }
     }
@@ -101,6 +105,28 @@ fn candidate_name(spec: &EffectSpec) -> String {
     format!("{}({})", spec.kind, fields.join(","))
 }
 
+/// The placement of an effect entry: the entry without its parameter values.
+fn placement(spec: &EffectSpec, effect: &dyn Effect) -> EffectSpec {
+    let mut spec = spec.clone();
+    for p in effect.parameters() {
+        spec.fields.remove(&p.name);
+    }
+    spec
+}
+
+/// A candidate's parameter value at which the effect is absent: 0 (clamped into its
+/// bounds). The base run has no such effect at all, so each hypothesis is linearised
+/// from there and its fitted change is the parameter's value.
+fn absent(p: &kalibre_core::Param) -> f64 {
+    0.0_f64.clamp(p.lower, p.upper)
+}
+
+/// The name of a hypothesis parameter: unique across candidates and distinct from the
+/// calibrated `<kind>/<param>` of an effect the hall already has.
+fn hypothesis_param(candidate: &str, param: &str) -> String {
+    format!("{candidate}/{param}")
+}
+
 /// One simulator run of the diagnosis: alpha per server and effect values.
 struct Job {
     snapshot: usize,
@@ -124,14 +150,24 @@ pub fn diagnose_hall(
     let space: &ParamSpace = layout.space();
     space.check_physical(params)?;
     let sim = Simulator::new(hall, settings.sim.clone())?;
+    // A candidate the hall already has (same kind and placement, whatever its parameter
+    // values) is no hypothesis: it is calibrated already.
+    let present: Vec<EffectSpec> = hall
+        .effects
+        .iter()
+        .zip(&effects)
+        .map(|(spec, e)| placement(spec, e.as_ref()))
+        .collect();
     let candidates: Vec<(EffectSpec, Box<dyn Effect>)> = registry
         .kinds()
         .iter()
         .filter_map(|k| registry.get(k))
         .flat_map(|f| f.candidates(hall))
-        .filter(|spec| !hall.effects.contains(spec))
         .map(|spec| registry.build(&spec, hall).map(|e| (spec, e)))
-        .collect::<Result<_>>()?;
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .filter(|(spec, e)| !present.contains(&placement(spec, e.as_ref())))
+        .collect();
 
     let alpha0 = layout.alpha_per_server(params);
     let values0: Vec<Vec<f64>> = (0..effects.len())
@@ -174,7 +210,7 @@ pub fn diagnose_hall(
             let v: Vec<f64> = e
                 .parameters()
                 .iter()
-                .map(|p| p.initial + settings.effect_step * (p.upper - p.lower))
+                .map(|p| absent(p) + settings.effect_step * (p.upper - p.lower))
                 .collect();
             jobs.push(Job {
                 snapshot: s,
@@ -223,7 +259,47 @@ pub fn diagnose_hall(
             block(cols)
         })
         .collect();
-    let residuals = Residuals::from_observations(&obs, &base, &jac, space.names())?;
+    let mut residuals = Residuals::from_observations(&obs, &base, &jac, space.names())?;
+    if let Some(factor) = settings.refine_factor {
+        if !(factor > 0.0 && factor < 1.0) {
+            return Err(Error::Mismatch(format!(
+                "refine_factor must be in (0, 1), got {factor}"
+            )));
+        }
+        let fine = Simulator::new(
+            hall,
+            SimConfig {
+                cell_m: settings.sim.cell_m * factor,
+                ..settings.sim.clone()
+            },
+        )?;
+        let list: Vec<(&dyn Effect, &[f64])> = effects
+            .iter()
+            .zip(&values0)
+            .map(|(e, v)| (e.as_ref(), v.as_slice()))
+            .collect();
+        let fine_out: Vec<Vec<f64>> = states
+            .par_iter()
+            .map(|st| {
+                fine.solve(st, &alpha0, &list)
+                    .map(|s| s.sensor_c().to_vec())
+            })
+            .collect::<Result<_>>()?;
+        // Rows in the order of the residuals: snapshot-major, measured sensors only.
+        let uncertainty: Vec<f64> = snaps
+            .iter()
+            .enumerate()
+            .flat_map(|(s, snap)| {
+                let (f, b) = (&fine_out[s], &base[s]);
+                snap.sensor_c
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, m)| m.is_some())
+                    .map(move |(k, _)| (f[k] - b[k]).abs())
+            })
+            .collect();
+        residuals = residuals.with_uncertainty(uncertainty)?;
+    }
     let mut hypotheses = Vec::with_capacity(candidates.len());
     for (c, (spec, e)) in candidates.iter().enumerate() {
         let ps = e.parameters();
@@ -232,9 +308,9 @@ pub fn diagnose_hall(
             .iter()
             .map(|p| {
                 HypothesisParam::bounded(
-                    format!("{}/{}", spec.kind, p.name),
-                    p.lower - p.initial,
-                    p.upper - p.initial,
+                    hypothesis_param(&name, &p.name),
+                    p.lower - absent(p),
+                    p.upper - absent(p),
                 )
             })
             .collect();
@@ -270,9 +346,9 @@ pub fn diagnose_hall(
             for p in e.parameters() {
                 let dq = h
                     .fitted
-                    .get(&format!("{}/{}", spec.kind, p.name))
+                    .get(&hypothesis_param(&h.name, &p.name))
                     .unwrap_or(0.0);
-                let v = (p.initial + dq).clamp(p.lower, p.upper);
+                let v = (absent(&p) + dq).clamp(p.lower, p.upper);
                 spec.fields
                     .insert(p.name.clone(), json!((v * 1e4).round() / 1e4));
             }

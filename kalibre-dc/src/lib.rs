@@ -7,15 +7,18 @@
 #![warn(missing_docs)]
 
 pub mod calibration;
+pub mod calibration_model;
 pub mod diagnosis;
 pub mod effects;
 mod error;
 pub mod hall;
 mod model;
+pub mod openfoam;
 mod params;
 pub mod report;
 pub mod sim;
 pub mod snapshots;
+pub mod story;
 pub mod surrogate;
 pub mod synth;
 

@@ -1,19 +1,25 @@
-//! `kalibre calibrate`: the four-step loop on a hall, with the built-in simulator.
+//! `kalibre calibrate`: the four-step loop on a hall, with the built-in simulator,
+//! OpenFOAM or any external command as the model.
 
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kalibre_core::calibrate::Report;
+use kalibre_core::external::{CommandModelConfig, ExternalCommand, NamedScenario};
 use kalibre_core::search::{Adam, DifferentialEvolution, Hybrid};
-use kalibre_core::{Event, Observe};
+use kalibre_core::{Event, Model, ModelError, Observe, Outputs};
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
+use kalibre_dc::calibration_model::calibrate_hall_model;
+use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::{AlphaMode, Hall};
-use kalibre_dc::snapshots;
-use kalibre_dc::surrogate::PenaltySettings;
+use kalibre_dc::openfoam::{OpenFoamError, OpenFoamModel, OpenFoamSettings};
+use kalibre_dc::snapshots::{self, HallSnapshot, OperatingState};
+use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
+use kalibre_dc::ParamLayout;
 
 use super::simulate::sim_config;
 use super::{io_err, with_threads, CliError, CliResult};
@@ -27,6 +33,17 @@ pub enum AlphaArg {
     PerServer,
     /// Alpha fixed at its initial values (only effect parameters are calibrated).
     Fixed,
+}
+
+/// Which model the calibration runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// The built-in thermal simulator (seconds per run).
+    Builtin,
+    /// OpenFOAM (`buoyantBoussinesqSimpleFoam`) on a case generated from hall.json.
+    Openfoam,
+    /// Any simulator driven through files, described by `--config model.toml`.
+    Command,
 }
 
 /// Options of `kalibre calibrate`.
@@ -106,6 +123,13 @@ pub struct CalibrateArgs {
     /// step that improved the model and shrinking after one that did not; 0: whole box.
     #[arg(long = "trust-region", default_value_t = 0.1)]
     trust_region: f64,
+    /// After the iterations, up to this many Levenberg-Marquardt steps on the model itself
+    /// (finite-difference Jacobians: parameters + 1 runs per snapshot each); they take the
+    /// fit to what the model can reach when the surrogate stalls. Default: 8 with the
+    /// built-in model (cheap), 0 with `openfoam` and `command` (each run costs a solve).
+    /// Skipped when more than 64 parameters are calibrated.
+    #[arg(long)]
+    polish: Option<usize>,
     /// Leave out the surrogate's mass-balance terms (recirculation and bypass), as in the paper.
     #[arg(long = "paper-surrogate")]
     paper_surrogate: bool,
@@ -113,6 +137,27 @@ pub struct CalibrateArgs {
     /// against the supply openings near it).
     #[arg(long = "local-recirculation")]
     local_recirculation: bool,
+    /// The model: `builtin` (the built-in simulator), `openfoam` (a case generated from
+    /// hall.json, meshed once into OUT/openfoam and solved per run) or `command` (an
+    /// external program described by --config). The surrogate is the same for all three.
+    #[arg(long, value_enum, default_value_t = ModelArg::Builtin)]
+    model: ModelArg,
+    /// OpenFOAM: processes per solve; 1 runs serially, more runs decomposePar then
+    /// `mpirun -np N` (set --parallel-runs 1 so solves do not compete for cores).
+    #[arg(long)]
+    np: Option<u32>,
+    /// OpenFOAM: SIMPLE iterations per solve; sensors are averaged over the second half.
+    #[arg(long = "of-iterations")]
+    of_iterations: Option<u32>,
+    /// OpenFOAM: wall-clock limit per solve (s); a solve past it is killed with its whole
+    /// process group and recorded as failed.
+    #[arg(long = "of-timeout-s")]
+    of_timeout_s: Option<f64>,
+    /// `--model command`: the model description (`model.toml`, see docs/models.md); its
+    /// params must be the hall's calibrated parameters in order and its outputs the
+    /// hall's sensors in order.
+    #[arg(long)]
+    config: Option<PathBuf>,
     /// No progress bars (they are off anyway when stderr is not a terminal).
     #[arg(long)]
     quiet: bool,
@@ -172,6 +217,10 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         explore_on_repeat: (args.explore != 0.0).then_some(args.explore),
         trust_region: (args.trust_region != 0.0).then_some(args.trust_region),
         output_correction: args.output_correction,
+        polish_iterations: args.polish.unwrap_or(match args.model {
+            ModelArg::Builtin => HallCalibrationSettings::loop_defaults().polish_iterations,
+            ModelArg::Openfoam | ModelArg::Command => 0,
+        }),
         ..HallCalibrationSettings::loop_defaults()
     };
     core.check().map_err(|e| match e {
@@ -247,39 +296,246 @@ impl Observe for Progress {
     }
 }
 
+/// Refuses model options that do not belong to the chosen model.
+fn check_model_flags(args: &CalibrateArgs) -> CliResult {
+    let of_flags = [
+        ("--np", args.np.is_some()),
+        ("--of-iterations", args.of_iterations.is_some()),
+        ("--of-timeout-s", args.of_timeout_s.is_some()),
+    ];
+    if args.model != ModelArg::Openfoam {
+        if let Some((flag, _)) = of_flags.iter().find(|(_, given)| *given) {
+            return Err(CliError::Input(format!(
+                "{flag} is an OpenFOAM option: add --model openfoam"
+            )));
+        }
+    }
+    match (args.model, &args.config) {
+        (ModelArg::Command, None) => Err(CliError::Input(
+            "--model command needs --config model.toml (see docs/models.md)".into(),
+        )),
+        (ModelArg::Builtin | ModelArg::Openfoam, Some(_)) => {
+            Err(CliError::Input("--config is for --model command".into()))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The OpenFOAM adapter's settings from the arguments; cases and runs go in OUT/openfoam.
+fn openfoam_settings(args: &CalibrateArgs) -> CliResult<OpenFoamSettings> {
+    let mut s = OpenFoamSettings::default().with_cache_root(args.out.join("openfoam"));
+    if let Some(h) = args.grid_m {
+        s = s.with_grid_m(h);
+    }
+    if let Some(np) = args.np {
+        s = s.with_np(np);
+    }
+    if let Some(k) = args.of_iterations {
+        s = s.with_iterations(k);
+    }
+    if let Some(t) = args.of_timeout_s {
+        if !(t.is_finite() && t > 0.0 && t < 1e9) {
+            return Err(CliError::Input(format!(
+                "--of-timeout-s: {t} is not a positive number of seconds"
+            )));
+        }
+        s = s.with_timeout(Duration::from_secs_f64(t));
+    }
+    s.check().map_err(|e| {
+        CliError::Input(match e {
+            OpenFoamError::Setting { name, reason } => {
+                let flag = match name.as_str() {
+                    "np" => "--np",
+                    "iterations" => "--of-iterations",
+                    "grid_m" => "--grid-m",
+                    "timeout" => "--of-timeout-s",
+                    other => other,
+                };
+                format!("{flag}: {reason}")
+            }
+            e => e.to_string(),
+        })
+    })
+}
+
+fn of_err(e: OpenFoamError) -> CliError {
+    match e {
+        OpenFoamError::Meshing { .. } | OpenFoamError::Io { .. } => CliError::Run(e.to_string()),
+        e => CliError::Input(e.to_string()),
+    }
+}
+
+/// Runs the calibration with the chosen model.
+fn calibrate_with_model<'o>(
+    args: &CalibrateArgs,
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    settings: &HallCalibrationSettings,
+    journal: &Path,
+    observers: Vec<Box<dyn Observe + 'o>>,
+) -> CliResult<(Report, PenaltyReport)> {
+    let mut hall = hall.clone();
+    if let Some(mode) = settings.alpha_mode {
+        hall.calibrate.alpha = mode;
+    }
+    match args.model {
+        ModelArg::Builtin => {
+            let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)?;
+            Ok((c.report, c.penalty_report))
+        }
+        ModelArg::Openfoam => {
+            let model = OpenFoamModel::new(&hall, openfoam_settings(args)?).map_err(of_err)?;
+            let c = calibrate_hall_model(
+                &hall,
+                snaps,
+                &model,
+                model.layout(),
+                settings,
+                Some(journal),
+                observers,
+            )?;
+            Ok((c.report, c.penalty_report))
+        }
+        ModelArg::Command => {
+            let path = args
+                .config
+                .as_deref()
+                .expect("checked by check_model_flags");
+            let config =
+                CommandModelConfig::load(path).map_err(|e| CliError::Input(e.to_string()))?;
+            let model = HallCommand::new(&hall, config, path)?;
+            let c = calibrate_hall_model(
+                &hall,
+                snaps,
+                &model,
+                &model.layout,
+                settings,
+                Some(journal),
+                observers,
+            )?;
+            Ok((c.report, c.penalty_report))
+        }
+    }
+}
+
+/// An external command as a hall's model: each snapshot becomes the template variables
+/// `setpoint_c/<crac>`, `fan_speed/<crac>` and `power_w/<server>`.
+struct HallCommand {
+    command: ExternalCommand<NamedScenario>,
+    layout: ParamLayout,
+    crac_ids: Vec<String>,
+    server_ids: Vec<String>,
+}
+
+impl HallCommand {
+    fn new(hall: &Hall, config: CommandModelConfig, path: &Path) -> CliResult<Self> {
+        let bad = |what: String| CliError::Input(format!("{}: {what}", path.display()));
+        let effects = EffectRegistry::builtin().build_all(hall)?;
+        let layout = ParamLayout::new(hall, &effects)?;
+        let want = layout.space().names();
+        let got = config.space.names();
+        if want != got {
+            return Err(bad(format!(
+                "params must be the hall's calibrated parameters in order: [{}], got [{}]",
+                want.join(", "),
+                got.join(", ")
+            )));
+        }
+        let sensors: Vec<String> = hall.sensors.iter().map(|s| s.id.clone()).collect();
+        if config.command.output_names() != sensors.as_slice() {
+            return Err(bad(format!(
+                "output.names must be the hall's sensors in order: [{}]",
+                sensors.join(", ")
+            )));
+        }
+        if !config.scenarios.is_empty() {
+            return Err(bad(
+                "[[scenarios]] are not used with a hall: the snapshots come from --snapshots"
+                    .into(),
+            ));
+        }
+        let model = HallCommand {
+            command: config.command,
+            layout,
+            crac_ids: hall.cracs.iter().map(|c| c.id.clone()).collect(),
+            server_ids: hall.servers().map(|s| s.server.id.clone()).collect(),
+        };
+        Ok(model)
+    }
+
+    fn scenario(&self, state: &OperatingState) -> NamedScenario {
+        let mut s = NamedScenario::new(state.label.clone());
+        for (i, id) in self.crac_ids.iter().enumerate() {
+            s = s
+                .with(format!("setpoint_c/{id}"), state.setpoint_c[i])
+                .with(format!("fan_speed/{id}"), state.fan_speed[i]);
+        }
+        for (id, p) in self.server_ids.iter().zip(&state.power_w) {
+            s = s.with(format!("power_w/{id}"), *p);
+        }
+        s
+    }
+}
+
+impl Model for HallCommand {
+    type Scenario = OperatingState;
+
+    fn fingerprint(&self) -> String {
+        self.command.fingerprint()
+    }
+
+    fn evaluate(&self, state: &OperatingState, params: &[f64]) -> Result<Outputs, ModelError> {
+        self.command.evaluate(&self.scenario(state), params)
+    }
+}
+
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     let settings = settings(&args)?;
+    check_model_flags(&args)?;
     let hall = Hall::load(&args.hall)?;
+    kalibre_dc::effects::EffectRegistry::builtin()
+        .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     std::fs::create_dir_all(&args.out).map_err(|e| io_err(&args.out, e))?;
+    if args.model == ModelArg::Command {
+        // Checked before the loop so a bad template fails at once, not per run.
+        let path = args
+            .config
+            .as_deref()
+            .expect("checked by check_model_flags");
+        let config = CommandModelConfig::load(path).map_err(|e| CliError::Input(e.to_string()))?;
+        let model = HallCommand::new(&hall, config, path)?;
+        for s in &snaps {
+            model
+                .command
+                .check_scenario(&model.scenario(&s.state))
+                .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
+        }
+    }
     let journal = args.out.join("runs.jsonl");
     let total_runs = ((4 + args.iterations) * snaps.len()) as u64;
     let progress = Progress::new(total_runs, args.quiet);
     let started = Instant::now();
-    let outcome = with_threads(args.threads, || {
-        calibrate_hall(
+    let (report, penalty_report) = with_threads(args.threads, || {
+        calibrate_with_model(
+            &args,
             &hall,
             &snaps,
             &settings,
-            Some(&journal),
+            &journal,
             vec![Box::new(progress)],
         )
     })??;
     let wall_s = started.elapsed().as_secs_f64();
     let report_path = args.out.join("report.json");
-    let json = serde_json::to_string_pretty(&outcome.report)
+    let json = serde_json::to_string_pretty(&report)
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;
     std::fs::write(&report_path, json).map_err(|e| io_err(&report_path, e))?;
     let html_path = args.out.join("report.html");
-    let html = kalibre_dc::report::calibration_html(
-        &hall,
-        &snaps,
-        &outcome.report,
-        &outcome.penalty_report,
-    );
+    let html = kalibre_dc::report::calibration_html(&hall, &snaps, &report, &penalty_report);
     std::fs::write(&html_path, html).map_err(|e| io_err(&html_path, e))?;
-    print_summary(&outcome.report, wall_s, &outcome.penalty_report);
+    print_summary(&report, wall_s, &penalty_report);
     println!(
         "wrote {}, {}, {}",
         report_path.display(),

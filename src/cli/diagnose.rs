@@ -43,6 +43,8 @@ pub struct DiagnoseArgs {
 /// Runs `kalibre diagnose`.
 pub fn run(args: DiagnoseArgs) -> CliResult {
     let hall = Hall::load(&args.hall)?;
+    kalibre_dc::effects::EffectRegistry::builtin()
+        .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     let report_path = args.calibration.join("report.json");
     let text = std::fs::read_to_string(&report_path)

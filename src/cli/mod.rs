@@ -1,6 +1,7 @@
 //! Subcommands of the `kalibre` tool.
 
 mod calibrate;
+mod demo;
 mod diagnose;
 mod error;
 mod simulate;
@@ -29,6 +30,9 @@ enum Command {
     Calibrate(calibrate::CalibrateArgs),
     /// Show where a calibrated model fails and rank the physical effects that may be missing.
     Diagnose(diagnose::DiagnoseArgs),
+    /// The whole story on a synthetic hall with a hidden effect: calibrate, diagnose, add
+    /// the missing effect, recalibrate, and write report.html.
+    Demo(demo::DemoArgs),
 }
 
 /// Runs a parsed command line.
@@ -38,6 +42,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Simulate(a) => simulate::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Diagnose(a) => diagnose::run(a),
+        Command::Demo(a) => demo::run(a),
     }
 }
 

@@ -94,6 +94,8 @@ pub fn sim_config(grid_m: Option<f64>) -> CliResult<SimConfig> {
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
     let hall = Hall::load(&args.hall)?;
+    kalibre_dc::effects::EffectRegistry::builtin()
+        .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     let model = HallModel::new(&hall, sim_config(args.grid_m)?)?;
     let space = model.layout().space();

@@ -4,6 +4,7 @@
 //! settings checked once, and [`Calibrator::run`] returning a serialisable [`Report`].
 
 mod design;
+mod polish;
 mod report;
 mod runner;
 mod settings;
@@ -519,50 +520,49 @@ where
                     (*r * 0.5).max(1e-3)
                 };
             }
-            let v = eval.validation.as_ref();
-            let record = IterationRecord {
+            let record = polish::record(
                 iteration,
-                model_runs: state.counts.total,
-                mae_c: v.map(|v| v.overall.mae),
-                rmse_c: v.map(|v| v.overall.rmse),
-                max_abs_c: v.map(|v| v.overall.max_abs),
-                score: eval.score,
-                best_mae_c: state.best.as_ref().map(|b| b.validation.overall.mae),
-                per_snapshot: v.map_or_else(Vec::new, |v| {
-                    v.per_snapshot
-                        .iter()
-                        .map(|(l, e)| SnapshotErrors {
-                            snapshot: l.clone(),
-                            mae_c: e.mae,
-                            rmse_c: e.rmse,
-                            max_abs_c: e.max_abs,
-                        })
-                        .collect()
-                }),
-                per_group: v.map_or_else(Default::default, |v| {
-                    v.per_group
-                        .iter()
-                        .map(|(g, e)| (g.clone(), Errors::from(*e)))
-                        .collect()
-                }),
-                fit_mse: fit.train_mse,
-                training_samples,
-                search_loss: outcome.best_cost,
-                search_data_mse,
-                search_evaluations: outcome.evaluations,
-                failed_runs: n_snap - eval.ok_runs,
-                perturbed,
-                params: NamedValues::new(&names, &params),
-                wall_s: Timings {
-                    fit_s,
-                    search_s,
-                    model_s,
-                    total_s: t_iter.elapsed().as_secs_f64(),
+                &state,
+                &eval,
+                n_snap,
+                &names,
+                &params,
+                polish::StepInfo {
+                    fit_mse: fit.train_mse,
+                    training_samples,
+                    search_loss: outcome.best_cost,
+                    search_data_mse,
+                    search_evaluations: outcome.evaluations,
+                    perturbed,
+                    wall_s: Timings {
+                        fit_s,
+                        search_s,
+                        model_s,
+                        total_s: t_iter.elapsed().as_secs_f64(),
+                    },
                 },
-            };
+            );
             self.emit(Event::IterationDone { record: &record });
             history.push(record);
         };
+        if st.polish_iterations > 0 && stop != StopReason::TargetError {
+            let polish = polish::Polish {
+                runner: &runner,
+                validator: &self.validator,
+                observations: obs,
+                space,
+                settings: st,
+                names: &names,
+                t_start,
+            };
+            let observers = &self.observers;
+            let records = polish.run(&mut state, iteration, |record| {
+                for o in observers {
+                    o.observe(&Event::IterationDone { record });
+                }
+            })?;
+            history.extend(records);
+        }
         self.emit(Event::Stopped { reason: stop });
 
         let best = state.best.ok_or_else(|| {

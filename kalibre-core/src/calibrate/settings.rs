@@ -22,6 +22,7 @@ use crate::{Error, Result};
 /// | `explore_on_repeat` | none | when the search proposes a point already run: none stops (converged); a sigma moves the proposal with that much seeded noise (unit box) and goes on | finite, > 0 |
 /// | `output_correction` | false | search the surrogate plus, per snapshot and output, the model's outputs minus the surrogate's at the best run (the corrected surrogate matches the model there) | bool |
 /// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
+/// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1 | finite, > 0 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -56,6 +57,10 @@ pub struct Settings {
     pub output_correction: bool,
     /// Initial trust-region radius (unit box); none searches the whole box.
     pub trust_region: Option<f64>,
+    /// Levenberg-Marquardt steps on the model after the loop (0: none). Missing in older
+    /// reports: 0.
+    #[serde(default)]
+    pub polish_iterations: usize,
 }
 
 impl Default for Settings {
@@ -76,6 +81,7 @@ impl Default for Settings {
             explore_on_repeat: None,
             output_correction: false,
             trust_region: None,
+            polish_iterations: 0,
         }
     }
 }

@@ -94,6 +94,7 @@ pub struct Residuals {
     residuals: Vec<f64>,
     jacobian: Array2<f64>,
     params: Vec<String>,
+    uncertainty: Option<Vec<f64>>,
 }
 
 impl Residuals {
@@ -150,6 +151,7 @@ impl Residuals {
             residuals,
             jacobian,
             params,
+            uncertainty: None,
         })
     }
 
@@ -193,6 +195,37 @@ impl Residuals {
             stack_blocks(obs, jacobians, "Jacobian")?
         };
         Residuals::new(measured_rows(obs), residuals, jacobian, params)
+    }
+
+    /// Adds a known model uncertainty per row (standard deviation, output units), e.g.
+    /// the model's own discretisation error from a refined grid. The diagnosis weighs
+    /// each row by `1 / sqrt(sigma^2 + u^2)` instead of `1 / sigma`, so that no hypothesis
+    /// earns credit for explaining what the model's numerics alone could produce.
+    pub fn with_uncertainty(mut self, uncertainty: Vec<f64>) -> Result<Self> {
+        if uncertainty.len() != self.rows.len() {
+            return Err(Error::Mismatch(format!(
+                "{} uncertainties for {} residual rows",
+                uncertainty.len(),
+                self.rows.len()
+            )));
+        }
+        if let Some((i, u)) = uncertainty
+            .iter()
+            .enumerate()
+            .find(|(_, u)| !(u.is_finite() && **u >= 0.0))
+        {
+            return Err(Error::Mismatch(format!(
+                "uncertainty of output `{}` in snapshot `{}` is {u}, expected finite and >= 0",
+                self.rows[i].output, self.rows[i].snapshot
+            )));
+        }
+        self.uncertainty = Some(uncertainty);
+        Ok(self)
+    }
+
+    /// The per-row model uncertainty, when given.
+    pub fn uncertainty(&self) -> Option<&[f64]> {
+        self.uncertainty.as_deref()
     }
 
     /// Row descriptions.

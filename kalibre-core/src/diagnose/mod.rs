@@ -21,10 +21,16 @@
 //! - **identifiable** unless the hypothesis is (nearly) in the span of `J`, its own
 //!   columns are (nearly) dependent, or another hypothesis spans the same directions;
 //! - **significant** when the BIC falls by at least the threshold, the held-out error
-//!   falls by at least the threshold, the fitted values lie within the parameters' ranges
+//!   falls by at least the threshold, the predicted MAE is below the current parameters'
+//!   own refit (least squares can trade a few large residuals for many small ones), the
+//!   fitted values lie within the parameters' ranges
 //!   (a negative leak is no explanation), and it is neither inert nor in the span of `J`;
 //!   among alternatives collinear with each other only the best is significant (the
 //!   lowest BIC, or within 2 of it the most modest fitted change relative to its range).
+//!
+//! A known model uncertainty per row ([`Residuals::with_uncertainty`], e.g. the model's
+//! own grid error) weighs each row by `sigma / sqrt(sigma^2 + u^2)` in every fit and test,
+//! so that no hypothesis earns credit for what the model's numerics alone could produce.
 //!
 //! Results are sorted best first: significant ones, then by BIC change.
 //!
@@ -52,8 +58,9 @@
 mod heldout;
 mod identify;
 mod input;
-mod linalg;
+pub(crate) mod linalg;
 mod settings;
+mod weights;
 
 pub use heldout::HeldOutScheme;
 pub use input::{measured_rows, Hypothesis, HypothesisParam, Residuals, RowInfo};
@@ -164,11 +171,23 @@ pub fn diagnose(
         }
         h.check(res)?;
     }
-    let r = res.residuals();
-    let n = r.len();
+    let raw = res.residuals();
+    let n = raw.len();
+    let raw_jcols = columns(res.jacobian());
+    let p = raw_jcols.len();
+    // Row weights: 1 without a model uncertainty; with one, `sigma / sqrt(sigma^2 +
+    // u^2)`, `sigma` the given noise or its maximum-likelihood estimate. Every fit, BIC
+    // and held-out check below works on weighted rows; MAEs are reported unweighted.
+    let weights: Vec<f64> = match res.uncertainty() {
+        None => vec![1.0; n],
+        Some(u) => weights::row_weights(raw, &raw_jcols, u, settings.noise_sigma).1,
+    };
+    let weigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(&weights).map(|(x, w)| x * w).collect() };
+    let unweigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(&weights).map(|(x, w)| x / w).collect() };
+    let r_weighted = weigh(raw);
+    let r = r_weighted.as_slice();
     let neg_r: Vec<f64> = r.iter().map(|v| -v).collect();
-    let jcols = columns(res.jacobian());
-    let p = jcols.len();
+    let jcols: Vec<Vec<f64>> = raw_jcols.iter().map(|c| weigh(c)).collect();
     let jrefs: Vec<&[f64]> = jcols.iter().map(Vec::as_slice).collect();
     let base = lstsq(&jrefs, &neg_r, &vec![0.0; p]);
     let e0 = residual_after(&jrefs, &base.x, r);
@@ -197,11 +216,15 @@ pub fn diagnose(
         fit + k as f64 * ln_n
     };
     let bic0 = bic(rss0, 0);
+    let refit_mae = mean_abs(&unweigh(&e0));
     let (scheme, folds) = heldout::folds(res.rows(), settings.output_folds)?;
     let held0 = heldout::held_out_sse(&jcols, &vec![0.0; p], r, &folds);
 
     let qj = orthonormal_basis(&jcols, 1e-8);
-    let hcols: Vec<Vec<Vec<f64>>> = hypotheses.iter().map(|h| columns(&h.jacobian)).collect();
+    let hcols: Vec<Vec<Vec<f64>>> = hypotheses
+        .iter()
+        .map(|h| columns(&h.jacobian).iter().map(|c| weigh(c)).collect())
+        .collect();
     let perps: Vec<identify::Perp> = hcols.iter().map(|c| identify::perp(&qj, c)).collect();
     let alone: Vec<bool> = perps
         .iter()
@@ -256,7 +279,11 @@ pub fn diagnose(
             .iter()
             .zip(&h.params)
             .all(|(v, q)| *v >= q.lower && *v <= q.upper);
+        // Least squares may buy a lower RSS with a worse MAE (a few large residuals
+        // traded for many small ones): a suggestion must lower the error users see.
+        let predicted_mae = mean_abs(&unweigh(&e));
         let significant = delta_bic <= -settings.bic_threshold
+            && predicted_mae < refit_mae
             && held_out_improvement >= settings.min_held_out_improvement
             && !inert
             && alone[i]
@@ -275,7 +302,7 @@ pub fn diagnose(
             } else {
                 0.0
             },
-            predicted_mae: mean_abs(&e),
+            predicted_mae,
             delta_bic,
             held_out_improvement,
             significant,
@@ -322,8 +349,8 @@ pub fn diagnose(
     });
     Ok(Diagnosis {
         schema: DIAGNOSIS_SCHEMA.into(),
-        mae: mean_abs(r),
-        refit_mae: mean_abs(&e0),
+        mae: mean_abs(raw),
+        refit_mae,
         noise_sigma: sigma,
         noise_sigma_estimated: estimated,
         held_out: scheme,

@@ -10,7 +10,7 @@ use crate::{Error, Result};
 /// |---|---|---|---|
 /// | `noise_sigma` | none | measurement noise (standard deviation, output units); none: estimated from the refit of the current parameters alone, `sqrt(RSS_0 / (n - rank J))`, which is an upper bound when an effect is missing | finite, > 0 |
 /// | `bic_threshold` | 10 | a hypothesis must lower the BIC by at least this much (10: "very strong" evidence on the Kass-Raftery scale) | finite, >= 0 |
-/// | `min_held_out_improvement` | 0.05 | it must also remove at least this fraction of the held-out squared error | finite, < 1 |
+/// | `min_held_out_improvement` | 0.05 | it must also remove at least this fraction of the held-out squared error (and, always, predict a lower MAE than the current parameters' own refit) | finite, < 1 |
 /// | `inert_snr` | 1 | inert when no parameter, moved from 0 to the far end of its range, changes the outputs by this many noise sigmas (2-norm over all rows) | finite, >= 0 |
 /// | `min_independence` | 0.05 | identifiable when the hypothesis's unit columns, with the current parameters' span removed, keep a smallest singular value of at least this (1: orthogonal, 0: dependent), and no other hypothesis spans the same residual directions | (0, 1) |
 /// | `prior_weight` | 0 | ridge on the hypothesis's parameters: adds `prior_weight * (dq_j / s_j)^2` in noise-sigma units, `s_j` the larger magnitude of its bounds (a Gaussian prior of that scale); 0: plain least squares | finite, >= 0 |

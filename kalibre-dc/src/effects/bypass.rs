@@ -98,76 +98,92 @@ impl EffectFactory for BypassFactory {
         let behind = f.opt_str("behind_rack")?;
         let depth = f.opt_f64("depth_m")?;
         let room = hall.room.size_m;
-        let (placement, region) = match (pos, size, behind) {
-            (Some(p), Some(sz), None) => {
-                if depth.is_some() {
-                    return Err(f.error("depth_m", "only with `behind_rack`"));
+        let (placement, region) =
+            match (pos, size, behind) {
+                (Some(p), Some(sz), None) => {
+                    if depth.is_some() {
+                        return Err(f.error("depth_m", "only with `behind_rack`"));
+                    }
+                    if !(sz[0] > 0.0 && sz[1] > 0.0) {
+                        return Err(f.error("size_m", "must be positive"));
+                    }
+                    if p[0] < -1e-9
+                        || p[1] < -1e-9
+                        || p[0] + sz[0] > room[0] + 1e-9
+                        || p[1] + sz[1] > room[1] + 1e-9
+                    {
+                        return Err(f.error("position_m", "the opening must lie inside the room"));
+                    }
+                    let region = Aabb {
+                        min: [p[0], p[1], 0.0],
+                        max: [p[0] + sz[0], p[1] + sz[1], 0.0],
+                    };
+                    (
+                        Placement::Floor {
+                            position_m: p,
+                            size_m: sz,
+                        },
+                        region,
+                    )
                 }
-                if !(sz[0] > 0.0 && sz[1] > 0.0) {
-                    return Err(f.error("size_m", "must be positive"));
-                }
-                if p[0] < -1e-9
-                    || p[1] < -1e-9
-                    || p[0] + sz[0] > room[0] + 1e-9
-                    || p[1] + sz[1] > room[1] + 1e-9
-                {
-                    return Err(f.error("position_m", "the opening must lie inside the room"));
-                }
-                let region = Aabb {
-                    min: [p[0], p[1], 0.0],
-                    max: [p[0] + sz[0], p[1] + sz[1], 0.0],
-                };
-                (
-                    Placement::Floor {
-                        position_m: p,
-                        size_m: sz,
-                    },
-                    region,
-                )
-            }
-            (None, None, Some(id)) => {
-                let r =
-                    hall.racks.iter().find(|r| r.id == id).ok_or_else(|| {
+                (None, None, Some(id)) => {
+                    let r = hall.racks.iter().find(|r| r.id == id).ok_or_else(|| {
                         f.error("behind_rack", format!("no rack `{id}` in the hall"))
                     })?;
-                let d = depth.unwrap_or(0.4);
-                if !(d > 0.0 && d <= 5.0) {
-                    return Err(f.error("depth_m", format!("{d} is outside (0, 5]")));
+                    let d = depth.unwrap_or(0.4);
+                    if !(d > 0.0 && d <= 5.0) {
+                        return Err(f.error("depth_m", format!("{d} is outside (0, 5]")));
+                    }
+                    let b = Aabb::from_position_size(r.position_m, r.size_m);
+                    let (axis, sign) = r.inlet.opposite().axis_sign();
+                    let mut region = Aabb {
+                        min: [b.min[0], b.min[1], 0.0],
+                        max: [b.max[0], b.max[1], 0.0],
+                    };
+                    if sign > 0.0 {
+                        region.min[axis] = b.max[axis];
+                        region.max[axis] = (b.max[axis] + d).min(room[axis]);
+                    } else {
+                        region.max[axis] = b.min[axis];
+                        region.min[axis] = (b.min[axis] - d).max(0.0);
+                    }
+                    if region.max[axis] - region.min[axis] <= 1e-9 {
+                        return Err(f.error(
+                            "behind_rack",
+                            format!("rack `{id}` exhausts against a wall"),
+                        ));
+                    }
+                    (
+                        Placement::BehindRack {
+                            rack: id.to_string(),
+                            depth_m: d,
+                        },
+                        region,
+                    )
                 }
-                let b = Aabb::from_position_size(r.position_m, r.size_m);
-                let (axis, sign) = r.inlet.opposite().axis_sign();
-                let mut region = Aabb {
-                    min: [b.min[0], b.min[1], 0.0],
-                    max: [b.max[0], b.max[1], 0.0],
-                };
-                if sign > 0.0 {
-                    region.min[axis] = b.max[axis];
-                    region.max[axis] = (b.max[axis] + d).min(room[axis]);
-                } else {
-                    region.max[axis] = b.min[axis];
-                    region.min[axis] = (b.min[axis] - d).max(0.0);
+                (None, None, None) => return Err(f.error(
+                    "position_m",
+                    "missing: give `position_m` and `size_m` (a floor opening) or `behind_rack`",
+                )),
+                (Some(_), None, None) => {
+                    return Err(f.error(
+                        "size_m",
+                        "missing: a floor opening needs `position_m` and `size_m`",
+                    ))
                 }
-                if region.max[axis] - region.min[axis] <= 1e-9 {
+                (None, Some(_), None) => {
+                    return Err(f.error(
+                        "position_m",
+                        "missing: a floor opening needs `position_m` and `size_m`",
+                    ))
+                }
+                (_, _, Some(_)) => {
                     return Err(f.error(
                         "behind_rack",
-                        format!("rack `{id}` exhausts against a wall"),
-                    ));
+                        "give either `behind_rack` or `position_m` and `size_m`, not both",
+                    ))
                 }
-                (
-                    Placement::BehindRack {
-                        rack: id.to_string(),
-                        depth_m: d,
-                    },
-                    region,
-                )
-            }
-            _ => {
-                return Err(f.error(
-                    "position_m",
-                    "give either `position_m` and `size_m` (a floor opening) or `behind_rack`",
-                ))
-            }
-        };
+            };
         let param = f.param("fraction", BOUNDS[0], BOUNDS[1], 0.05)?;
         f.finish()?;
         Ok(Box::new(Bypass {

@@ -123,12 +123,16 @@ impl<'a> Fields<'a> {
         if lo > hi || lo < lower || hi > upper {
             return Err(self.error(
                 &bounds_field,
-                format!("[{lo}, {hi}] must be ordered and within [{lower}, {upper}]"),
+                format!(
+                    "[{}, {}] must be ordered and within [{lower}, {upper}]",
+                    short(lo),
+                    short(hi)
+                ),
             ));
         }
         let x = self.opt_f64(name)?.unwrap_or(initial.clamp(lo, hi));
         if x < lo || x > hi {
-            return Err(self.error(name, format!("{x} is outside [{lo}, {hi}]")));
+            return Err(self.error(name, format!("{} is outside [{lo}, {hi}]", short(x))));
         }
         Param::new(name, lo, hi, x, Scale::Linear).map_err(|e| self.error(name, e))
     }
@@ -149,6 +153,23 @@ impl<'a> Fields<'a> {
             }),
         }
     }
+}
+
+/// A number as a reader expects it: plain, or in exponent form when very large or small.
+fn short(x: f64) -> String {
+    if x != 0.0 && !(1e-4..1e6).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+/// Splits a message of [`Fields::error`] into the field it names and the rest.
+pub(crate) fn split_field(message: &str) -> (Option<&str>, &str) {
+    message
+        .strip_prefix("field `")
+        .and_then(|m| m.split_once("`: "))
+        .map_or((None, message), |(f, rest)| (Some(f), rest))
 }
 
 /// An `effects` entry from a kind and fields.

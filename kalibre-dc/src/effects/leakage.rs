@@ -93,8 +93,8 @@ impl EffectFactory for ContainmentLeakageFactory {
                 return Err(f.error(
                     "containment",
                     format!(
-                        "index {c} but the hall has {} containments",
-                        hall.containment.len()
+                        "index {c} is out of range: the hall's containments are 0..{}",
+                        hall.containment.len() - 1
                     ),
                 ));
             }
@@ -124,7 +124,18 @@ impl EffectFactory for ContainmentLeakageFactory {
     }
 
     fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {
+        // Leaky panels everywhere (the common case: a containment kit of one make), each
+        // containment as a whole, then each side of each containment (a door left open).
         let mut out = Vec::new();
+        if hall.containment.is_empty() {
+            return out;
+        }
+        out.push(spec(KIND, vec![]));
+        if hall.containment.len() > 1 {
+            for c in 0..hall.containment.len() {
+                out.push(spec(KIND, vec![("containment", Value::from(c))]));
+            }
+        }
         for c in 0..hall.containment.len() {
             for s in WallSide::ALL {
                 out.push(spec(

@@ -73,8 +73,10 @@ pub trait EffectFactory: Send + Sync {
     fn build(&self, spec: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>>;
 
     /// Candidate placements of this kind in a hall, as `effects` entries: the hypotheses
-    /// a diagnosis tries (e.g. one per CRAC, per rack, per containment side). Hook for
-    /// issue 6; the default has none.
+    /// a diagnosis tries (e.g. one per CRAC, per rack, per containment side); the default
+    /// has none. The diagnosis linearises each candidate from its parameters at 0 (clamped
+    /// into their bounds), so an effect must be absent there (a zero fraction, offset or
+    /// opening).
     fn candidates(&self, _hall: &Hall) -> Vec<EffectSpec> {
         Vec::new()
     }
@@ -176,6 +178,32 @@ impl EffectRegistry {
                 })
             })
             .collect()
+    }
+}
+
+impl EffectRegistry {
+    /// Checks every entry of `hall.effects` as [`Self::build_all`] does, naming the file
+    /// and the field on error: an [`Error::Format`] whose field is a JSON pointer, e.g.
+    /// `hall.json: /effects/0/fraction: effect `bypass`: 0.9 is outside [0, 0.5]`. Tools
+    /// call it right after loading a hall (loading alone cannot check the entries: the
+    /// kinds depend on the registry).
+    pub fn check_hall(&self, hall: &Hall, file: &str) -> Result<()> {
+        for (i, s) in hall.effects.iter().enumerate() {
+            if let Err(e) = self.build(s, hall) {
+                return Err(match e {
+                    Error::Effect { kind, message } => {
+                        let (field, rest) = fields::split_field(&message);
+                        Error::Format {
+                            file: file.to_string(),
+                            field: format!("/effects/{i}/{}", field.unwrap_or("kind")),
+                            message: format!("effect `{kind}`: {rest}"),
+                        }
+                    }
+                    other => other,
+                });
+            }
+        }
+        Ok(())
     }
 }
 

@@ -2,9 +2,13 @@
 //! still fails, and how the error fell.
 
 mod plan;
+mod story;
 mod svg;
+mod thermal;
 
 pub use plan::plan_svg;
+pub use story::{outcome_text, story_error_svg, story_html};
+pub use thermal::{thermal_svg, ColourScale, Marker, ThermalPlane, INLET_HEIGHT_M};
 
 use std::fmt::Write;
 

@@ -55,6 +55,7 @@ pub struct Chart {
     /// Axis labels.
     pub labels: (String, String),
     body: String,
+    x_ticks: Option<Vec<(f64, String)>>,
 }
 
 const MARGIN: (f64, f64, f64, f64) = (56.0, 16.0, 20.0, 44.0); // left, right, top, bottom
@@ -76,6 +77,7 @@ impl Chart {
             y: widen(y),
             labels: (xl.into(), yl.into()),
             body: String::new(),
+            x_ticks: None,
         }
     }
 
@@ -86,6 +88,12 @@ impl Chart {
         let fx = (x - self.x.0) / (self.x.1 - self.x.0);
         let fy = (y - self.y.0) / (self.y.1 - self.y.0);
         (l + fx * (w - l - r), t + (1.0 - fy) * (h - t - b))
+    }
+
+    /// Labelled ticks on the x axis in place of the automatic ones.
+    pub fn with_x_ticks(mut self, ticks: Vec<(f64, String)>) -> Self {
+        self.x_ticks = Some(ticks);
+        self
     }
 
     /// A polyline through the points.
@@ -123,6 +131,21 @@ impl Chart {
         );
     }
 
+    /// A small label just above and right of a data point.
+    pub fn text(&mut self, x: f64, y: f64, text: &str) {
+        if !(x.is_finite() && y.is_finite()) {
+            return;
+        }
+        let (a, b) = self.px(x, y);
+        let _ = write!(
+            self.body,
+            r#"<text x="{:.1}" y="{:.1}" font-size="11">{}</text>"#,
+            a + 8.0,
+            b - 6.0,
+            esc(text)
+        );
+    }
+
     /// A legend entry at row `i`.
     pub fn legend(&mut self, i: usize, colour: &str, text: &str) {
         let (l, _, t, _) = MARGIN;
@@ -151,7 +174,13 @@ impl Chart {
             w - l - r,
             h - t - b
         );
-        for tx in ticks(self.x.0, self.x.1, 6) {
+        let x_ticks = self.x_ticks.clone().unwrap_or_else(|| {
+            ticks(self.x.0, self.x.1, 6)
+                .into_iter()
+                .map(|t| (t, fmt_tick(t)))
+                .collect()
+        });
+        for (tx, label) in x_ticks {
             let (px, _) = self.px(tx, self.y.0);
             let _ = write!(
                 s,
@@ -159,7 +188,7 @@ impl Chart {
                 t,
                 h - b,
                 h - b + 14.0,
-                fmt_tick(tx)
+                esc(&label)
             );
         }
         for ty in ticks(self.y.0, self.y.1, 5) {
@@ -189,7 +218,8 @@ impl Chart {
     }
 }
 
-fn fmt_tick(v: f64) -> String {
+/// A tick label: integers without decimals, others with at most two.
+pub fn fmt_tick(v: f64) -> String {
     if v.abs() >= 100.0 || v == v.round() {
         format!("{v:.0}")
     } else {

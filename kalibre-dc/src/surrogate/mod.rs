@@ -8,9 +8,11 @@
 //! - [`TemperatureRisePenalty`]: the paper's power-weighted ReLU prior on server
 //!   temperature rises, with a report of where it binds;
 //! - [`ThermalGraphObjective`]: the search loss on a fitted graph, precomputed for speed;
-//! - [`SurrogateTerm`]: the extension point for effect terms.
+//! - [`SurrogateTerm`]: the extension point for effect terms; [`EffectLinearTerm`]: the
+//!   learned linear term of one effect parameter.
 
 mod adjacency;
+mod effect_linear;
 mod flow_balance;
 mod graph;
 mod local_flow;
@@ -20,6 +22,7 @@ mod term;
 mod train;
 
 pub use adjacency::{Adjacency, AdjacencySettings, Csr};
+pub use effect_linear::EffectLinearTerm;
 pub use flow_balance::{FlowBalance, FlowBalanceTerm};
 pub use graph::{ThermalGraph, ThermalGraphSettings};
 pub use local_flow::{LocalRecirculationTerm, LOCAL_RADIUS_M};

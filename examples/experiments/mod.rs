@@ -1,0 +1,313 @@
+//! Shared code of the paper's experiments (`table4`, `fig7`, `fig8`): the synthetic
+//! halls, the four-step loop with any surrogate and searcher, statistics over seeds, and
+//! writing results. The example binaries and `tests/experiments.rs` include this module
+//! with `#[path]`, so the test suite runs the same code as the binaries (in quick mode).
+
+#![allow(dead_code)] // Each binary uses part of the shared code.
+
+pub mod chart;
+pub mod fig7;
+pub mod fig8;
+pub mod table4;
+
+use std::path::{Path, PathBuf};
+
+use kalibre::core::{Calibrator, Event, Observations, Report, RunStore, Searcher, Surrogate};
+use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::hall::Hall;
+use kalibre::dc::sim::SimConfig;
+use kalibre::dc::snapshots::{self, HallSnapshot, OperatingState};
+use kalibre::dc::surrogate::{FlowBalance, FlowBalanceTerm, TemperatureRisePenalty, ThermalGraph};
+use kalibre::dc::synth::{self, Preset, SynthOptions};
+use kalibre::dc::HallModel;
+use serde::{Deserialize, Serialize};
+
+/// Any error of an experiment.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
+/// Result of an experiment step.
+pub type Result<T> = std::result::Result<T, BoxError>;
+
+/// The measurements of every experiment: synth seed 1, 3 snapshots, noise 0.2 C, no
+/// hidden effect (issue 5).
+pub const SYNTH_SEED: u64 = 1;
+/// Snapshots per synthetic hall.
+pub const SNAPSHOTS: usize = 3;
+/// Sensor noise of the synthetic measurements (C).
+pub const NOISE_C: f64 = 0.2;
+
+/// A synthetic hall, its measurements and the model calibrated against them.
+pub struct Setup {
+    /// Preset name.
+    pub preset: Preset,
+    /// The hall (initial alpha per the preset's policy).
+    pub hall: Hall,
+    /// Snapshots with noisy measurements.
+    pub snaps: Vec<HallSnapshot>,
+    /// The same as core observations.
+    pub obs: Observations<OperatingState>,
+    /// The built-in simulator on its default grid.
+    pub model: HallModel,
+    /// MAE of the model at the true alphas (C), when the reference runs were made.
+    pub model_at_truth_mae_c: Option<f64>,
+    /// MAE of the noise alone (C), when the reference runs were made.
+    pub noise_only_mae_c: Option<f64>,
+    /// Wall time of the synthesis, seconds.
+    pub synth_s: f64,
+}
+
+/// Synthesises `preset` (seed 1, 3 snapshots, noise 0.2 C) and builds its model.
+/// `reference` also runs the model at the truth (a few extra runs) for context.
+pub fn setup(preset: Preset, reference: bool) -> Result<Setup> {
+    let t = std::time::Instant::now();
+    let opts = SynthOptions::new(preset, SYNTH_SEED)
+        .with_snapshots(SNAPSHOTS)
+        .with_noise_c(NOISE_C)
+        .with_reference_runs(reference);
+    let s = synth::generate(&opts)?;
+    let synth_s = t.elapsed().as_secs_f64();
+    let obs = snapshots::to_observations(&s.hall, &s.snapshots)?;
+    let model = HallModel::new(&s.hall, SimConfig::default())?;
+    let reference = s.truth.reference.as_ref();
+    Ok(Setup {
+        preset,
+        model_at_truth_mae_c: reference.map(|r| r.model_at_truth_mae_c),
+        noise_only_mae_c: reference.map(|r| r.noise_only_mae_c),
+        hall: s.hall,
+        snaps: s.snapshots,
+        obs,
+        model,
+        synth_s,
+    })
+}
+
+/// Runs the four-step loop on `setup` with `surrogate` and `searcher`, assembled exactly
+/// as [`kalibre::dc::calibration::calibrate_hall`] assembles it (the temperature-rise
+/// prior as regulariser, the loop settings of `settings.core` with the penalty's
+/// weight), so a baseline surrogate or searcher runs in the same loop as Kalibre.
+pub fn run_loop<'o, Su>(
+    setup: &Setup,
+    surrogate: Su,
+    searcher: impl Searcher + 'o,
+    settings: &HallCalibrationSettings,
+    observer: Option<&'o (dyn Fn(&Event<'_>) + Sync)>,
+) -> Result<Report>
+where
+    Su: Surrogate<Scenario = OperatingState> + Sync,
+{
+    let layout = setup.model.layout();
+    let space = layout.space().clone();
+    let scenarios: Vec<_> = setup.snaps.iter().map(|s| s.state.clone()).collect();
+    let penalty = TemperatureRisePenalty::new(&setup.hall, layout, &scenarios, settings.penalty)?;
+    let core = kalibre::core::Settings {
+        regularizer_weight: settings.penalty.weight,
+        // As `calibrate_hall`: the model-in-the-loop polish only for few parameters.
+        polish_iterations: if space.dim() <= settings.polish_max_params {
+            settings.core.polish_iterations
+        } else {
+            0
+        },
+        ..settings.core.clone()
+    };
+    let mut cal = Calibrator::new(&setup.model, surrogate, &setup.obs, &space)
+        .with_settings(core)
+        .with_searcher(searcher)
+        .with_regularizer(&penalty, settings.penalty.weight)
+        .with_store(RunStore::in_memory(kalibre::core::Model::fingerprint(
+            &setup.model,
+        )));
+    if let Some(o) = observer {
+        cal = cal.with_observer(move |e: &Event<'_>| o(e));
+    }
+    Ok(cal.run()?)
+}
+
+/// Kalibre's thermal graph as `calibrate_hall` builds it: the paper's cooling and heating
+/// blocks plus the recirculation and bypass terms.
+pub fn kalibre_surrogate(
+    setup: &Setup,
+    settings: &HallCalibrationSettings,
+) -> Result<ThermalGraph> {
+    let layout = setup.model.layout();
+    let mut g = ThermalGraph::new(&setup.hall, layout.clone(), settings.surrogate)?;
+    if settings.flow_balance_terms {
+        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
+            g = g.with_term(Box::new(FlowBalanceTerm::new(&setup.hall, layout, kind)));
+        }
+    }
+    Ok(g)
+}
+
+/// Serialises a preset by its CLI name.
+pub fn ser_preset<S: serde::Serializer>(p: &Preset, s: S) -> std::result::Result<S::Ok, S::Error> {
+    s.serialize_str(p.as_str())
+}
+
+/// Reads a preset from its CLI name.
+pub fn de_preset<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Preset, D::Error> {
+    let s = String::deserialize(d)?;
+    s.parse().map_err(serde::de::Error::custom)
+}
+
+/// Reads an experiment's JSON result (to redraw its figure without rerunning it).
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?)
+}
+
+/// Mean, sample standard deviation, minimum and maximum of a set of values.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Stats {
+    /// Values summarised.
+    pub n: usize,
+    /// Mean.
+    pub mean: f64,
+    /// Sample standard deviation (0 for one value).
+    pub sd: f64,
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
+}
+
+impl Stats {
+    /// Summarises `v`; `None` when it is empty.
+    pub fn of(v: &[f64]) -> Option<Stats> {
+        if v.is_empty() {
+            return None;
+        }
+        let n = v.len();
+        let mean = v.iter().sum::<f64>() / n as f64;
+        let var = if n > 1 {
+            v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64
+        } else {
+            0.0
+        };
+        Some(Stats {
+            n,
+            mean,
+            sd: var.sqrt(),
+            min: v.iter().copied().fold(f64::INFINITY, f64::min),
+            max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        })
+    }
+
+    /// `mean ± sd` with `digits` decimals (no spread for one value).
+    pub fn show(&self, digits: usize) -> String {
+        if self.n > 1 {
+            format!("{:.digits$} ± {:.digits$}", self.mean, self.sd)
+        } else {
+            format!("{:.digits$}", self.mean)
+        }
+    }
+}
+
+/// Shows an optional summary, `n/a` when absent.
+pub fn show_opt(s: &Option<Stats>, digits: usize) -> String {
+    s.as_ref().map_or_else(|| "n/a".into(), |s| s.show(digits))
+}
+
+/// Command-line options shared by the experiment binaries.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Args {
+    /// Tiny budgets on the demo hall.
+    pub quick: bool,
+    /// Where results are written.
+    pub out_dir: PathBuf,
+    /// Number of seeds (None: the experiment's default).
+    pub seeds: Option<usize>,
+    /// Presets with an optional seed count each (`hall-a:3,hall-b:1`).
+    pub presets: Option<Vec<(Preset, Option<usize>)>>,
+}
+
+/// Parses `--quick`, `--out-dir DIR`, `--seeds N`, `--presets a[:n],b[:n]`.
+pub fn parse_args(args: impl IntoIterator<Item = String>) -> std::result::Result<Args, String> {
+    let mut a = Args {
+        quick: false,
+        out_dir: PathBuf::from("docs/results"),
+        seeds: None,
+        presets: None,
+    };
+    let mut it = args.into_iter();
+    while let Some(flag) = it.next() {
+        let mut value = || it.next().ok_or_else(|| format!("`{flag}` needs a value"));
+        match flag.as_str() {
+            "--quick" => a.quick = true,
+            "--out-dir" => a.out_dir = PathBuf::from(value()?),
+            "--seeds" => {
+                let v = value()?;
+                let n: usize = v
+                    .parse()
+                    .map_err(|_| format!("--seeds: `{v}` is not a count"))?;
+                if n == 0 {
+                    return Err("--seeds must be at least 1".into());
+                }
+                a.seeds = Some(n);
+            }
+            "--presets" => {
+                let mut list = Vec::new();
+                for item in value()?.split(',') {
+                    let (name, n) = match item.split_once(':') {
+                        Some((p, n)) => (
+                            p,
+                            Some(n.parse::<usize>().map_err(|_| {
+                                format!("--presets: `{n}` in `{item}` is not a seed count")
+                            })?),
+                        ),
+                        None => (item, None),
+                    };
+                    list.push((name.parse::<Preset>().map_err(|e| e.to_string())?, n));
+                }
+                a.presets = Some(list);
+            }
+            other => {
+                return Err(format!(
+                    "unknown argument `{other}` (use --quick, --out-dir DIR, --seeds N, \
+                     --presets hall-a[:seeds],hall-b[:seeds])"
+                ))
+            }
+        }
+    }
+    Ok(a)
+}
+
+/// Writes `text` to `dir/name`, creating `dir`; errors name the file.
+pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<PathBuf> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let path = dir.join(name);
+    std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(path)
+}
+
+/// Writes `value` as pretty JSON to `dir/name`.
+pub fn write_json(dir: &Path, name: &str, value: &impl Serialize) -> Result<PathBuf> {
+    write_file(dir, name, &serde_json::to_string_pretty(value)?)
+}
+
+/// Best MAE so far at or before `iteration` in a `(iteration, model_runs, best_mae_c)`
+/// history (the last point when the history stopped earlier).
+pub fn best_at(history: &[(usize, usize, f64)], iteration: usize) -> f64 {
+    history
+        .iter()
+        .take_while(|h| h.0 <= iteration)
+        .last()
+        .map_or(f64::NAN, |h| h.2)
+}
+
+/// The loop report as `(iteration, model_runs, best_mae_c)`, with iteration 0 the initial
+/// values after the design (counted with every design run; the design's own best may be
+/// lower, and is credited to iteration 1 at the latest).
+pub fn loop_history(report: &Report) -> Vec<(usize, usize, f64)> {
+    let mut h = vec![(
+        0,
+        report.initial.design_runs,
+        report.initial.mae_c.unwrap_or(f64::INFINITY),
+    )];
+    for r in &report.history {
+        h.push((
+            r.iteration,
+            r.model_runs,
+            r.best_mae_c.unwrap_or(f64::INFINITY),
+        ));
+    }
+    h
+}

@@ -1,0 +1,97 @@
+//! The paper's Fig. 7 on the synthetic `hall-a`: test MAE of the thermal graph with fixed
+//! and with trainable adjacency and of the vanilla MLP, trained on 5, 15, 30 and 50 % of
+//! the training set (213 model runs at uniformly random alpha, 8:2 split).
+//!
+//! ```sh
+//! cargo run --release --example fig7 -- [--quick] [--out-dir docs/results] [--seeds 3]
+//! ```
+//!
+//! Alpha is drawn uniformly in cfm/W; `--log-box` draws it uniformly on the log scale.
+//! `--quick`: 40 runs of `demo`, 1 seed. Prints the table and writes `fig7.json`,
+//! `fig7.md` and `fig7.svg`.
+
+#[path = "experiments/mod.rs"]
+mod experiments;
+
+use experiments::fig7::{markdown, run_fig7, svg, Fig7Config, Fig7Result};
+use experiments::{parse_args, write_file, write_json};
+
+fn main() {
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    // `--render FILE.json`: redraw the figure and table of an earlier run beside it.
+    if let Some(i) = raw.iter().position(|a| a == "--render") {
+        let Some(file) = raw.get(i + 1).map(std::path::PathBuf::from) else {
+            eprintln!("--render needs a fig7.json file");
+            std::process::exit(2)
+        };
+        let r: Fig7Result = experiments::read_json(&file).unwrap_or_else(|e| {
+            eprintln!("{e}");
+            std::process::exit(1)
+        });
+        let dir = file.parent().unwrap_or(std::path::Path::new("."));
+        let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or("fig7");
+        let written = write_file(dir, &format!("{stem}.svg"), &svg(&r))
+            .and_then(|_| write_file(dir, &format!("{stem}.md"), &markdown(&r)));
+        if let Err(e) = written {
+            eprintln!("{e}");
+            std::process::exit(1);
+        }
+        return;
+    }
+    let log_box = raw.iter().any(|a| a == "--log-box");
+    let args = parse_args(raw.into_iter().filter(|a| a != "--log-box")).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
+    let mut cfg = if args.quick {
+        Fig7Config::quick()
+    } else {
+        Fig7Config::full()
+    };
+    cfg.log_box = log_box;
+    if let Some(n) = args.seeds {
+        cfg.seeds = n;
+    }
+    if let Some((p, _)) = args.presets.as_ref().and_then(|v| v.first()) {
+        cfg.preset = *p;
+    }
+    let r = run_fig7(&cfg, &|l| eprintln!("{l}")).unwrap_or_else(|e| {
+        eprintln!("fig7: {e}");
+        std::process::exit(1)
+    });
+    let md = markdown(&r);
+    let written = write_json(
+        &args.out_dir,
+        if log_box {
+            "fig7-logbox.json"
+        } else {
+            "fig7.json"
+        },
+        &r,
+    )
+    .and_then(|_| {
+        write_file(
+            &args.out_dir,
+            if log_box { "fig7-logbox.md" } else { "fig7.md" },
+            &md,
+        )
+    })
+    .and_then(|_| {
+        write_file(
+            &args.out_dir,
+            if log_box {
+                "fig7-logbox.svg"
+            } else {
+                "fig7.svg"
+            },
+            &svg(&r),
+        )
+    });
+    if let Err(e) = written {
+        eprintln!("{e}");
+        std::process::exit(1);
+    }
+    println!("{md}");
+    let stem = if log_box { "fig7-logbox" } else { "fig7" };
+    println!("wrote {}/{stem}.json, .md and .svg", args.out_dir.display());
+}

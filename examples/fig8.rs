@@ -1,0 +1,105 @@
+//! The paper's Fig. 8 on the synthetic `hall-a`: the search loss and gradient norm per
+//! loop iteration, with differential evolution before Adam (Kalibre) and with Adam
+//! alone, over 10 iterations and 3 seeds.
+//!
+//! ```sh
+//! cargo run --release --example fig8 -- [--quick] [--out-dir docs/results] [--seeds 3]
+//! ```
+//!
+//! `--paper-loop` runs the paper's Algorithm 1 (no trust region, output correction or fit
+//! focus) and writes `fig8-paper-loop.*` instead. `--quick`: 3 iterations of `demo`, 1 seed. Prints the table and writes `fig8.json`,
+//! `fig8.md` and `fig8.svg`.
+
+#[path = "experiments/mod.rs"]
+mod experiments;
+
+use experiments::fig8::{markdown, run_fig8, svg, Fig8Config, Fig8Result};
+use experiments::{parse_args, write_file, write_json};
+
+fn main() {
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    // `--render FILE.json`: redraw the figure and table of an earlier run beside it.
+    if let Some(i) = raw.iter().position(|a| a == "--render") {
+        let Some(file) = raw.get(i + 1).map(std::path::PathBuf::from) else {
+            eprintln!("--render needs a fig8.json file");
+            std::process::exit(2)
+        };
+        let r: Fig8Result = experiments::read_json(&file).unwrap_or_else(|e| {
+            eprintln!("{e}");
+            std::process::exit(1)
+        });
+        let dir = file.parent().unwrap_or(std::path::Path::new("."));
+        let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or("fig8");
+        let written = write_file(dir, &format!("{stem}.svg"), &svg(&r))
+            .and_then(|_| write_file(dir, &format!("{stem}.md"), &markdown(&r)));
+        if let Err(e) = written {
+            eprintln!("{e}");
+            std::process::exit(1);
+        }
+        return;
+    }
+    let paper_loop = raw.iter().any(|a| a == "--paper-loop");
+    let args = parse_args(raw.into_iter().filter(|a| a != "--paper-loop")).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
+    let mut cfg = if args.quick {
+        Fig8Config::quick()
+    } else {
+        Fig8Config::full()
+    };
+    cfg.paper_loop = paper_loop;
+    if let Some(n) = args.seeds {
+        cfg.seeds = n;
+    }
+    if let Some((p, _)) = args.presets.as_ref().and_then(|v| v.first()) {
+        cfg.preset = *p;
+    }
+    let r = run_fig8(&cfg, &|l| eprintln!("{l}")).unwrap_or_else(|e| {
+        eprintln!("fig8: {e}");
+        std::process::exit(1)
+    });
+    let md = markdown(&r);
+    let written = write_json(
+        &args.out_dir,
+        if paper_loop {
+            "fig8-paper-loop.json"
+        } else {
+            "fig8.json"
+        },
+        &r,
+    )
+    .and_then(|_| {
+        write_file(
+            &args.out_dir,
+            if paper_loop {
+                "fig8-paper-loop.md"
+            } else {
+                "fig8.md"
+            },
+            &md,
+        )
+    })
+    .and_then(|_| {
+        write_file(
+            &args.out_dir,
+            if paper_loop {
+                "fig8-paper-loop.svg"
+            } else {
+                "fig8.svg"
+            },
+            &svg(&r),
+        )
+    });
+    if let Err(e) = written {
+        eprintln!("{e}");
+        std::process::exit(1);
+    }
+    println!("{md}");
+    let stem = if paper_loop {
+        "fig8-paper-loop"
+    } else {
+        "fig8"
+    };
+    println!("wrote {}/{stem}.json, .md and .svg", args.out_dir.display());
+}

@@ -1,0 +1,312 @@
+//! The optional last stage of the loop: Levenberg-Marquardt on the model itself.
+//!
+//! The surrogate finds the basin; near the optimum its own error (a fraction of a degree
+//! on a hall) is as large as the differences it must resolve, so the loop stalls above
+//! what the model can reach. When model runs are cheap enough, a few Gauss-Newton steps
+//! with finite-difference Jacobians of the model close that gap. Each step costs
+//! `dim + 1` runs per snapshot after an accepted move (the Jacobian), one per snapshot
+//! after a rejected one (the Jacobian is kept, the damping raised). Every run goes through
+//! the same runner as the loop's: journaled, replayed on resume, failures recorded.
+
+use std::time::Instant;
+
+use super::report::{Errors, IterationRecord, NamedValues, SnapshotErrors, Timings};
+use super::runner::{RunResult, Runner};
+use super::state::{PointEval, State};
+use super::Settings;
+use crate::diagnose::linalg::lstsq;
+use crate::{Model, Observations, ParamSpace, Result, Validator};
+
+/// Finite-difference step in the unit box.
+const FD_STEP: f64 = 0.01;
+/// Initial Marquardt damping (relative to each column's squared norm).
+const LAMBDA_START: f64 = 0.01;
+/// A step shorter than this (max norm, unit box) ends the polish: nothing left to gain.
+const MIN_STEP: f64 = 1e-6;
+
+/// What each polish step adds to its [`IterationRecord`] beyond the run's errors.
+pub(crate) struct StepInfo {
+    pub fit_mse: f64,
+    pub training_samples: usize,
+    pub search_loss: f64,
+    pub search_data_mse: f64,
+    pub search_evaluations: usize,
+    pub perturbed: bool,
+    pub wall_s: Timings,
+}
+
+/// The history record of one evaluated point (loop iteration or polish step).
+pub(crate) fn record(
+    iteration: usize,
+    state: &State,
+    eval: &PointEval,
+    n_snap: usize,
+    names: &[String],
+    params: &[f64],
+    info: StepInfo,
+) -> IterationRecord {
+    let v = eval.validation.as_ref();
+    IterationRecord {
+        iteration,
+        model_runs: state.counts.total,
+        mae_c: v.map(|v| v.overall.mae),
+        rmse_c: v.map(|v| v.overall.rmse),
+        max_abs_c: v.map(|v| v.overall.max_abs),
+        score: eval.score,
+        best_mae_c: state.best.as_ref().map(|b| b.validation.overall.mae),
+        per_snapshot: v.map_or_else(Vec::new, |v| {
+            v.per_snapshot
+                .iter()
+                .map(|(l, e)| SnapshotErrors {
+                    snapshot: l.clone(),
+                    mae_c: e.mae,
+                    rmse_c: e.rmse,
+                    max_abs_c: e.max_abs,
+                })
+                .collect()
+        }),
+        per_group: v.map_or_else(Default::default, |v| {
+            v.per_group
+                .iter()
+                .map(|(g, e)| (g.clone(), Errors::from(*e)))
+                .collect()
+        }),
+        fit_mse: info.fit_mse,
+        training_samples: info.training_samples,
+        search_loss: info.search_loss,
+        search_data_mse: info.search_data_mse,
+        search_evaluations: info.search_evaluations,
+        failed_runs: n_snap - eval.ok_runs,
+        perturbed: info.perturbed,
+        params: NamedValues::new(names, params),
+        wall_s: info.wall_s,
+    }
+}
+
+/// Residuals `measured - predicted` over every measured output of every snapshot.
+fn residuals<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f64> {
+    obs.snapshots()
+        .iter()
+        .zip(outputs)
+        .flat_map(|(snap, pred)| {
+            snap.measured
+                .iter()
+                .zip(pred)
+                .filter_map(|(m, p)| m.map(|m| m - p))
+        })
+        .collect()
+}
+
+/// The model linearised at a point: the point (unit box), its residuals and the
+/// Jacobian's columns (residual change per unit-box step).
+struct Linearisation {
+    unit: Vec<f64>,
+    residuals: Vec<f64>,
+    columns: Vec<Vec<f64>>,
+}
+
+/// The polish stage's context: what it runs and scores with.
+pub(crate) struct Polish<'p, 'r, M: Model, V> {
+    pub runner: &'p Runner<'r, M>,
+    pub validator: &'p V,
+    pub observations: &'p Observations<M::Scenario>,
+    pub space: &'p ParamSpace,
+    pub settings: &'p Settings,
+    pub names: &'p [String],
+    pub t_start: Instant,
+}
+
+impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
+    /// Room for `runs` more model runs within the run and wall budgets.
+    fn within_budget(&self, state: &State, runs: usize) -> bool {
+        let st = self.settings;
+        st.max_model_runs
+            .is_none_or(|b| state.counts.total + runs <= b)
+            && !st
+                .max_wall_s
+                .is_some_and(|w| self.t_start.elapsed().as_secs_f64() >= w)
+    }
+
+    /// Runs up to `settings.polish_iterations` damped Gauss-Newton steps from the best
+    /// point, numbering them after `last_iteration`; returns their history records.
+    pub(crate) fn run(
+        &self,
+        state: &mut State,
+        last_iteration: usize,
+        mut emit: impl FnMut(&IterationRecord),
+    ) -> Result<Vec<IterationRecord>> {
+        let (obs, space) = (self.observations, self.space);
+        let n_snap = obs.snapshots().len();
+        let dim = space.dim();
+        let mut records = Vec::new();
+        let mut lambda = LAMBDA_START;
+        let mut jac: Option<Linearisation> = None;
+        let mut iteration = last_iteration;
+        for _ in 0..self.settings.polish_iterations {
+            let Some(best) = state.best.as_ref() else {
+                break;
+            };
+            let t_iter = Instant::now();
+            let mut model_s = 0.0;
+            let stale = jac.as_ref().is_none_or(|l| l.unit != best.unit);
+            if stale {
+                if !self.within_budget(state, (dim + 1) * n_snap) {
+                    break;
+                }
+                let (u0, y0) = (best.unit.clone(), best.outputs.clone());
+                let r0 = residuals(obs, &y0);
+                let mut steps = Vec::with_capacity(dim);
+                let mut points = Vec::with_capacity(dim);
+                for i in 0..dim {
+                    let mut u = u0.clone();
+                    u[i] = if u[i] + FD_STEP <= 1.0 {
+                        u[i] + FD_STEP
+                    } else {
+                        u[i] - FD_STEP
+                    };
+                    steps.push(u[i] - u0[i]);
+                    points.push(u);
+                }
+                let phys: Vec<Vec<f64>> = points
+                    .iter()
+                    .map(|u| space.from_unit(u))
+                    .collect::<Result<_>>()?;
+                iteration += 1;
+                let t = Instant::now();
+                let results = self.runner.run(iteration, &phys)?;
+                model_s += t.elapsed().as_secs_f64();
+                let mut cols = Vec::with_capacity(dim);
+                for (i, res) in results.into_iter().enumerate() {
+                    let ok: Option<Vec<Vec<f64>>> = res
+                        .iter()
+                        .map(|r: &RunResult| r.result.as_ref().ok().map(|o| o.values.clone()))
+                        .collect();
+                    // A failed difference leaves its parameter where it is (a zero column).
+                    let col = match &ok {
+                        Some(out) => residuals(obs, out)
+                            .iter()
+                            .zip(&r0)
+                            .map(|(r, r0)| (r0 - r) / steps[i])
+                            .collect(),
+                        None => vec![0.0; r0.len()],
+                    };
+                    cols.push(col);
+                    state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res);
+                }
+                jac = Some(Linearisation {
+                    unit: u0,
+                    residuals: r0,
+                    columns: cols,
+                });
+            }
+            let Some(Linearisation {
+                unit: u0,
+                residuals: r0,
+                columns: cols,
+            }) = jac.as_ref()
+            else {
+                break;
+            };
+            if !self.within_budget(state, n_snap) {
+                break;
+            }
+            let t = Instant::now();
+            let step = self.damped_step(u0, r0, cols, lambda);
+            let search_s = t.elapsed().as_secs_f64();
+            if step.iter().map(|d| d.abs()).fold(0.0, f64::max) < MIN_STEP {
+                break;
+            }
+            let unit: Vec<f64> = u0
+                .iter()
+                .zip(&step)
+                .map(|(u, d)| (u + d).clamp(0.0, 1.0))
+                .collect();
+            let params = space.from_unit(&unit)?;
+            let before = state.best.as_ref().map(|b| b.score);
+            iteration += 1;
+            let t = Instant::now();
+            let results = self
+                .runner
+                .run(iteration, std::slice::from_ref(&params))?
+                .pop()
+                .unwrap_or_default();
+            model_s += t.elapsed().as_secs_f64();
+            let eval = state.absorb(self.validator, obs, iteration, &unit, &params, results);
+            let improved = state.best.as_ref().map(|b| b.score) < before
+                || before.is_none() && state.best.is_some();
+            lambda = if improved {
+                (lambda / 3.0).max(1e-6)
+            } else {
+                lambda * 4.0
+            };
+            // The linearised loss: what the step promised, per measured output.
+            let predicted = {
+                let mut r = r0.clone();
+                for (c, d) in cols.iter().zip(&step) {
+                    r.iter_mut().zip(c).for_each(|(ri, ci)| *ri -= ci * d);
+                }
+                r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64
+            };
+            let rec = record(
+                iteration,
+                state,
+                &eval,
+                n_snap,
+                self.names,
+                &params,
+                StepInfo {
+                    fit_mse: f64::NAN,
+                    training_samples: 0,
+                    search_loss: predicted,
+                    search_data_mse: predicted,
+                    search_evaluations: if stale { dim } else { 0 },
+                    perturbed: false,
+                    wall_s: Timings {
+                        fit_s: 0.0,
+                        search_s,
+                        model_s,
+                        total_s: t_iter.elapsed().as_secs_f64(),
+                    },
+                },
+            );
+            emit(&rec);
+            records.push(rec);
+        }
+        Ok(records)
+    }
+
+    /// The Levenberg-Marquardt step in the unit box: `min |r0 - J d|^2 + lambda sum_j
+    /// |J_j|^2 d_j^2`, with parameters the step would push out of the box held at the
+    /// bound and the rest solved again.
+    fn damped_step(&self, u0: &[f64], r0: &[f64], cols: &[Vec<f64>], lambda: f64) -> Vec<f64> {
+        let dim = cols.len();
+        let mut free = vec![true; dim];
+        let mut step = vec![0.0; dim];
+        for _ in 0..dim.max(1) {
+            let active: Vec<usize> = (0..dim).filter(|&j| free[j]).collect();
+            let a: Vec<&[f64]> = active.iter().map(|&j| cols[j].as_slice()).collect();
+            let ridge: Vec<f64> = active
+                .iter()
+                .map(|&j| lambda * cols[j].iter().map(|v| v * v).sum::<f64>())
+                .collect();
+            let x = lstsq(&a, r0, &ridge).x;
+            step = vec![0.0; dim];
+            let mut clipped = false;
+            for (k, &j) in active.iter().enumerate() {
+                step[j] = x[k];
+                let u = u0[j] + x[k];
+                if (u < 0.0 && u0[j] <= 0.0) || (u > 1.0 && u0[j] >= 1.0) {
+                    free[j] = false;
+                    clipped = true;
+                }
+            }
+            if !clipped {
+                break;
+            }
+        }
+        step.iter()
+            .zip(&free)
+            .map(|(d, f)| if *f { *d } else { 0.0 })
+            .collect()
+    }
+}

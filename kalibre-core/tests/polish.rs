@@ -1,0 +1,99 @@
+//! The loop's polish stage: Levenberg-Marquardt steps on the model itself after the
+//! four-step iterations. It closes the gap a surrogate leaves, counts and journals its
+//! runs like the loop's, stays within the run budget, and replays from the journal.
+
+mod common;
+
+use common::*;
+use kalibre_core::{Calibrator, Report, RunStore, Settings};
+
+fn run(polish: usize, budget: Option<usize>, store: Option<RunStore>) -> (Report, usize) {
+    let (model, obs, space) = (Poly::new(), observations(), space());
+    let settings = Settings {
+        seed: 5,
+        max_iterations: 1,
+        polish_iterations: polish,
+        max_model_runs: budget,
+        ..Settings::default()
+    };
+    let mut cal =
+        Calibrator::new(&model, QuadSurface::default(), &obs, &space).with_settings(settings);
+    if let Some(s) = store {
+        cal = cal.with_store(s);
+    }
+    let report = cal.run().unwrap();
+    (report, model.calls())
+}
+
+#[test]
+fn polish_reaches_the_least_squares_optimum_the_loop_stopped_short_of() {
+    let (loop_only, _) = run(0, None, None);
+    let (polished, calls) = run(10, None, None);
+    assert!(
+        loop_only.best.mae_c > 1e-3,
+        "loop alone {}",
+        loop_only.best.mae_c
+    );
+    // Forward differences make the Jacobian inexact, so convergence is linear: ten steps
+    // take the error down by two orders of magnitude or more, not to round-off.
+    assert!(
+        polished.best.mae_c < 1e-5 && polished.best.mae_c < loop_only.best.mae_c / 100.0,
+        "polished {} from {}",
+        polished.best.mae_c,
+        loop_only.best.mae_c
+    );
+    for (name, truth) in ["a", "b"].iter().zip(TRUTH) {
+        let got = polished.best.params.get(name).unwrap();
+        assert!((got - truth).abs() < 1e-4, "{name}: {got} vs {truth}");
+    }
+    // Every run counted, polish records numbered after the loop's, no surrogate fit.
+    assert_eq!(calls, polished.runs.total);
+    assert_eq!(polished.history[0].iteration, 1);
+    let steps = &polished.history[1..];
+    assert!(!steps.is_empty());
+    for (k, h) in steps.iter().enumerate() {
+        assert!(
+            h.iteration > 1 + k,
+            "iterations increase: {:?}",
+            h.iteration
+        );
+        assert_eq!(h.training_samples, 0);
+        assert!(h.fit_mse.is_nan());
+    }
+    // Each best-so-far never rises.
+    let best: Vec<f64> = polished
+        .history
+        .iter()
+        .filter_map(|h| h.best_mae_c)
+        .collect();
+    assert!(best.windows(2).all(|w| w[1] <= w[0]), "{best:?}");
+}
+
+#[test]
+fn polish_stays_within_the_run_budget() {
+    // Design 8 + loop 2 = 10 runs; a Jacobian needs (2 + 1) x 2 = 6 more, a step 2.
+    for budget in [10, 15, 16, 18, 23] {
+        let (r, calls) = run(10, Some(budget), None);
+        assert!(
+            r.runs.total <= budget,
+            "budget {budget}: {} runs",
+            r.runs.total
+        );
+        assert_eq!(calls, r.runs.total);
+    }
+    let (r, _) = run(10, Some(15), None);
+    assert_eq!(r.history.len(), 1, "no room for a Jacobian: no polish step");
+}
+
+#[test]
+fn polish_runs_replay_from_the_journal() {
+    let dir = temp_dir("polish-journal");
+    let path = dir.join("runs.jsonl");
+    let (first, calls) = run(6, None, Some(RunStore::open(&path, "poly-v1").unwrap()));
+    assert_eq!(calls, first.runs.total);
+    let (second, calls) = run(6, None, Some(RunStore::open(&path, "poly-v1").unwrap()));
+    assert_eq!(calls, 0, "every run replayed");
+    assert_eq!(second.runs.cached, second.runs.total);
+    assert_eq!(best_bits(&first), best_bits(&second));
+    let _ = std::fs::remove_dir_all(dir);
+}

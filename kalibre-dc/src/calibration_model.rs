@@ -1,0 +1,106 @@
+//! The hall calibration with any model of a hall (OpenFOAM, an external command): the
+//! surrogate, its terms and the temperature-rise prior are built from the hall exactly as
+//! in [`crate::calibration::calibrate_hall`]; only the model runs change.
+
+use std::path::Path;
+
+use kalibre_core::calibrate::Report;
+use kalibre_core::{Calibrator, Model, Observe, RunStore, Settings};
+
+use crate::calibration::HallCalibrationSettings;
+use crate::hall::Hall;
+use crate::snapshots::{self, HallSnapshot, OperatingState};
+use crate::surrogate::{
+    FlowBalance, FlowBalanceTerm, LocalRecirculationTerm, PenaltyReport, TemperatureRisePenalty,
+    ThermalGraph,
+};
+use crate::{Error, ParamLayout, Result};
+
+/// What a calibration with an external model returns.
+#[derive(Debug)]
+pub struct ModelCalibration {
+    /// The calibration report (`report.json`).
+    pub report: Report,
+    /// The temperature-rise prior's report at the best parameters.
+    pub penalty_report: PenaltyReport,
+}
+
+/// Calibrates `model` (whose parameters are laid out as `layout`, the layout the built-in
+/// model would use for `hall`) against `snaps`, journaling runs in `journal` when given.
+///
+/// `settings.alpha_mode` and `settings.sim` are not used: the model fixes the layout and
+/// does its own solving.
+pub fn calibrate_hall_model<'o, M>(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    model: &M,
+    layout: &ParamLayout,
+    settings: &HallCalibrationSettings,
+    journal: Option<&Path>,
+    observers: Vec<Box<dyn Observe + 'o>>,
+) -> Result<ModelCalibration>
+where
+    M: Model<Scenario = OperatingState>,
+{
+    let observations = snapshots::to_observations(hall, snaps)?;
+    let space = layout.space().clone();
+    if space.is_empty() {
+        return Err(Error::Mismatch(format!(
+            "hall `{}` has nothing to calibrate (alpha is fixed and no effect has parameters)",
+            hall.name
+        )));
+    }
+    let mut surrogate = ThermalGraph::new(hall, layout.clone(), settings.surrogate)?;
+    if settings.flow_balance_terms {
+        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
+            surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(hall, layout, kind)));
+        }
+    }
+    if settings.local_recirculation_term {
+        surrogate = surrogate.with_term(Box::new(LocalRecirculationTerm::new(hall, layout)));
+    }
+    let scenarios: Vec<_> = snaps.iter().map(|s| s.state.clone()).collect();
+    let penalty = TemperatureRisePenalty::new(hall, layout, &scenarios, settings.penalty)?;
+    let store = match journal {
+        Some(path) => {
+            let store = RunStore::open(path, model.fingerprint())?;
+            let load = store.load_report();
+            if load.other_fingerprint > 0 {
+                return Err(Error::Mismatch(format!(
+                    "{}: holds {} runs of another model (a different model, hall, grid or \
+                     settings); calibrate into another directory",
+                    path.display(),
+                    load.other_fingerprint
+                )));
+            }
+            store
+        }
+        None => RunStore::in_memory(model.fingerprint()),
+    };
+    // As in `calibrate_hall`: the polish stage's Jacobians cost `dim + 1` runs per
+    // snapshot, so it runs only for few parameters.
+    let core_settings = Settings {
+        regularizer_weight: settings.penalty.weight,
+        polish_iterations: if space.dim() <= settings.polish_max_params {
+            settings.core.polish_iterations
+        } else {
+            0
+        },
+        ..settings.core.clone()
+    };
+    let mut calibrator = Calibrator::new(model, surrogate, &observations, &space)
+        .with_settings(core_settings)
+        .with_searcher(settings.searcher.clone())
+        .with_regularizer(&penalty, settings.penalty.weight)
+        .with_store(store);
+    for o in observers {
+        calibrator = calibrator.with_observer(move |e: &kalibre_core::Event<'_>| o.observe(e));
+    }
+    let report = calibrator.run()?;
+    let best = report.best.params.values();
+    let penalty_report = penalty.report(&best);
+    Ok(ModelCalibration {
+        report,
+        penalty_report,
+    })
+}

@@ -1,0 +1,436 @@
+//! The hall on the OpenFOAM grid: which cells are solid, which boundary faces form each
+//! patch (server intakes and exhausts, tiles, returns), the heated cell layers and the
+//! probe points, all checked in Rust before any OpenFOAM program runs.
+//!
+//! Patch names are built from indices (`srv7-in`, `tile2`, `ret0`) because hall ids may
+//! hold characters OpenFOAM does not accept in a word; the order is the hall's.
+
+use crate::hall::{Hall, Side, SupplyKind};
+
+use super::OpenFoamError;
+
+/// Relative tolerance for "on the grid".
+const GRID_TOL: f64 = 1e-6;
+
+/// An axis-aligned index box of cells `[lo, hi)` per axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CellRange {
+    /// Lowest cell index per axis.
+    pub lo: [usize; 3],
+    /// One past the highest cell index per axis.
+    pub hi: [usize; 3],
+}
+
+impl CellRange {
+    fn count(&self) -> usize {
+        (0..3).map(|a| self.hi[a] - self.lo[a]).product()
+    }
+}
+
+/// A set of boundary faces on one plane: normal `axis`, at grid line `plane`, over the
+/// tangential cell range of `cells` (its extent along `axis` is ignored).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FacePatch {
+    /// OpenFOAM patch name.
+    pub name: String,
+    /// Normal axis (0 x, 1 y, 2 z).
+    pub axis: usize,
+    /// Grid line index of the plane along `axis`.
+    pub plane: usize,
+    /// Tangential extent (cell indices).
+    pub cells: CellRange,
+    /// Number of faces (checked against the mesh OpenFOAM builds).
+    pub faces: usize,
+}
+
+/// One server on the grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServerPatches {
+    /// Intake (air leaves the room here).
+    pub intake: FacePatch,
+    /// Exhaust (air re-enters the room here).
+    pub exhaust: FacePatch,
+    /// The fluid cell layer in front of the exhaust that receives the server's heat.
+    pub heat_cells: CellRange,
+}
+
+/// The hall on the grid.
+#[derive(Debug, Clone)]
+pub struct CaseGeometry {
+    /// Cell size (m).
+    pub h: f64,
+    /// Cells per axis.
+    pub n: [usize; 3],
+    /// Room size (m).
+    pub size_m: [f64; 3],
+    /// Solid boxes (racks, CRACs) as cell ranges.
+    pub solids: Vec<CellRange>,
+    /// Per server, hall order.
+    pub servers: Vec<ServerPatches>,
+    /// Per tile, hall order.
+    pub tiles: Vec<FacePatch>,
+    /// Per return grille, hall order.
+    pub returns: Vec<FacePatch>,
+    /// Probe points (sensor positions), hall order.
+    pub probes: Vec<[f64; 3]>,
+    /// Fluid cells after cutting the solids.
+    pub fluid_cells: usize,
+    solid: Vec<bool>,
+}
+
+fn geo(field: impl Into<String>, message: impl Into<String>) -> OpenFoamError {
+    OpenFoamError::Geometry {
+        field: field.into(),
+        message: message.into(),
+    }
+}
+
+impl CaseGeometry {
+    /// Places `hall` on a grid of cell size `h` (m). Every box edge must lie on a grid line.
+    pub fn new(hall: &Hall, h: f64) -> Result<Self, OpenFoamError> {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(OpenFoamError::Setting {
+                name: "grid_m".into(),
+                reason: format!("{h} is not a positive cell size"),
+            });
+        }
+        if !hall.containment.is_empty() {
+            return Err(OpenFoamError::Unsupported(
+                "aisle containment (`containment` in hall.json): the OpenFOAM adapter has no \
+                 baffles yet"
+                    .into(),
+            ));
+        }
+        if hall.returns.is_empty() {
+            return Err(OpenFoamError::Unsupported(
+                "a hall without ceiling returns: the OpenFOAM case needs a pressure outlet".into(),
+            ));
+        }
+        let snap = |x: f64, field: &str| -> Result<usize, OpenFoamError> {
+            let r = x / h;
+            if (r - r.round()).abs() > GRID_TOL * r.abs().max(1.0) || r < -GRID_TOL {
+                return Err(geo(
+                    field,
+                    format!("{x} m is not on the {h} m grid (the OpenFOAM case needs edges on grid lines)"),
+                ));
+            }
+            Ok(r.round() as usize)
+        };
+        let size = hall.room.size_m;
+        let mut n = [0usize; 3];
+        for a in 0..3 {
+            n[a] = snap(size[a], &format!("/room/size_m/{a}"))?;
+            if n[a] == 0 {
+                return Err(geo(format!("/room/size_m/{a}"), "smaller than one cell"));
+            }
+        }
+        let boxr = |pos: [f64; 3], sz: [f64; 3], field: &str| -> Result<CellRange, OpenFoamError> {
+            let mut lo = [0; 3];
+            let mut hi = [0; 3];
+            for a in 0..3 {
+                lo[a] = snap(pos[a], &format!("{field}/position_m/{a}"))?;
+                hi[a] = snap(pos[a] + sz[a], &format!("{field}/size_m/{a}"))?;
+                if hi[a] <= lo[a] || hi[a] > n[a] {
+                    return Err(geo(field, "box is empty or outside the room on the grid"));
+                }
+            }
+            Ok(CellRange { lo, hi })
+        };
+        let mut solids = Vec::new();
+        for (i, c) in hall.cracs.iter().enumerate() {
+            if c.supply == SupplyKind::Front {
+                return Err(OpenFoamError::Unsupported(format!(
+                    "CRAC `{}`: supply `front` (only `floor` supply through tiles)",
+                    c.id
+                )));
+            }
+            solids.push(boxr(c.position_m, c.size_m, &format!("/cracs/{i}"))?);
+        }
+        let rack_ranges: Vec<CellRange> = hall
+            .racks
+            .iter()
+            .enumerate()
+            .map(|(i, r)| boxr(r.position_m, r.size_m, &format!("/racks/{i}")))
+            .collect::<Result<_, _>>()?;
+        solids.extend(rack_ranges.iter().copied());
+        let mut solid = vec![false; n[0] * n[1] * n[2]];
+        let idx = |i: usize, j: usize, k: usize| i + n[0] * (j + n[1] * k);
+        for s in &solids {
+            for k in s.lo[2]..s.hi[2] {
+                for j in s.lo[1]..s.hi[1] {
+                    for i in s.lo[0]..s.hi[0] {
+                        solid[idx(i, j, k)] = true;
+                    }
+                }
+            }
+        }
+        let fluid_cells = solid.iter().filter(|s| !**s).count();
+        let mut g = CaseGeometry {
+            h,
+            n,
+            size_m: size,
+            solids,
+            servers: Vec::new(),
+            tiles: Vec::new(),
+            returns: Vec::new(),
+            probes: Vec::new(),
+            fluid_cells,
+            solid,
+        };
+
+        for s in hall.servers() {
+            let rack = s.rack;
+            let rr = rack_ranges[s.rack_index];
+            let units = rack.units.max(1) as f64;
+            let z0 = rack.position_m[2] + (s.server.u as f64 - 1.0) / units * rack.size_m[2];
+            let z1 = z0 + s.server.height_u as f64 / units * rack.size_m[2];
+            // Faces whose centre height lies in [z0, z1): servers off the grid still get the
+            // faces nearest their span.
+            let k_lo = ((z0 / h) - 0.5).ceil().max(0.0) as usize;
+            let k_hi = (((z1 / h) - 0.5).ceil().max(0.0) as usize).min(rr.hi[2]);
+            let field = format!("server `{}`", s.server.id);
+            if k_hi <= k_lo {
+                return Err(geo(
+                    &field,
+                    format!("spans z {z0:.3}-{z1:.3} m, less than one {h} m cell face"),
+                ));
+            }
+            let mut span = rr;
+            span.lo[2] = k_lo;
+            span.hi[2] = k_hi;
+            let intake = g.side_patch(&span, rack.inlet, format!("srv{}-in", s.index), &field)?;
+            let exhaust = g.side_patch(
+                &span,
+                rack.inlet.opposite(),
+                format!("srv{}-out", s.index),
+                &field,
+            )?;
+            let (axis, sign) = rack.inlet.opposite().axis_sign();
+            let mut heat = span;
+            if sign > 0.0 {
+                heat.lo[axis] = span.hi[axis];
+                heat.hi[axis] = span.hi[axis] + 1;
+            } else {
+                heat.lo[axis] = span.lo[axis] - 1;
+                heat.hi[axis] = span.lo[axis];
+            }
+            g.servers.push(ServerPatches {
+                intake,
+                exhaust,
+                heat_cells: heat,
+            });
+        }
+        for (t, tile) in hall.tiles.iter().enumerate() {
+            let p = g.plane_patch(
+                tile.position_m,
+                tile.size_m,
+                0,
+                format!("tile{t}"),
+                &format!("/tiles/{t}"),
+                &snap,
+            )?;
+            g.tiles.push(p);
+        }
+        for (r, ret) in hall.returns.iter().enumerate() {
+            let p = g.plane_patch(
+                ret.position_m,
+                ret.size_m,
+                n[2],
+                format!("ret{r}"),
+                &format!("/returns/{r}"),
+                &snap,
+            )?;
+            g.returns.push(p);
+        }
+        for (i, s) in hall.sensors.iter().enumerate() {
+            let p = s.position_m;
+            let mut c = [0usize; 3];
+            for a in 0..3 {
+                if !(p[a] > 0.0 && p[a] < size[a]) {
+                    return Err(geo(format!("/sensors/{i}/position_m"), "outside the room"));
+                }
+                c[a] = ((p[a] / h).floor() as usize).min(n[a] - 1);
+            }
+            if g.solid[idx(c[0], c[1], c[2])] {
+                return Err(geo(
+                    format!("/sensors/{i}"),
+                    format!("sensor `{}` is inside a rack or CRAC on the grid", s.id),
+                ));
+            }
+            g.probes.push(p);
+        }
+        Ok(g)
+    }
+
+    fn is_solid(&self, c: [usize; 3]) -> bool {
+        self.solid[c[0] + self.n[0] * (c[1] + self.n[1] * c[2])]
+    }
+
+    /// Boundary faces of a rack's side over a server's span; every face must open onto
+    /// fluid (a rack pressed against another rack or a wall has no intake there).
+    fn side_patch(
+        &self,
+        span: &CellRange,
+        side: Side,
+        name: String,
+        field: &str,
+    ) -> Result<FacePatch, OpenFoamError> {
+        let (axis, sign) = side.axis_sign();
+        let plane = if sign > 0.0 {
+            span.hi[axis]
+        } else {
+            span.lo[axis]
+        };
+        let outside = if sign > 0.0 {
+            Some(plane)
+        } else {
+            plane.checked_sub(1)
+        };
+        let outside = outside.filter(|&o| o < self.n[axis]).ok_or_else(|| {
+            geo(
+                field,
+                format!("side {side:?} lies on a room wall: no air can pass"),
+            )
+        })?;
+        let mut cells = *span;
+        cells.lo[axis] = outside;
+        cells.hi[axis] = outside + 1;
+        for k in cells.lo[2]..cells.hi[2] {
+            for j in cells.lo[1]..cells.hi[1] {
+                for i in cells.lo[0]..cells.hi[0] {
+                    if self.is_solid([i, j, k]) {
+                        return Err(geo(
+                            field,
+                            format!(
+                                "side {side:?} is blocked by a solid at cell ({i}, {j}, {k}) \
+                                 (racks back to back or against a CRAC)"
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(FacePatch {
+            name,
+            axis,
+            plane,
+            faces: cells.count(),
+            cells,
+        })
+    }
+
+    /// A floor (`plane` 0) or ceiling (`plane` nz) rectangle.
+    fn plane_patch(
+        &self,
+        pos: [f64; 2],
+        size: [f64; 2],
+        plane: usize,
+        name: String,
+        field: &str,
+        snap: &dyn Fn(f64, &str) -> Result<usize, OpenFoamError>,
+    ) -> Result<FacePatch, OpenFoamError> {
+        let mut lo = [0; 3];
+        let mut hi = [0; 3];
+        for a in 0..2 {
+            lo[a] = snap(pos[a], &format!("{field}/position_m/{a}"))?;
+            hi[a] = snap(pos[a] + size[a], &format!("{field}/size_m/{a}"))?;
+            if hi[a] <= lo[a] || hi[a] > self.n[a] {
+                return Err(geo(field, "empty or outside the room on the grid"));
+            }
+        }
+        let k = if plane == 0 { 0 } else { self.n[2] - 1 };
+        lo[2] = k;
+        hi[2] = k + 1;
+        let cells = CellRange { lo, hi };
+        for j in lo[1]..hi[1] {
+            for i in lo[0]..hi[0] {
+                if self.is_solid([i, j, k]) {
+                    return Err(geo(
+                        field,
+                        format!("covered by a solid at cell ({i}, {j}, {k})"),
+                    ));
+                }
+            }
+        }
+        Ok(FacePatch {
+            name,
+            axis: 2,
+            plane,
+            faces: cells.count(),
+            cells,
+        })
+    }
+
+    /// A box (m) that holds exactly the face centres of `p`.
+    pub fn face_box(&self, p: &FacePatch) -> ([f64; 3], [f64; 3]) {
+        let h = self.h;
+        let mut lo = [0.0; 3];
+        let mut hi = [0.0; 3];
+        for a in 0..3 {
+            if a == p.axis {
+                lo[a] = p.plane as f64 * h - 0.25 * h;
+                hi[a] = p.plane as f64 * h + 0.25 * h;
+            } else {
+                lo[a] = p.cells.lo[a] as f64 * h + 0.25 * h;
+                hi[a] = p.cells.hi[a] as f64 * h - 0.25 * h;
+            }
+        }
+        (lo, hi)
+    }
+
+    /// A box (m) that holds exactly the cell centres of `r`.
+    pub fn cell_box(&self, r: &CellRange) -> ([f64; 3], [f64; 3]) {
+        let h = self.h;
+        let mut lo = [0.0; 3];
+        let mut hi = [0.0; 3];
+        for a in 0..3 {
+            lo[a] = r.lo[a] as f64 * h + 0.25 * h;
+            hi[a] = r.hi[a] as f64 * h - 0.25 * h;
+        }
+        (lo, hi)
+    }
+
+    /// Every patch other than the walls, in the order they are created.
+    pub fn patches(&self) -> impl Iterator<Item = &FacePatch> {
+        self.servers
+            .iter()
+            .flat_map(|s| [&s.intake, &s.exhaust])
+            .chain(&self.tiles)
+            .chain(&self.returns)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn dev_hall() -> Hall {
+        let p =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean/hall.json");
+        Hall::load(&p).unwrap()
+    }
+
+    #[test]
+    fn dev_hall_has_the_readme_cell_count_and_patches() {
+        let g = CaseGeometry::new(&dev_hall(), 0.2).unwrap();
+        // README: 11,140 cells after cutting racks and the CRAC.
+        assert_eq!(g.fluid_cells, 11_140);
+        assert_eq!(g.servers.len(), 20);
+        // A server half of a 0.6 m wide, 1 m high rack face: 3 x 5 faces.
+        assert!(g
+            .servers
+            .iter()
+            .all(|s| s.intake.faces == 15 && s.exhaust.faces == 15));
+        assert_eq!(g.tiles.iter().map(|t| t.faces).sum::<usize>(), 5 * 12);
+        assert_eq!(g.probes.len(), 24);
+    }
+
+    #[test]
+    fn off_grid_geometry_is_refused_with_the_field() {
+        let err = CaseGeometry::new(&dev_hall(), 0.25)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("not on the 0.25 m grid"), "{err}");
+    }
+}

@@ -1,0 +1,100 @@
+//! OpenFOAM as the hall's model: [`OpenFoamModel`] builds a case from `hall.json` once
+//! (blockMesh on the grid, racks and CRACs cut out with `topoSet` + `subsetMesh`, one
+//! intake and one exhaust patch per server, tiles and returns made by `createPatch`), and
+//! per run writes only `0.orig/include/params` and runs `buoyantBoussinesqSimpleFoam`
+//! (k-epsilon, Boussinesq buoyancy) serially or with `mpirun -np N` after `decomposePar`.
+//!
+//! Outputs are the window means of the probes at the sensors; their window standard
+//! deviations are the run's spread. A run fails (a [`kalibre_core::ModelError`], journaled,
+//! the loop goes on) on a non-zero exit, a signal, a timeout (the process group is
+//! killed), a floating-point exception, a log without `End`, missing probes or an energy
+//! balance off by more than the tolerance. The layout of the case and each setting are
+//! documented in `docs/models.md`.
+
+mod case;
+mod dicts;
+mod geometry;
+mod model;
+mod params;
+mod results;
+mod settings;
+
+use thiserror::Error;
+
+pub use case::{CaseDir, MeshSummary};
+pub use geometry::{CaseGeometry, CellRange, FacePatch, ServerPatches};
+pub use model::{OpenFoamModel, RunTimings};
+pub use params::{RunInputs, M3_S_PER_CFM};
+pub use results::{log_verdict, probe_window, ProbeWindow};
+pub use settings::OpenFoamSettings;
+
+/// Errors of building an OpenFOAM case (a run's failure is a
+/// [`kalibre_core::ModelError`] instead).
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum OpenFoamError {
+    /// The hall uses something the adapter cannot represent.
+    #[error("not supported by the OpenFOAM adapter: {0}")]
+    Unsupported(String),
+    /// The hall's geometry does not fit the grid.
+    #[error("hall.json: {field}: {message}")]
+    Geometry {
+        /// The field or item concerned.
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A setting is out of range.
+    #[error("OpenFOAM setting `{name}`: {reason}")]
+    Setting {
+        /// The setting.
+        name: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// An OpenFOAM program is missing.
+    #[error(
+        "OpenFOAM program `{0}` not found in PATH (install OpenFOAM, e.g. `apt-get install openfoam`)"
+    )]
+    NotInstalled(String),
+    /// Meshing failed.
+    #[error("meshing step `{step}` failed: {reason}{}", log_tail.as_deref().map(|t| format!("\n{t}")).unwrap_or_default())]
+    Meshing {
+        /// The OpenFOAM program.
+        step: String,
+        /// What went wrong.
+        reason: String,
+        /// The end of its log.
+        log_tail: Option<String>,
+    },
+    /// A file could not be written or read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or directory.
+        path: String,
+        /// Underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The hall or its effects are invalid.
+    #[error(transparent)]
+    Hall(#[from] crate::Error),
+}
+
+impl OpenFoamError {
+    pub(crate) fn io(path: impl AsRef<std::path::Path>, source: std::io::Error) -> Self {
+        OpenFoamError::Io {
+            path: path.as_ref().display().to_string(),
+            source,
+        }
+    }
+}
+
+impl From<OpenFoamError> for crate::Error {
+    fn from(e: OpenFoamError) -> Self {
+        match e {
+            OpenFoamError::Hall(e) => e,
+            e => crate::Error::Mismatch(e.to_string()),
+        }
+    }
+}

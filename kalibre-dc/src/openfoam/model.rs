@@ -1,0 +1,394 @@
+//! [`OpenFoamModel`]: one OpenFOAM solve per model run.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use kalibre_core::external::{log_tail, ProcessEnd, RunDirs};
+use kalibre_core::{check_outputs, Model, ModelError, Outputs};
+
+use super::case::{run_step, which, CaseDir};
+use super::geometry::CaseGeometry;
+use super::params::RunInputs;
+use super::results::{file_tail, last_field_value, log_verdict, probe_window};
+use super::{OpenFoamError, OpenFoamSettings};
+use crate::effects::{Effect, EffectRegistry};
+use crate::hall::Hall;
+use crate::sim::SimMods;
+use crate::snapshots::OperatingState;
+use crate::ParamLayout;
+
+/// The only effect kind the case can represent (a change of the tiles' temperature).
+const SUPPORTED_EFFECTS: [&str; 1] = ["crac_supply_offset"];
+
+/// Version of the case generator: part of the fingerprint and the case directory name.
+const GENERATOR: &str = "kalibre-dc-openfoam/1";
+
+/// A hall's OpenFOAM model, with the same [`ParamLayout`] as [`crate::HallModel`].
+#[derive(Debug)]
+pub struct OpenFoamModel {
+    hall: Hall,
+    geometry: CaseGeometry,
+    effects: Vec<Box<dyn Effect>>,
+    layout: ParamLayout,
+    settings: OpenFoamSettings,
+    case: CaseDir,
+    runs: RunDirs,
+    fingerprint: String,
+    sensor_names: Vec<String>,
+}
+
+/// What one run did, beyond its outputs (for overhead measurements and reports).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunTimings {
+    /// Writing the run directory and the parameter file (s).
+    pub prepare_s: f64,
+    /// OpenFOAM programs (decomposePar, solver) (s).
+    pub solve_s: f64,
+    /// Reading the probes, log and balance (s).
+    pub parse_s: f64,
+    /// Removing the successful run's directory (s; 0 when kept).
+    pub cleanup_s: f64,
+    /// Relative energy balance error.
+    pub energy_balance: f64,
+}
+
+fn hash_hex(parts: &[&[u8]]) -> String {
+    // 64-bit FNV-1a: stable across builds and platforms.
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for p in parts {
+        for b in p.iter().chain(b"\x00") {
+            h ^= *b as u64;
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    format!("{h:016x}")
+}
+
+impl OpenFoamModel {
+    /// The model of `hall` with its own effects (`hall.effects`) and alpha mode.
+    pub fn new(hall: &Hall, settings: OpenFoamSettings) -> Result<Self, OpenFoamError> {
+        let effects = EffectRegistry::builtin().build_all(hall)?;
+        let layout = ParamLayout::new(hall, &effects)?;
+        Self::with_layout(hall, settings, effects, layout)
+    }
+
+    /// The model with explicit effects and layout (as a calibration builds them).
+    pub fn with_layout(
+        hall: &Hall,
+        settings: OpenFoamSettings,
+        effects: Vec<Box<dyn Effect>>,
+        layout: ParamLayout,
+    ) -> Result<Self, OpenFoamError> {
+        let settings = settings.check()?;
+        for e in &effects {
+            if !SUPPORTED_EFFECTS.contains(&e.kind()) {
+                return Err(OpenFoamError::Unsupported(format!(
+                    "effect `{}` (supported: {})",
+                    e.kind(),
+                    SUPPORTED_EFFECTS.join(", ")
+                )));
+            }
+        }
+        let geometry = CaseGeometry::new(hall, settings.grid_m)?;
+        let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
+        let hall_json = json(hall)?;
+        let settings_json = json(&settings)?;
+        let effects_json = json(&specs)?;
+        let case_key = hash_hex(&[
+            GENERATOR.as_bytes(),
+            hall_json.as_bytes(),
+            settings_json.as_bytes(),
+        ]);
+        let fingerprint = format!(
+            "{GENERATOR}:{}",
+            hash_hex(&[
+                GENERATOR.as_bytes(),
+                hall_json.as_bytes(),
+                settings_json.as_bytes(),
+                effects_json.as_bytes(),
+                format!("{:?}", layout.mode()).as_bytes(),
+            ])
+        );
+        let case = CaseDir::open_or_build(&geometry, &settings, &case_key)?;
+        if settings.np > 1 && (which("mpirun").is_none() || which("decomposePar").is_none()) {
+            return Err(OpenFoamError::NotInstalled("mpirun / decomposePar".into()));
+        }
+        let runs = RunDirs::new(case.path().with_file_name(format!("runs-{case_key}")));
+        Ok(OpenFoamModel {
+            hall: hall.clone(),
+            sensor_names: hall.sensors.iter().map(|s| s.id.clone()).collect(),
+            geometry,
+            effects,
+            layout,
+            settings,
+            case,
+            runs,
+            fingerprint,
+        })
+    }
+
+    /// Where each parameter sits (the same as the built-in model's).
+    pub fn layout(&self) -> &ParamLayout {
+        &self.layout
+    }
+
+    /// The case on the grid.
+    pub fn geometry(&self) -> &CaseGeometry {
+        &self.geometry
+    }
+
+    /// The meshed case directory.
+    pub fn case_dir(&self) -> &Path {
+        self.case.path()
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &OpenFoamSettings {
+        &self.settings
+    }
+
+    /// The inputs of one run (flows, heat, tile temperatures).
+    pub fn inputs(&self, state: &OperatingState, params: &[f64]) -> Result<RunInputs, ModelError> {
+        self.layout
+            .space()
+            .check_physical(params)
+            .map_err(|e| ModelError::InvalidParams(e.to_string()))?;
+        if state.power_w.len() != self.geometry.servers.len()
+            || state.setpoint_c.len() != self.hall.cracs.len()
+            || state.fan_speed.len() != self.hall.cracs.len()
+        {
+            return Err(ModelError::InvalidParams(format!(
+                "snapshot `{}` does not match the hall's servers and CRACs",
+                state.label
+            )));
+        }
+        let alpha = self.layout.alpha_per_server(params);
+        let mut mods = SimMods::new(self.hall.cracs.len());
+        for (e, effect) in self.effects.iter().enumerate() {
+            effect
+                .modify(self.layout.effect_values(params, e), &self.hall, &mut mods)
+                .map_err(|err| ModelError::InvalidParams(err.to_string()))?;
+        }
+        RunInputs::new(
+            &self.hall,
+            state,
+            &alpha,
+            &mods.supply_offset_c,
+            &self.settings,
+        )
+        .map_err(ModelError::InvalidParams)
+    }
+
+    /// Runs one solve, returning the outputs and where the time went.
+    pub fn evaluate_timed(
+        &self,
+        state: &OperatingState,
+        params: &[f64],
+    ) -> Result<(Outputs, RunTimings), ModelError> {
+        let t0 = Instant::now();
+        let inputs = self.inputs(state, params)?;
+        let key = params.iter().fold(
+            u128::from_str_radix(&self.fingerprint[GENERATOR.len() + 1..], 16).unwrap_or(0),
+            |h, p| h.rotate_left(13) ^ u128::from(p.to_bits()),
+        );
+        let dir = self
+            .runs
+            .create(&state.label, key)
+            .map_err(|e| ModelError::failed(format!("cannot create a run directory: {e}")))?;
+        let mut result = self.run_in(&dir, &inputs, t0);
+        let keep = self.settings.keep_runs || result.is_err();
+        if !keep {
+            let t3 = Instant::now();
+            let _ = std::fs::remove_dir_all(&dir);
+            if let Ok((_, timings)) = &mut result {
+                timings.cleanup_s = t3.elapsed().as_secs_f64();
+            }
+        }
+        result
+    }
+
+    fn run_in(
+        &self,
+        dir: &Path,
+        inputs: &RunInputs,
+        t0: Instant,
+    ) -> Result<(Outputs, RunTimings), ModelError> {
+        let io = |what: &str, e: std::io::Error| ModelError::failed(format!("{what}: {e}"));
+        let case = self.case.path();
+        for sub in ["constant", "system"] {
+            std::os::unix::fs::symlink(case.join(sub), dir.join(sub))
+                .map_err(|e| io("linking the meshed case", e))?;
+        }
+        let params = inputs.render();
+        for zero in ["0.orig", "0"] {
+            let d = dir.join(zero).join("include");
+            std::fs::create_dir_all(&d).map_err(|e| io("writing the run", e))?;
+            std::fs::write(d.join("params"), &params).map_err(|e| io("writing params", e))?;
+            for entry in std::fs::read_dir(case.join("0.orig")).map_err(|e| io("0.orig", e))? {
+                let entry = entry.map_err(|e| io("0.orig", e))?;
+                if entry.path().is_file() {
+                    std::fs::copy(entry.path(), dir.join(zero).join(entry.file_name()))
+                        .map_err(|e| io("copying 0.orig", e))?;
+                }
+            }
+        }
+        let prepare_s = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let deadline = t1 + self.settings.timeout;
+        let remaining = || {
+            deadline
+                .saturating_duration_since(Instant::now())
+                .max(Duration::from_millis(1))
+        };
+        let case_args = vec!["-case".to_string(), dir.display().to_string()];
+        let solver = "buoyantBoussinesqSimpleFoam";
+        let np = self.settings.np;
+        if np > 1 {
+            let mut args = vec!["-force".to_string()];
+            args.extend(case_args.clone());
+            self.step(dir, "decomposePar", "decomposePar", &args, remaining())?;
+        }
+        let (program, args) = if np > 1 {
+            let mut a: Vec<String> = ["--allow-run-as-root", "--oversubscribe", "-np"]
+                .iter()
+                .map(|s| s.to_string())
+                .collect();
+            a.push(np.to_string());
+            a.push(solver.into());
+            a.push("-parallel".into());
+            a.extend(case_args);
+            ("mpirun", a)
+        } else {
+            (solver, case_args)
+        };
+        let logs = self.step(dir, "solve", program, &args, remaining())?;
+        let solve_s = t1.elapsed().as_secs_f64();
+        let t2 = Instant::now();
+        let tail = file_tail(&logs.join("stdout.log"), 16 * 1024).unwrap_or_default();
+        if let Some(reason) = log_verdict(&tail) {
+            return Err(ModelError::Failed {
+                reason,
+                log_tail: log_tail(&logs, 20),
+            });
+        }
+        let st = &self.settings;
+        let k = st.iterations as f64;
+        let probes = dir.join("postProcessing/probes/0/T");
+        let text = std::fs::read_to_string(&probes)
+            .map_err(|e| ModelError::failed(format!("{}: {e}", probes.display())))?;
+        let window = probe_window(&text, self.geometry.probes.len(), k * st.average_from, k)
+            .map_err(ModelError::failed)?;
+        let mut flux_sum = 0.0;
+        for p in self.geometry.tiles.iter().chain(&self.geometry.returns) {
+            let f = dir.join(format!(
+                "postProcessing/flux_{}/0/surfaceFieldValue.dat",
+                p.name
+            ));
+            let text = std::fs::read_to_string(&f)
+                .map_err(|e| ModelError::failed(format!("{}: {e}", f.display())))?;
+            flux_sum += last_field_value(&text)
+                .map_err(|e| ModelError::failed(format!("{}: {e}", f.display())))?;
+        }
+        let rise_w = st.rho_kg_m3 * st.cp_j_kgk * flux_sum;
+        let balance = (rise_w - inputs.heat_w) / inputs.heat_w.max(f64::MIN_POSITIVE);
+        if !balance.is_finite() || balance.abs() > st.energy_tolerance {
+            return Err(ModelError::Failed {
+                reason: format!(
+                    "energy balance off by {:.2} % (air carries {rise_w:.0} W out, servers put in {:.0} W; tolerance {:.1} %)",
+                    100.0 * balance,
+                    inputs.heat_w,
+                    100.0 * st.energy_tolerance
+                ),
+                log_tail: log_tail(&logs, 20),
+            });
+        }
+        let outputs = check_outputs(
+            Outputs {
+                values: window.mean_c,
+                spread: Some(window.std_c),
+            },
+            &self.sensor_names,
+        )?;
+        Ok((
+            outputs,
+            RunTimings {
+                prepare_s,
+                solve_s,
+                parse_s: t2.elapsed().as_secs_f64(),
+                cleanup_s: 0.0,
+                energy_balance: balance,
+            },
+        ))
+    }
+
+    /// Runs one program; a failed end becomes a [`ModelError`].
+    fn step(
+        &self,
+        dir: &Path,
+        step: &str,
+        program: &str,
+        args: &[String],
+        timeout: Duration,
+    ) -> Result<PathBuf, ModelError> {
+        let (out, logs) = run_step(
+            dir,
+            &self.settings.project_dir,
+            step,
+            program,
+            args,
+            timeout,
+        )
+        .map_err(|e| ModelError::failed(e.to_string()))?;
+        let tail = || log_tail(&logs, 20);
+        match out.end {
+            ProcessEnd::Exited(0) => Ok(logs),
+            ProcessEnd::Exited(c) => {
+                let fpe = file_tail(&logs.join("stdout.log"), 16 * 1024)
+                    .and_then(|t| log_verdict(&t))
+                    .filter(|r| r.contains("floating-point"));
+                Err(ModelError::Failed {
+                    reason: fpe
+                        .unwrap_or_else(|| format!("{program} ({step}) exited with code {c}")),
+                    log_tail: tail(),
+                })
+            }
+            ProcessEnd::Signalled(s) => Err(ModelError::Failed {
+                reason: if s == libc_sigfpe() {
+                    format!("{program} ({step}): floating-point exception (SIGFPE)")
+                } else {
+                    format!("{program} ({step}) killed by signal {s}")
+                },
+                log_tail: tail(),
+            }),
+            ProcessEnd::TimedOut { .. } => Err(ModelError::Timeout {
+                seconds: self.settings.timeout.as_secs_f64(),
+                log_tail: tail(),
+            }),
+        }
+    }
+}
+
+/// SIGFPE's number on Linux and the BSDs.
+fn libc_sigfpe() -> i32 {
+    8
+}
+
+impl Model for OpenFoamModel {
+    type Scenario = OperatingState;
+
+    fn fingerprint(&self) -> String {
+        self.fingerprint.clone()
+    }
+
+    fn evaluate(&self, scenario: &OperatingState, params: &[f64]) -> Result<Outputs, ModelError> {
+        self.evaluate_timed(scenario, params).map(|(o, _)| o)
+    }
+}
+
+/// JSON text of a value, for fingerprints.
+fn json<T: serde::Serialize>(v: &T) -> Result<String, OpenFoamError> {
+    serde_json::to_string(v).map_err(|e| OpenFoamError::Setting {
+        name: "fingerprint".into(),
+        reason: e.to_string(),
+    })
+}

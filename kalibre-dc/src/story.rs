@@ -1,0 +1,482 @@
+//! The user's whole path on one hall, as a library: calibrate, see where the model still
+//! fails, learn which effect is missing, add it, recalibrate, and watch the error fall.
+//!
+//! [`run_story`] runs calibrations ([`calibrate_hall`]) and diagnoses ([`diagnose_hall`])
+//! in turn, adding the top significant suggestion after each diagnosis (up to
+//! [`StorySettings::max_effects`]), and stops honestly: when nothing is significant it says
+//! so and adds nothing. Each new calibration starts from the previous one's best alphas
+//! and the suggestion's fitted effect values (a warm start: the user's next run would do
+//! the same). With an output directory it writes `story.json` (schema
+//! [`STORY_SCHEMA`]), `hall-with-effect.json`, per step `step-N/report.json`, per
+//! diagnosis `diagnosis-N.json`, and `report.html`.
+
+use std::path::Path;
+use std::time::Instant;
+
+use kalibre_core::calibrate::{NamedValues, Report};
+use serde::{Deserialize, Serialize};
+
+use crate::calibration::{calibrate_hall, HallCalibration, HallCalibrationSettings};
+use crate::diagnosis::{diagnose_hall, HallDiagnosis, HallDiagnosisSettings};
+use crate::effects::EffectRegistry;
+use crate::hall::{AlphaMode, EffectSpec, Hall};
+use crate::report::{ThermalPlane, INLET_HEIGHT_M};
+use crate::snapshots::HallSnapshot;
+use crate::{Error, ParamLayout, Result};
+
+/// The schema tag of `story.json`.
+pub const STORY_SCHEMA: &str = "kalibre.story/1";
+
+/// Hypotheses kept per diagnosis in `story.json` and the report (the full ranking goes
+/// to `diagnosis-N.json`).
+const KEPT_HYPOTHESES: usize = 8;
+
+/// What shapes a story.
+///
+/// | Name | Default | Meaning |
+/// |---|---|---|
+/// | `calibration` | [`HallCalibrationSettings::default`] | every calibration of the story |
+/// | `diagnosis` | [`HallDiagnosisSettings::default`] | every diagnosis; its `sim` is replaced by the calibration's, so the Jacobians are of the calibrated model |
+/// | `max_effects` | 1 | effects added at most (one calibration more each) |
+/// | `thermal_z_m` | 1.2 | height of the thermal planes (m) |
+/// | `thermal_snapshot` | 0 | snapshot of the thermal planes |
+/// | `reference_mae_c` | none | the MAE of a complete model at the true parameters, when known (synthetic halls): drawn as the floor |
+#[derive(Debug, Clone)]
+pub struct StorySettings {
+    /// Settings of each calibration.
+    pub calibration: HallCalibrationSettings,
+    /// Settings of each diagnosis.
+    pub diagnosis: HallDiagnosisSettings,
+    /// Effects added at most.
+    pub max_effects: usize,
+    /// Height of the thermal planes (m).
+    pub thermal_z_m: f64,
+    /// Snapshot (index) of the thermal planes.
+    pub thermal_snapshot: usize,
+    /// The floor a complete model reaches, when known (C).
+    pub reference_mae_c: Option<f64>,
+}
+
+impl Default for StorySettings {
+    fn default() -> Self {
+        StorySettings {
+            calibration: HallCalibrationSettings::default(),
+            diagnosis: HallDiagnosisSettings::default(),
+            max_effects: 1,
+            thermal_z_m: INLET_HEIGHT_M,
+            thermal_snapshot: 0,
+            reference_mae_c: None,
+        }
+    }
+}
+
+/// One calibration of the story.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Step {
+    /// What the step did, e.g. `calibrate alpha`.
+    pub name: String,
+    /// The hall's effects during this calibration.
+    pub effects: Vec<EffectSpec>,
+    /// MAE of the model at the step's initial parameters (C).
+    pub mae_before_c: Option<f64>,
+    /// Best MAE the calibration reached (C).
+    pub mae_after_c: f64,
+    /// Model runs of the calibration.
+    pub model_runs: usize,
+    /// Wall time of the calibration (s).
+    pub wall_s: f64,
+    /// The best parameters.
+    pub best_params: NamedValues,
+    /// The calibration report.
+    pub report: Report,
+}
+
+/// One hypothesis of a diagnosis, as the story keeps it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Suggestion {
+    /// Candidate name, e.g. `rack_recirculation(rack=A05)`.
+    pub name: String,
+    /// Share of the residual it explains when refit with the current parameters.
+    pub explained_fraction: f64,
+    /// Predicted MAE after adding it (C).
+    pub predicted_mae_c: f64,
+    /// Significant (penalised fit and held-out check both improve).
+    pub significant: bool,
+    /// The outputs hardly move with it.
+    pub inert: bool,
+    /// Distinguishable from what the model already has.
+    pub identifiable: bool,
+    /// The `effects` entry to paste into `hall.json`.
+    pub entry: EffectSpec,
+}
+
+/// One diagnosis of the story (after calibration `after_step`, 0-based).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisStep {
+    /// Index of the calibration it diagnoses.
+    pub after_step: usize,
+    /// MAE of the calibrated model (C).
+    pub mae_c: f64,
+    /// The best hypotheses, best first.
+    pub hypotheses: Vec<Suggestion>,
+    /// Wall time (s).
+    pub wall_s: f64,
+}
+
+impl DiagnosisStep {
+    /// The first significant hypothesis, if any.
+    pub fn top_significant(&self) -> Option<&Suggestion> {
+        self.hypotheses.iter().find(|h| h.significant)
+    }
+}
+
+/// How the story ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StoryOutcome {
+    /// The first diagnosis found no significant missing effect: nothing was added.
+    NothingSignificant,
+    /// Every added effect lowered the calibrated error.
+    Improved,
+    /// The last added effect did not lower the calibrated error.
+    NotImproved,
+}
+
+/// Everything a story did (`story.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StoryReport {
+    /// Always [`STORY_SCHEMA`].
+    pub schema: String,
+    /// The hall's name.
+    pub hall: String,
+    /// The calibrations, in order.
+    pub steps: Vec<Step>,
+    /// The diagnoses, in order (one after each calibration).
+    pub diagnoses: Vec<DiagnosisStep>,
+    /// Effects added, in order.
+    pub added: Vec<EffectSpec>,
+    /// How it ended.
+    pub outcome: StoryOutcome,
+    /// The floor of a complete model, when known (C).
+    pub reference_mae_c: Option<f64>,
+    /// Why the diagnosis after the last calibration failed, when it did (it only
+    /// informs, so the story goes on without it).
+    pub final_diagnosis_error: Option<String>,
+    /// Total wall time (s).
+    pub wall_s: f64,
+    /// The simulator's temperature at inlet height before calibration (the hall's initial
+    /// parameters) and after the last calibration (not in `story.json`).
+    #[serde(skip)]
+    pub thermal: Vec<ThermalPlane>,
+}
+
+impl StoryReport {
+    /// MAE after the first calibration and after the last (C).
+    pub fn first_and_last_mae_c(&self) -> Option<(f64, f64)> {
+        Some((
+            self.steps.first()?.mae_after_c,
+            self.steps.last()?.mae_after_c,
+        ))
+    }
+}
+
+/// What happened, for progress output (library code never prints).
+#[derive(Debug, Clone, Copy)]
+#[non_exhaustive]
+pub enum StoryEvent<'a> {
+    /// A calibration starts.
+    CalibrationStarted {
+        /// Its index.
+        index: usize,
+        /// What it does.
+        name: &'a str,
+    },
+    /// A calibration finished.
+    CalibrationDone {
+        /// Its index.
+        index: usize,
+        /// The step.
+        step: &'a Step,
+    },
+    /// A diagnosis starts.
+    DiagnosisStarted {
+        /// The calibration it diagnoses.
+        after_step: usize,
+    },
+    /// A diagnosis finished.
+    DiagnosisDone {
+        /// The summary the story keeps.
+        step: &'a DiagnosisStep,
+        /// The full diagnosis.
+        full: &'a HallDiagnosis,
+        /// The calibration it diagnoses (its residuals show where the model fails).
+        calibration: &'a Report,
+    },
+    /// The diagnosis after the last calibration failed (the story goes on).
+    DiagnosisFailed {
+        /// The calibration it diagnoses.
+        after_step: usize,
+        /// Why.
+        error: &'a str,
+    },
+    /// An effect was added to the hall.
+    EffectAdded {
+        /// The entry.
+        entry: &'a EffectSpec,
+        /// The hall with it (and warm-started initial values).
+        hall: &'a Hall,
+    },
+}
+
+/// Runs the story on `hall` and `snaps`; see the module documentation. `observer` sees
+/// every [`StoryEvent`] as it happens.
+pub fn run_story(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    settings: &StorySettings,
+    out_dir: Option<&Path>,
+    observer: &(dyn Fn(&StoryEvent<'_>) + Sync),
+) -> Result<StoryReport> {
+    if settings.thermal_snapshot >= snaps.len() {
+        return Err(Error::Mismatch(format!(
+            "story: thermal_snapshot {} but only {} snapshot(s)",
+            settings.thermal_snapshot,
+            snaps.len()
+        )));
+    }
+    if let Some(dir) = out_dir {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let registry = EffectRegistry::builtin();
+    let diag_settings = HallDiagnosisSettings {
+        sim: settings.calibration.sim.clone(),
+        ..settings.diagnosis.clone()
+    };
+    let started = Instant::now();
+    let mut current = hall.clone();
+    let mut steps: Vec<Step> = Vec::new();
+    let mut diagnoses = Vec::new();
+    let mut added = Vec::new();
+    let mut thermal = Vec::new();
+    let mut final_diagnosis_error = None;
+    let mut name = "calibrate alpha".to_string();
+    let outcome = loop {
+        let index = steps.len();
+        observer(&StoryEvent::CalibrationStarted { index, name: &name });
+        let t = Instant::now();
+        let cal = calibrate_hall(&current, snaps, &settings.calibration, None, Vec::new())?;
+        let step = Step {
+            name: name.clone(),
+            effects: current.effects.clone(),
+            mae_before_c: cal.report.initial.mae_c,
+            mae_after_c: cal.report.best.mae_c,
+            model_runs: cal.report.runs.total,
+            wall_s: t.elapsed().as_secs_f64(),
+            best_params: cal.report.best.params.clone(),
+            report: cal.report.clone(),
+        };
+        if index == 0 {
+            let initial = cal.model.layout().space().initial();
+            thermal.push(plane(
+                &cal,
+                snaps,
+                settings,
+                &initial,
+                "before calibration",
+            )?);
+        }
+        if let Some(dir) = out_dir {
+            write_json(
+                &dir.join(format!("step-{}", index + 1)),
+                "report.json",
+                &step.report,
+            )?;
+        }
+        observer(&StoryEvent::CalibrationDone { index, step: &step });
+        let improved = steps
+            .last()
+            .is_none_or(|p| step.mae_after_c < p.mae_after_c);
+        steps.push(step);
+        let best = cal.report.best.params.values();
+        let after = format!("after calibration {}", index + 1);
+        if !improved {
+            thermal.push(plane(&cal, snaps, settings, &best, &after)?);
+            break StoryOutcome::NotImproved;
+        }
+        observer(&StoryEvent::DiagnosisStarted { after_step: index });
+        let t = Instant::now();
+        let full = match diagnose_hall(&current, snaps, &best, &registry, &diag_settings) {
+            Ok(full) => full,
+            // After the last calibration the diagnosis only informs; its failure is
+            // reported, not fatal, so the calibrations and the report are not lost.
+            Err(e) if added.len() >= settings.max_effects && index > 0 => {
+                let message = e.to_string();
+                observer(&StoryEvent::DiagnosisFailed {
+                    after_step: index,
+                    error: &message,
+                });
+                final_diagnosis_error = Some(message);
+                thermal.push(plane(&cal, snaps, settings, &best, &after)?);
+                break StoryOutcome::Improved;
+            }
+            Err(e) => return Err(e),
+        };
+        let diag = summarise(index, &full, t.elapsed().as_secs_f64());
+        if let Some(dir) = out_dir {
+            write_json(
+                dir,
+                &format!("diagnosis-{}.json", index + 1),
+                &full.to_json(),
+            )?;
+        }
+        observer(&StoryEvent::DiagnosisDone {
+            step: &diag,
+            full: &full,
+            calibration: &cal.report,
+        });
+        let top = diag.top_significant().cloned();
+        diagnoses.push(diag);
+        let top = match top {
+            Some(top) if added.len() < settings.max_effects => top,
+            _ => {
+                thermal.push(plane(&cal, snaps, settings, &best, &after)?);
+                break if added.is_empty() {
+                    StoryOutcome::NothingSignificant
+                } else {
+                    StoryOutcome::Improved
+                };
+            }
+        };
+        current = with_effect(&current, &cal, &registry, &top.entry)?;
+        if let Some(dir) = out_dir {
+            current.save(&dir.join("hall-with-effect.json"))?;
+        }
+        observer(&StoryEvent::EffectAdded {
+            entry: &top.entry,
+            hall: &current,
+        });
+        added.push(top.entry.clone());
+        name = format!("add {}, recalibrate", top.name);
+    };
+    let report = StoryReport {
+        schema: STORY_SCHEMA.into(),
+        hall: hall.name.clone(),
+        steps,
+        diagnoses,
+        added,
+        outcome,
+        reference_mae_c: settings.reference_mae_c,
+        final_diagnosis_error,
+        wall_s: started.elapsed().as_secs_f64(),
+        thermal,
+    };
+    if let Some(dir) = out_dir {
+        write_json(dir, "story.json", &report)?;
+        let html = crate::report::story_html(&current, snaps, &report);
+        let path = dir.join("report.html");
+        std::fs::write(&path, html).map_err(|e| Error::io(&path, e))?;
+    }
+    Ok(report)
+}
+
+/// The thermal plane of a calibration's model at `params`.
+fn plane(
+    cal: &HallCalibration,
+    snaps: &[HallSnapshot],
+    settings: &StorySettings,
+    params: &[f64],
+    label: &str,
+) -> Result<ThermalPlane> {
+    let snap = &snaps[settings.thermal_snapshot];
+    let solution = cal.model.solve(&snap.state, params)?;
+    ThermalPlane::from_solution(
+        cal.model.simulator(),
+        &solution,
+        settings.thermal_z_m,
+        format!("{label}, snapshot {}", snap.state.label),
+    )
+}
+
+fn summarise(after_step: usize, d: &HallDiagnosis, wall_s: f64) -> DiagnosisStep {
+    DiagnosisStep {
+        after_step,
+        mae_c: d.diagnosis.mae,
+        hypotheses: d
+            .diagnosis
+            .hypotheses
+            .iter()
+            .zip(&d.suggestions)
+            .take(KEPT_HYPOTHESES)
+            .map(|(h, s)| Suggestion {
+                name: h.name.clone(),
+                explained_fraction: h.explained_fraction,
+                predicted_mae_c: h.predicted_mae,
+                significant: h.significant,
+                inert: h.inert,
+                identifiable: h.identifiable,
+                entry: s.clone(),
+            })
+            .collect(),
+        wall_s,
+    }
+}
+
+/// The hall with `entry` added, warm-started: each type's initial alpha is the calibrated
+/// one (the mean over its servers when alpha is per server), each effect already present
+/// starts at its calibrated values, and the new one at the diagnosis's fitted values
+/// (which `entry` carries).
+pub fn with_effect(
+    hall: &Hall,
+    cal: &HallCalibration,
+    registry: &EffectRegistry,
+    entry: &EffectSpec,
+) -> Result<Hall> {
+    let best = &cal.report.best.params;
+    let layout: &ParamLayout = cal.model.layout();
+    let mut next = hall.clone();
+    let values = best.values();
+    if layout.mode() != AlphaMode::Fixed {
+        let per_server = layout.alpha_per_server(&values);
+        let mut sums = std::collections::BTreeMap::<&str, (f64, usize)>::new();
+        for (s, a) in hall.servers().zip(&per_server) {
+            let e = sums.entry(s.server.server_type.as_str()).or_default();
+            e.0 += a;
+            e.1 += 1;
+        }
+        for t in &mut next.server_types {
+            if let Some((sum, n)) = sums.get(t.id.as_str()).filter(|(_, n)| *n > 0) {
+                let b = &mut t.alpha_cfm_per_w;
+                b.initial = (sum / *n as f64).clamp(b.min, b.max);
+            }
+        }
+    }
+    for (e, (effect, spec)) in cal
+        .model
+        .effects()
+        .iter()
+        .zip(next.effects.iter_mut())
+        .enumerate()
+    {
+        for (p, v) in effect
+            .parameters()
+            .iter()
+            .zip(layout.effect_values(&values, e))
+        {
+            spec.fields
+                .insert(p.name.clone(), serde_json::json!(v.clamp(p.lower, p.upper)));
+        }
+    }
+    // Check the entry builds on this hall before adding it.
+    registry.build(entry, &next)?;
+    next.effects.push(entry.clone());
+    next.validate("hall with the suggested effect")?;
+    Ok(next)
+}
+
+fn write_json<T: Serialize>(dir: &Path, name: &str, value: &T) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let path = dir.join(name);
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::Mismatch(format!("{}: cannot serialise: {e}", path.display())))?;
+    std::fs::write(&path, text + "\n").map_err(|e| Error::io(&path, e))
+}

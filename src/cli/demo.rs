@@ -1,0 +1,319 @@
+//! `kalibre demo`: the whole story on a synthetic `demo` hall whose measurements hide an
+//! effect the model lacks: calibrate alpha (the error stalls), diagnose (the effect is
+//! named), add it, recalibrate (the error falls), and write the report.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use clap::Args;
+use kalibre_dc::hall::{EffectSpec, Hall};
+use kalibre_dc::story::{run_story, StoryEvent, StoryOutcome, StoryReport, StorySettings};
+use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
+
+use super::{with_threads, CliError, CliResult};
+
+/// The effect hidden in the demo's truth when `--effect` is not given.
+pub const DEFAULT_EFFECT: &str = "rack_recirculation";
+
+/// The demo's placement and size of each built-in kind: strong enough to stall an
+/// alpha-only calibration well above the noise.
+const EFFECT_PRESETS: [(&str, &str); 4] = [
+    (
+        "rack_recirculation",
+        "rack_recirculation:rack=A05,fraction=0.3",
+    ),
+    ("bypass", "bypass:behind_rack=A03,fraction=0.2"),
+    (
+        "containment_leakage",
+        "containment_leakage:open_fraction=0.3",
+    ),
+    ("crac_supply_offset", "crac_supply_offset:offset_c=-1.5"),
+];
+
+/// Measurement noise of the demo (C).
+const DEMO_NOISE_C: f64 = 0.15;
+
+/// Options of `kalibre demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Output directory: the synthetic hall (hall.json, snapshots.csv, truth.json),
+    /// story.json, hall-with-effect.json, step-N/report.json, diagnosis-N.json, report.html.
+    #[arg(long, default_value = "kalibre-demo")]
+    out: PathBuf,
+    /// Seed of the synthetic hall and of every calibration.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The effect hidden in the measurements: a kind (`rack_recirculation`, `bypass`,
+    /// `containment_leakage`, `crac_supply_offset`) at the demo's placement, a full entry
+    /// `KIND:key=value,...`, or `none` for a clean truth.
+    #[arg(long, default_value = DEFAULT_EFFECT, value_name = "KIND")]
+    effect: String,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
+
+/// The hidden effect of `--effect`.
+fn hidden_effect(arg: &str) -> CliResult<Option<EffectSpec>> {
+    if arg == "none" {
+        return Ok(None);
+    }
+    let full = EFFECT_PRESETS
+        .iter()
+        .find(|(kind, _)| *kind == arg)
+        .map_or(arg, |(_, entry)| entry);
+    parse_effect_arg(full)
+        .map(Some)
+        .map_err(|e| CliError::Input(e.to_string()))
+}
+
+fn entry_json(e: &EffectSpec) -> String {
+    serde_json::to_string(e).unwrap_or_default()
+}
+
+/// Runs `kalibre demo`.
+pub fn run(args: DemoArgs) -> CliResult {
+    let hidden = hidden_effect(&args.effect)?;
+    let mut opts = SynthOptions::new(Preset::Demo, args.seed).with_noise_c(DEMO_NOISE_C);
+    if let Some(e) = &hidden {
+        opts = opts.with_effect(e.clone());
+    }
+    let synth = with_threads(args.threads, || synth::generate(&opts))??;
+    synth::write_dir(&args.out, &synth)?;
+    let hall = &synth.hall;
+    let reference = synth.truth.reference.clone();
+    println!(
+        "kalibre demo: synthetic hall `{}` ({} servers, {} CRACs, {} sensors, {} snapshots, noise {DEMO_NOISE_C} C)",
+        hall.name,
+        hall.servers().count(),
+        hall.cracs.len(),
+        hall.sensors.len(),
+        synth.snapshots.len()
+    );
+    match synth.truth.hidden_effects.first() {
+        Some(h) => println!(
+            "hidden in the measurements (the model is not told): {}",
+            entry_json(&h.resolved)
+        ),
+        None => println!("nothing hidden in the measurements: a clean truth"),
+    }
+    if let Some(r) = &reference {
+        println!(
+            "a complete model at the true parameters reaches an MAE of {:.3} C (noise alone: {:.3} C)",
+            r.model_at_truth_mae_c, r.noise_only_mae_c
+        );
+    }
+    println!(
+        "wrote {}/{{hall.json, snapshots.csv, truth.json}}",
+        args.out.display()
+    );
+    let settings = StorySettings {
+        reference_mae_c: reference.as_ref().map(|r| r.model_at_truth_mae_c),
+        calibration: kalibre_dc::calibration::HallCalibrationSettings {
+            core: kalibre_core::Settings {
+                seed: args.seed,
+                ..kalibre_dc::calibration::HallCalibrationSettings::loop_defaults()
+            },
+            ..Default::default()
+        },
+        ..StorySettings::default()
+    };
+    let floor = settings.reference_mae_c;
+    let counter = AtomicUsize::new(0);
+    let observer = |e: &StoryEvent<'_>| print_event(hall, floor, &counter, e);
+    let story = with_threads(args.threads, || {
+        run_story(
+            hall,
+            &synth.snapshots,
+            &settings,
+            Some(&args.out),
+            &observer,
+        )
+    })??;
+    print_summary(&story);
+    if let (Some(h), Some(added)) = (synth.truth.hidden_effects.first(), story.added.first()) {
+        if added.kind == h.resolved.kind {
+            println!("the diagnosis named the hidden kind ({})", h.resolved.kind);
+        } else {
+            println!(
+                "the diagnosis named {} but the hidden effect is {}",
+                added.kind, h.resolved.kind
+            );
+        }
+    }
+    println!(
+        "wrote {}, {}",
+        args.out.join("story.json").display(),
+        args.out.join("report.html").display()
+    );
+    Ok(())
+}
+
+/// Prints each step as it happens.
+fn print_event(hall: &Hall, floor: Option<f64>, counter: &AtomicUsize, e: &StoryEvent<'_>) {
+    let n = || counter.fetch_add(1, Ordering::Relaxed) + 1;
+    match e {
+        StoryEvent::CalibrationStarted { name, .. } => println!("\nstep {}: {name}", n()),
+        StoryEvent::CalibrationDone { step, .. } => {
+            println!(
+                "  MAE {} -> {:.3} C ({} model runs, {:.1} s)",
+                step.mae_before_c
+                    .map_or("-".into(), |m| format!("{m:.3} C")),
+                step.mae_after_c,
+                step.model_runs,
+                step.wall_s
+            );
+            if let Some(f) = floor {
+                println!(
+                    "  {:.1} times the {f:.3} C a complete model reaches{}",
+                    step.mae_after_c / f,
+                    if step.mae_after_c > 2.0 * f {
+                        ": the fit stalls, something is missing"
+                    } else {
+                        ""
+                    }
+                );
+            }
+        }
+        StoryEvent::DiagnosisStarted { .. } => {
+            println!("\nstep {}: diagnose where the calibrated model fails", n())
+        }
+        StoryEvent::DiagnosisDone {
+            step, calibration, ..
+        } => {
+            print_where(hall, calibration);
+            println!(
+                "  missing effects, best first (MAE now {:.3} C, {:.1} s):",
+                step.mae_c, step.wall_s
+            );
+            for h in step.hypotheses.iter().take(5) {
+                let flags = [
+                    (h.significant, "significant"),
+                    (h.inert, "inert"),
+                    (!h.identifiable, "not identifiable"),
+                ]
+                .iter()
+                .filter(|f| f.0)
+                .map(|f| f.1)
+                .collect::<Vec<_>>()
+                .join(", ");
+                println!(
+                    "    {:<46} explains {:>3.0}%  predicted MAE {:.3} C  {flags}",
+                    h.name,
+                    100.0 * h.explained_fraction,
+                    h.predicted_mae_c
+                );
+            }
+            match step.top_significant() {
+                Some(top) => println!(
+                    "  suggested entry for hall.json \"effects\": {}",
+                    entry_json(&top.entry)
+                ),
+                None => println!("  no significant missing effect: nothing to add"),
+            }
+        }
+        StoryEvent::DiagnosisFailed { error, .. } => {
+            println!("  the diagnosis failed: {error}")
+        }
+        StoryEvent::EffectAdded { entry, .. } => {
+            println!("  added {} (hall-with-effect.json)", entry_json(entry))
+        }
+        _ => {}
+    }
+}
+
+/// The worst sensors and the mean residual per aisle, in words.
+fn print_where(hall: &Hall, report: &kalibre_core::calibrate::Report) {
+    let mut by_sensor: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
+    for r in &report.residuals {
+        let s = by_sensor.entry(r.sensor.as_str()).or_default();
+        s.0 += r.predicted_c - r.measured_c;
+        s.1 += 1;
+    }
+    let mut worst: Vec<(&str, f64)> = by_sensor
+        .iter()
+        .map(|(k, (s, n))| (*k, s / *n as f64))
+        .collect();
+    worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+    println!("  worst sensors (mean over the snapshots):");
+    for (id, mean) in worst.iter().take(3) {
+        let s = hall.sensors.iter().find(|s| s.id == *id);
+        let (aisle, p) = s.map_or(("?", [0.0; 3]), |s| (s.aisle.as_str(), s.position_m));
+        println!(
+            "    {id:<12} {aisle} aisle at ({:.1}, {:.1}, {:.1}) m: the model reads {:.2} C {}",
+            p[0],
+            p[1],
+            p[2],
+            mean.abs(),
+            if *mean > 0.0 { "too warm" } else { "too cold" }
+        );
+    }
+}
+
+/// The table of steps: calibrations and diagnoses with their errors, runs and times.
+fn print_summary(story: &StoryReport) {
+    // (what, MAE before, MAE after, model runs, wall s)
+    let mut rows: Vec<[String; 5]> = Vec::new();
+    for (i, s) in story.steps.iter().enumerate() {
+        rows.push([
+            s.name.clone(),
+            s.mae_before_c.map_or("-".into(), |m| format!("{m:.3}")),
+            format!("{:.3}", s.mae_after_c),
+            s.model_runs.to_string(),
+            format!("{:.1}", s.wall_s),
+        ]);
+        if let Some(d) = story.diagnoses.iter().find(|d| d.after_step == i) {
+            let (what, predicted) = match d.top_significant() {
+                Some(t) => (
+                    format!("diagnose: {}", t.name),
+                    format!("{:.3}*", t.predicted_mae_c),
+                ),
+                None => ("diagnose: no significant missing effect".into(), "-".into()),
+            };
+            rows.push([
+                what,
+                format!("{:.3}", d.mae_c),
+                predicted,
+                "-".into(),
+                format!("{:.1}", d.wall_s),
+            ]);
+        }
+    }
+    if story.final_diagnosis_error.is_some() {
+        rows.push([
+            "diagnose: failed (see above)".into(),
+            "-".into(),
+            "-".into(),
+            "-".into(),
+            "-".into(),
+        ]);
+    }
+    let w = rows.iter().map(|r| r[0].len()).max().unwrap_or(0);
+    println!("\nsummary");
+    println!(
+        "  {:<4} {:<w$} {:>10} {:>10} {:>6} {:>7}",
+        "step", "", "MAE before", "MAE after", "runs", "wall s"
+    );
+    for (k, r) in rows.iter().enumerate() {
+        println!(
+            "  {:<4} {:<w$} {:>10} {:>10} {:>6} {:>7}",
+            k + 1,
+            r[0],
+            r[1],
+            r[2],
+            r[3],
+            r[4]
+        );
+    }
+    println!(
+        "  (MAE in C; * predicted by the diagnosis)   total wall time {:.1} s",
+        story.wall_s
+    );
+    match story.outcome {
+        StoryOutcome::NothingSignificant => {
+            println!("the diagnosis found no significant missing effect; nothing was added")
+        }
+        _ => println!("{}", kalibre_dc::report::outcome_text(story)),
+    }
+}

@@ -1,0 +1,197 @@
+//! The paper's experiments (`examples/table4.rs`, `fig7.rs`, `fig8.rs`) in their quick
+//! mode, through the same code the binaries run, so they cannot rot. About 30 s in a
+//! release build (`cargo test --release --test experiments`).
+
+#[path = "../examples/experiments/mod.rs"]
+mod experiments;
+
+use std::path::PathBuf;
+
+use experiments::{fig7, fig8, table4};
+use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
+use kalibre::dc::synth::Preset;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("kalibre-experiments-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn quiet(_: &str) {}
+
+#[test]
+fn table4_quick_every_approach_improves_and_files_are_written() {
+    let t = table4::run_hall(Preset::Demo, 1, table4::Budgets::quick(), false, &quiet).unwrap();
+    assert_eq!(t.rows.len(), 4);
+    assert!(t.initial_mae_c.is_finite() && t.initial_mae_c > 1.0);
+    for row in &t.rows {
+        assert!(!row.runs.is_empty(), "{}", row.approach);
+        for r in &row.runs {
+            assert!(
+                (r.initial_mae_c - t.initial_mae_c).abs() < 1e-9,
+                "{}: same model and measurements",
+                row.approach
+            );
+            assert!(r.lowest_mae_c.is_finite() && r.mae_after_10_c.is_finite());
+            assert!(r.lowest_mae_c <= r.mae_after_10_c + 1e-12);
+            assert!(
+                r.lowest_mae_c < 0.9 * r.initial_mae_c,
+                "{}: lowest {} vs initial {}",
+                row.approach,
+                r.lowest_mae_c,
+                r.initial_mae_c
+            );
+            assert!(r.model_runs_to_lowest <= r.model_runs && r.model_runs > 0);
+            // The history's best never rises and its run count never falls.
+            for w in r.history.windows(2) {
+                assert!(w[1].1 >= w[0].1 && w[1].2 <= w[0].2, "{}", row.approach);
+            }
+        }
+    }
+    let dir = temp_dir("table4");
+    let json = experiments::write_json(&dir, "table4.json", &vec![&t]).unwrap();
+    let md = experiments::write_file(
+        &dir,
+        "table4.md",
+        &table4::markdown(std::slice::from_ref(&t)),
+    )
+    .unwrap();
+    let back: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+    assert_eq!(back[0]["rows"].as_array().unwrap().len(), 4);
+    let text = std::fs::read_to_string(md).unwrap();
+    assert!(text.contains("Kalibre") && text.contains("(1+1)-ES") && text.contains("Manual"));
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn the_kalibre_row_is_calibrate_hall() {
+    // The experiments assemble the loop themselves (to swap surrogate or searcher);
+    // with Kalibre's parts it must be exactly `calibrate_hall`.
+    let s = experiments::setup(Preset::Demo, false).unwrap();
+    let mut st = HallCalibrationSettings::default();
+    st.core.max_iterations = 2;
+    st.core.seed = 3;
+    let ours = experiments::run_loop(
+        &s,
+        experiments::kalibre_surrogate(&s, &st).unwrap(),
+        st.searcher.clone(),
+        &st,
+        None,
+    )
+    .unwrap();
+    let theirs = calibrate_hall(&s.hall, &s.snaps, &st, None, Vec::new())
+        .unwrap()
+        .report;
+    // Two loop iterations, then whatever polish steps the hall defaults add.
+    assert!(ours.history.len() >= 2);
+    assert_eq!(ours.history.len(), theirs.history.len());
+    for (a, b) in ours.history.iter().zip(&theirs.history) {
+        assert_eq!(a.mae_c, b.mae_c);
+        assert_eq!(a.params, b.params);
+    }
+    assert_eq!(ours.best.mae_c, theirs.best.mae_c);
+}
+
+#[test]
+fn fig7_quick_is_finite_and_some_surrogate_learns() {
+    let r = fig7::run_fig7(&fig7::Fig7Config::quick(), &quiet).unwrap();
+    assert_eq!(r.curves.len(), 3);
+    assert_eq!(r.train + r.test + r.failed_runs, 40);
+    for c in &r.curves {
+        assert_eq!(c.points.len(), 4);
+        for p in &c.points {
+            assert!(
+                p.mae_c.mean.is_finite() && p.mae_c.mean > 0.0,
+                "{}",
+                c.surrogate
+            );
+        }
+        // More data never means fewer samples.
+        assert!(c
+            .points
+            .windows(2)
+            .all(|w| w[1].train_samples > w[0].train_samples));
+    }
+    // With half the training set, the best surrogate beats predicting the training mean.
+    let best_at_50 = r
+        .curves
+        .iter()
+        .map(|c| c.points[3].mae_c.mean)
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        best_at_50 < r.mean_predictor_mae_c,
+        "{best_at_50} vs {}",
+        r.mean_predictor_mae_c
+    );
+    let dir = temp_dir("fig7");
+    let svg = experiments::write_file(&dir, "fig7.svg", &fig7::svg(&r)).unwrap();
+    let text = std::fs::read_to_string(svg).unwrap();
+    assert!(
+        text.starts_with("<svg")
+            && text.contains("polyline")
+            && text.trim_end().ends_with("</svg>")
+    );
+    experiments::write_json(&dir, "fig7.json", &r).unwrap();
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn fig8_quick_records_every_iteration_of_both_searchers() {
+    let cfg = fig8::Fig8Config::quick();
+    let r = fig8::run_fig8(&cfg, &quiet).unwrap();
+    assert_eq!(r.variants.len(), 2);
+    for v in &r.variants {
+        assert_eq!(v.runs.len(), cfg.seeds);
+        assert_eq!(v.mean_loss.len(), cfg.iterations, "{}", v.name);
+        for run in &v.runs {
+            for t in run {
+                assert!(t.mean_loss.is_finite() && t.mean_loss >= 0.0, "{}", v.name);
+                assert!(t.mean_grad_norm.is_finite() && t.mean_grad_norm >= 0.0);
+                assert!(
+                    t.final_loss <= t.mean_loss + 1e-9,
+                    "the proposal is the best point"
+                );
+                assert!(t.best_mae_c.is_finite());
+            }
+            let last = run.last().unwrap();
+            assert!(
+                last.best_mae_c < r.initial_mae_c,
+                "{}: {} vs {}",
+                v.name,
+                last.best_mae_c,
+                r.initial_mae_c
+            );
+        }
+    }
+    let dir = temp_dir("fig8");
+    let svg = experiments::write_file(&dir, "fig8.svg", &fig8::svg(&r)).unwrap();
+    assert!(
+        std::fs::read_to_string(svg)
+            .unwrap()
+            .matches("<svg")
+            .count()
+            == 5
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn bad_arguments_are_named() {
+    let parse = |v: &[&str]| experiments::parse_args(v.iter().map(|s| s.to_string()));
+    let a = parse(&["--quick", "--presets", "hall-a:3,hall-b", "--out-dir", "x"]).unwrap();
+    assert!(a.quick);
+    assert_eq!(
+        a.presets.unwrap(),
+        vec![(Preset::HallA, Some(3)), (Preset::HallB, None)]
+    );
+    assert!(parse(&["--seeds", "0"]).unwrap_err().contains("--seeds"));
+    assert!(parse(&["--seeds"]).unwrap_err().contains("--seeds"));
+    assert!(parse(&["--presets", "hall-c"])
+        .unwrap_err()
+        .contains("hall-c"));
+    assert!(parse(&["--presets", "hall-a:x"])
+        .unwrap_err()
+        .contains("hall-a:x"));
+    assert!(parse(&["--fast"]).unwrap_err().contains("--fast"));
+}
