@@ -27,7 +27,7 @@ enum Command {
     /// Run the built-in simulator on a hall's snapshots and write the predicted sensor readings.
     Simulate(simulate::SimulateArgs),
     /// Calibrate a hall's parameters (server air flow rates, effects) against its measurements.
-    Calibrate(calibrate::CalibrateArgs),
+    Calibrate(Box<calibrate::CalibrateArgs>),
     /// Show where a calibrated model fails and rank the physical effects that may be missing.
     Diagnose(diagnose::DiagnoseArgs),
     /// The whole story on a synthetic hall with a hidden effect: calibrate, diagnose, add
@@ -40,7 +40,7 @@ pub fn run(cli: Cli) -> CliResult {
     match cli.command {
         Command::Synth(a) => synth::run(a),
         Command::Simulate(a) => simulate::run(a),
-        Command::Calibrate(a) => calibrate::run(a),
+        Command::Calibrate(a) => calibrate::run(*a),
         Command::Diagnose(a) => diagnose::run(a),
         Command::Demo(a) => demo::run(a),
     }
