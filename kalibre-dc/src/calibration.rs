@@ -6,17 +6,15 @@ use std::path::Path;
 
 use kalibre_core::calibrate::Report;
 use kalibre_core::search::Hybrid;
-use kalibre_core::{Calibrator, Model, Observe, RunStore, Settings};
+use kalibre_core::{Observe, Settings};
 
+use crate::calibration_model::{calibrate_with_terms, ModelCalibration};
 use crate::effects::{EffectRegistry, SurrogateTerm};
 use crate::hall::{AlphaMode, Hall};
 use crate::sim::SimConfig;
-use crate::snapshots::{self, HallSnapshot};
-use crate::surrogate::{
-    EffectLinearTerm, FlowBalance, FlowBalanceTerm, PenaltySettings, TemperatureRisePenalty,
-    ThermalGraph, ThermalGraphSettings,
-};
-use crate::{Error, HallModel, Result};
+use crate::snapshots::HallSnapshot;
+use crate::surrogate::{PenaltySettings, ThermalGraphSettings};
+use crate::{HallModel, Result};
 
 /// Everything that shapes a hall calibration.
 ///
@@ -124,7 +122,7 @@ pub fn calibrate_hall<'o>(
 
 /// [`calibrate_hall`] with `hall.effects` built by `registry` (downstream effect kinds).
 /// Each effect parameter whose effect asks for [`SurrogateTerm::LearnedLinear`] gets an
-/// [`EffectLinearTerm`] in the surrogate, so that the search can move it.
+/// [`EffectLinearTerm`](crate::surrogate::EffectLinearTerm) in the surrogate, so that the search can move it.
 pub fn calibrate_hall_with_registry<'o>(
     hall: &Hall,
     snaps: &[HallSnapshot],
@@ -137,74 +135,21 @@ pub fn calibrate_hall_with_registry<'o>(
     if let Some(mode) = settings.alpha_mode {
         hall.calibrate.alpha = mode;
     }
-    let observations = snapshots::to_observations(&hall, snaps)?;
     let model = HallModel::with_registry(&hall, settings.sim.clone(), registry)?;
     let layout = model.layout().clone();
-    let space = layout.space().clone();
-    if space.is_empty() {
-        return Err(Error::Mismatch(format!(
-            "hall `{}` has nothing to calibrate (alpha is fixed and no effect has parameters)",
-            hall.name
-        )));
-    }
-    let mut surrogate = ThermalGraph::new(&hall, layout.clone(), settings.surrogate)?;
-    if settings.flow_balance_terms {
-        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
-            surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(&hall, &layout, kind)));
-        }
-        if settings.local_recirculation_term {
-            surrogate = surrogate.with_term(Box::new(
-                crate::surrogate::LocalRecirculationTerm::new(&hall, &layout),
-            ));
-        }
-    }
-    for (e, effect) in model.effects().iter().enumerate() {
-        if effect.surrogate_term() == SurrogateTerm::LearnedLinear {
-            for i in layout.effect_range(e) {
-                surrogate = surrogate
-                    .with_term(Box::new(EffectLinearTerm::new(space.names()[i].clone(), i)));
-            }
-        }
-    }
-    let scenarios: Vec<_> = snaps.iter().map(|s| s.state.clone()).collect();
-    let penalty = TemperatureRisePenalty::new(&hall, &layout, &scenarios, settings.penalty)?;
-    let store = match journal {
-        Some(path) => {
-            let store = RunStore::open(path, model.fingerprint())?;
-            let load = store.load_report();
-            if load.other_fingerprint > 0 {
-                return Err(Error::Mismatch(format!(
-                    "{}: holds {} runs of another model (a different hall, grid or effects); \
-                     calibrate into another directory",
-                    path.display(),
-                    load.other_fingerprint
-                )));
-            }
-            store
-        }
-        None => RunStore::in_memory(model.fingerprint()),
-    };
-    let core_settings = Settings {
-        regularizer_weight: settings.penalty.weight,
-        polish_iterations: if space.dim() <= settings.polish_max_params {
-            settings.core.polish_iterations
-        } else {
-            0
-        },
-        ..settings.core.clone()
-    };
-    let mut calibrator = Calibrator::new(&model, surrogate, &observations, &space)
-        .with_settings(core_settings)
-        .with_searcher(settings.searcher.clone())
-        .with_regularizer(&penalty, settings.penalty.weight)
-        .with_store(store);
-    for o in observers {
-        calibrator = calibrator.with_observer(move |e: &kalibre_core::Event<'_>| o.observe(e));
-    }
-    let report = calibrator.run()?;
-    let best = report.best.params.values();
-    let penalty_report = penalty.report(&best);
-    drop(calibrator);
+    let learned: Vec<usize> = model
+        .effects()
+        .iter()
+        .enumerate()
+        .filter(|(_, effect)| effect.surrogate_term() == SurrogateTerm::LearnedLinear)
+        .flat_map(|(e, _)| layout.effect_range(e))
+        .collect();
+    let ModelCalibration {
+        report,
+        penalty_report,
+    } = calibrate_with_terms(
+        &hall, snaps, &model, &layout, &learned, settings, journal, observers,
+    )?;
     Ok(HallCalibration {
         report,
         model,

@@ -11,8 +11,8 @@ use crate::calibration::HallCalibrationSettings;
 use crate::hall::Hall;
 use crate::snapshots::{self, HallSnapshot, OperatingState};
 use crate::surrogate::{
-    FlowBalance, FlowBalanceTerm, LocalRecirculationTerm, PenaltyReport, TemperatureRisePenalty,
-    ThermalGraph,
+    EffectLinearTerm, FlowBalance, FlowBalanceTerm, LocalRecirculationTerm, PenaltyReport,
+    TemperatureRisePenalty, ThermalGraph,
 };
 use crate::{Error, ParamLayout, Result};
 
@@ -42,6 +42,35 @@ pub fn calibrate_hall_model<'o, M>(
 where
     M: Model<Scenario = OperatingState>,
 {
+    calibrate_with_terms(
+        hall,
+        snaps,
+        model,
+        layout,
+        &[],
+        settings,
+        journal,
+        observers,
+    )
+}
+
+/// [`calibrate_hall_model`] with an [`EffectLinearTerm`] in the surrogate for each
+/// parameter index in `learned_params` (effect parameters whose effect asks for a
+/// learned linear term), so that the search can move them.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn calibrate_with_terms<'o, M>(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    model: &M,
+    layout: &ParamLayout,
+    learned_params: &[usize],
+    settings: &HallCalibrationSettings,
+    journal: Option<&Path>,
+    observers: Vec<Box<dyn Observe + 'o>>,
+) -> Result<ModelCalibration>
+where
+    M: Model<Scenario = OperatingState>,
+{
     let observations = snapshots::to_observations(hall, snaps)?;
     let space = layout.space().clone();
     if space.is_empty() {
@@ -59,6 +88,10 @@ where
     if settings.local_recirculation_term {
         surrogate = surrogate.with_term(Box::new(LocalRecirculationTerm::new(hall, layout)));
     }
+    for &i in learned_params {
+        surrogate =
+            surrogate.with_term(Box::new(EffectLinearTerm::new(space.names()[i].clone(), i)));
+    }
     let scenarios: Vec<_> = snaps.iter().map(|s| s.state.clone()).collect();
     let penalty = TemperatureRisePenalty::new(hall, layout, &scenarios, settings.penalty)?;
     let store = match journal {
@@ -67,8 +100,8 @@ where
             let load = store.load_report();
             if load.other_fingerprint > 0 {
                 return Err(Error::Mismatch(format!(
-                    "{}: holds {} runs of another model (a different model, hall, grid or \
-                     settings); calibrate into another directory",
+                    "{}: holds {} runs of another model (a different model, hall, grid, effects \
+                     or settings); calibrate into another directory",
                     path.display(),
                     load.other_fingerprint
                 )));
