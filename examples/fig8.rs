@@ -19,24 +19,8 @@ use experiments::{parse_args, write_file, write_json};
 fn main() {
     let raw: Vec<String> = std::env::args().skip(1).collect();
     // `--render FILE.json`: redraw the figure and table of an earlier run beside it.
-    if let Some(i) = raw.iter().position(|a| a == "--render") {
-        let Some(file) = raw.get(i + 1).map(std::path::PathBuf::from) else {
-            eprintln!("--render needs a fig8.json file");
-            std::process::exit(2)
-        };
-        let r: Fig8Result = experiments::read_json(&file).unwrap_or_else(|e| {
-            eprintln!("{e}");
-            std::process::exit(1)
-        });
-        let dir = file.parent().unwrap_or(std::path::Path::new("."));
-        let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or("fig8");
-        let written = write_file(dir, &format!("{stem}.svg"), &svg(&r))
-            .and_then(|_| write_file(dir, &format!("{stem}.md"), &markdown(&r)));
-        if let Err(e) = written {
-            eprintln!("{e}");
-            std::process::exit(1);
-        }
-        return;
+    if let Some(code) = experiments::render_if_asked::<Fig8Result>(&raw, "fig8", svg, markdown) {
+        std::process::exit(code);
     }
     let paper_loop = raw.iter().any(|a| a == "--paper-loop");
     let args = parse_args(raw.into_iter().filter(|a| a != "--paper-loop")).unwrap_or_else(|e| {

@@ -149,6 +149,35 @@ pub fn de_preset<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<
 }
 
 /// Reads an experiment's JSON result (to redraw its figure without rerunning it).
+/// `--render FILE.json` among the arguments: redraws an earlier run's figure (`.svg`) and
+/// table (`.md`) beside the file. Returns the exit code (0 done, 1 failed, 2 no file
+/// given), or none when the flag is absent.
+pub fn render_if_asked<R: serde::de::DeserializeOwned>(
+    raw: &[String],
+    figure: &str,
+    svg: fn(&R) -> String,
+    markdown: fn(&R) -> String,
+) -> Option<i32> {
+    let i = raw.iter().position(|a| a == "--render")?;
+    let Some(file) = raw.get(i + 1).map(PathBuf::from) else {
+        eprintln!("--render needs a {figure}.json file");
+        return Some(2);
+    };
+    let written = read_json::<R>(&file).and_then(|r| {
+        let dir = file.parent().unwrap_or(Path::new("."));
+        let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or(figure);
+        write_file(dir, &format!("{stem}.svg"), &svg(&r))?;
+        write_file(dir, &format!("{stem}.md"), &markdown(&r))
+    });
+    Some(match written {
+        Ok(_) => 0,
+        Err(e) => {
+            eprintln!("{e}");
+            1
+        }
+    })
+}
+
 pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?)

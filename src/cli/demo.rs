@@ -2,7 +2,6 @@
 //! effect the model lacks: calibrate alpha (the error stalls), diagnose (the effect is
 //! named), add it, recalibrate (the error falls), and write the report.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -11,6 +10,7 @@ use kalibre_dc::hall::{EffectSpec, Hall};
 use kalibre_dc::story::{run_story, StoryEvent, StoryOutcome, StoryReport, StorySettings};
 use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
 
+use super::diagnose::{hypothesis_flags, sensor_line, worst_sensors};
 use super::{with_threads, CliError, CliResult};
 
 /// The effect hidden in the demo's truth when `--effect` is not given.
@@ -188,16 +188,7 @@ fn print_event(hall: &Hall, floor: Option<f64>, counter: &AtomicUsize, e: &Story
                 step.mae_c, step.wall_s
             );
             for h in step.hypotheses.iter().take(5) {
-                let flags = [
-                    (h.significant, "significant"),
-                    (h.inert, "inert"),
-                    (!h.identifiable, "not identifiable"),
-                ]
-                .iter()
-                .filter(|f| f.0)
-                .map(|f| f.1)
-                .collect::<Vec<_>>()
-                .join(", ");
+                let flags = hypothesis_flags(h.significant, h.inert, h.identifiable);
                 println!(
                     "    {:<46} explains {:>3.0}%  predicted MAE {:.3} C  {flags}",
                     h.name,
@@ -223,31 +214,11 @@ fn print_event(hall: &Hall, floor: Option<f64>, counter: &AtomicUsize, e: &Story
     }
 }
 
-/// The worst sensors and the mean residual per aisle, in words.
+/// The worst sensors, in words.
 fn print_where(hall: &Hall, report: &kalibre_core::calibrate::Report) {
-    let mut by_sensor: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
-    for r in &report.residuals {
-        let s = by_sensor.entry(r.sensor.as_str()).or_default();
-        s.0 += r.predicted_c - r.measured_c;
-        s.1 += 1;
-    }
-    let mut worst: Vec<(&str, f64)> = by_sensor
-        .iter()
-        .map(|(k, (s, n))| (*k, s / *n as f64))
-        .collect();
-    worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
     println!("  worst sensors (mean over the snapshots):");
-    for (id, mean) in worst.iter().take(3) {
-        let s = hall.sensors.iter().find(|s| s.id == *id);
-        let (aisle, p) = s.map_or(("?", [0.0; 3]), |s| (s.aisle.as_str(), s.position_m));
-        println!(
-            "    {id:<12} {aisle} aisle at ({:.1}, {:.1}, {:.1}) m: the model reads {:.2} C {}",
-            p[0],
-            p[1],
-            p[2],
-            mean.abs(),
-            if *mean > 0.0 { "too warm" } else { "too cold" }
-        );
+    for (sensor, mean) in worst_sensors(report).iter().take(3) {
+        println!("    {}", sensor_line(hall, sensor, *mean));
     }
 }
 

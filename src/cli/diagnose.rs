@@ -122,16 +122,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         println!("  no significant missing effect");
     }
     for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
-        let flags = [
-            (h.significant, "significant"),
-            (h.inert, "inert"),
-            (!h.identifiable, "not identifiable"),
-        ]
-        .iter()
-        .filter(|f| f.0)
-        .map(|f| f.1)
-        .collect::<Vec<_>>()
-        .join(", ");
+        let flags = hypothesis_flags(h.significant, h.inert, h.identifiable);
         println!(
             "  {:<48} explains {:>4.0}%  predicted MAE {:.3} C  {}",
             h.name,
@@ -147,16 +138,56 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     Ok(())
 }
 
+/// Mean residual (model minus measurement, C) per sensor over the snapshots, largest
+/// magnitude first.
+pub(super) fn worst_sensors(report: &Report) -> Vec<(&str, f64)> {
+    let mut by_sensor: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
+    for r in &report.residuals {
+        let s = by_sensor.entry(r.sensor.as_str()).or_default();
+        s.0 += r.predicted_c - r.measured_c;
+        s.1 += 1;
+    }
+    let mut worst: Vec<(&str, f64)> = by_sensor
+        .iter()
+        .map(|(k, (s, n))| (*k, s / *n as f64))
+        .collect();
+    worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+    worst
+}
+
+/// One worst sensor in words: where it is and how far off the model reads.
+pub(super) fn sensor_line(hall: &Hall, sensor: &str, mean_c: f64) -> String {
+    let s = hall.sensors.iter().find(|s| s.id == sensor);
+    let (aisle, pos) = s.map_or(("?", [0.0; 3]), |s| (s.aisle.as_str(), s.position_m));
+    format!(
+        "{sensor:<12} {aisle:>4} aisle at ({:.1}, {:.1}, {:.1}) m: the model reads {:.2} C {}",
+        pos[0],
+        pos[1],
+        pos[2],
+        mean_c.abs(),
+        if mean_c > 0.0 { "too warm" } else { "too cold" }
+    )
+}
+
+/// A hypothesis's flags in words, e.g. `significant, not identifiable`.
+pub(super) fn hypothesis_flags(significant: bool, inert: bool, identifiable: bool) -> String {
+    [
+        (significant, "significant"),
+        (inert, "inert"),
+        (!identifiable, "not identifiable"),
+    ]
+    .iter()
+    .filter(|f| f.0)
+    .map(|f| f.1)
+    .collect::<Vec<_>>()
+    .join(", ")
+}
+
 /// The worst sensors and the residual by aisle and snapshot, in words.
 fn print_where_it_fails(hall: &Hall, report: &Report) {
     println!("where the calibrated model fails (model minus measurement):");
-    let mut by_sensor: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
     let mut by_group: BTreeMap<(String, String), (f64, usize)> = BTreeMap::new();
     for r in &report.residuals {
-        let e = r.predicted_c - r.measured_c;
-        let s = by_sensor.entry(r.sensor.as_str()).or_default();
-        s.0 += e;
-        s.1 += 1;
         let aisle = hall
             .sensors
             .iter()
@@ -165,25 +196,11 @@ fn print_where_it_fails(hall: &Hall, report: &Report) {
         let g = by_group
             .entry((aisle.to_string(), r.snapshot.clone()))
             .or_default();
-        g.0 += e;
+        g.0 += r.predicted_c - r.measured_c;
         g.1 += 1;
     }
-    let mut worst: Vec<(&str, f64)> = by_sensor
-        .iter()
-        .map(|(k, (s, n))| (*k, s / *n as f64))
-        .collect();
-    worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-    for (sensor, mean) in worst.iter().take(5) {
-        let s = hall.sensors.iter().find(|s| s.id == *sensor);
-        let (aisle, pos) = s.map_or(("?", [0.0; 3]), |s| (s.aisle.as_str(), s.position_m));
-        println!(
-            "  {sensor:<12} {aisle:>4} aisle at ({:.1}, {:.1}, {:.1}) m: the model reads {:.2} C {}",
-            pos[0],
-            pos[1],
-            pos[2],
-            mean.abs(),
-            if *mean > 0.0 { "too warm" } else { "too cold" }
-        );
+    for (sensor, mean) in worst_sensors(report).iter().take(5) {
+        println!("  {}", sensor_line(hall, sensor, *mean));
     }
     for ((aisle, snap), (s, n)) in &by_group {
         println!(
