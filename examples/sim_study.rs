@@ -1,19 +1,84 @@
-//! Scratch: grid convergence on the synth demo and OpenFOAM realism vs diffusivity.
+//! Simulator study: grid convergence on the synth `demo` preset (0.2 m against 0.1 m),
+//! realism against OpenFOAM (`of-dev-clean`), and seconds per solve on the benchmark's
+//! demo and hall-a halls, per advection scheme and diffusivity.
+//!
+//! `cargo run --release --example sim_study -- [--advection upwind|van_leer|minmod]...
+//! [--passes MAX:TOL_C] [--no-timing] [DIFFUSIVITY...]` (run from the workspace root; defaults: upwind and
+//! van_leer, diffusivity 0.01). Prints a markdown table.
+
+#[path = "../kalibre-dc/tests/support/sim_halls.rs"]
+mod sim_halls;
+
+use std::time::Instant;
+
 use kalibre_dc::hall::Hall;
-use kalibre_dc::sim::{SimConfig, Simulator};
+use kalibre_dc::sim::{Advection, SimConfig, Simulator};
 use kalibre_dc::snapshots::load_snapshots;
 use kalibre_dc::synth::{generate, Preset, SynthOptions};
 
+/// The study's configuration: default grid, `d`, `advection`, optional pass settings.
+fn config(d: f64, advection: Advection, passes: Option<(usize, f64)>) -> SimConfig {
+    let cfg = SimConfig::default()
+        .with_diffusivity_m2_s(d)
+        .with_advection(advection);
+    match passes {
+        Some((m, t)) => cfg.with_advection_outer(m, t),
+        None => cfg,
+    }
+}
+
+fn parse_advection(s: &str) -> Advection {
+    serde_json::from_value(serde_json::Value::String(s.to_string()))
+        .unwrap_or_else(|e| panic!("--advection {s}: {e}"))
+}
+
+/// Median seconds per solve (and the last solve's figures) of `hall` at the default grid.
+fn timing(hall: &Hall, power_w: f64, cfg: SimConfig) -> (f64, usize, usize, f64) {
+    let sim = Simulator::new(hall, cfg).expect("sim");
+    let state = sim_halls::varied_state(hall, 18.0, 0.9, power_w);
+    let alpha = vec![0.12; hall.server_count()];
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..5 {
+        let t = Instant::now();
+        let sol = sim.solve(&state, &alpha, &[]).expect("solve");
+        times.push(t.elapsed().as_secs_f64());
+        last = Some(sol);
+    }
+    times.sort_by(f64::total_cmp);
+    let sol = last.expect("solved");
+    (
+        times[times.len() / 2],
+        sol.advection_stats.passes,
+        sol.heat_stats.iterations,
+        sol.energy_balance_error(),
+    )
+}
+
 fn main() {
-    let args: Vec<f64> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse().unwrap())
-        .collect();
-    let ds = if args.is_empty() {
-        vec![0.01, 0.02, 0.03, 0.05]
-    } else {
-        args
-    };
+    let mut schemes = Vec::new();
+    let mut ds = Vec::new();
+    let mut with_timing = true;
+    let mut passes_cfg: Option<(usize, f64)> = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--advection" => schemes.push(parse_advection(&args.next().expect("scheme"))),
+            "--no-timing" => with_timing = false,
+            "--passes" => {
+                let v = args.next().expect("MAX:TOL");
+                let (m, t) = v.split_once(':').expect("--passes MAX:TOL");
+                passes_cfg = Some((m.parse().expect("MAX"), t.parse().expect("TOL")));
+            }
+            v => ds.push(v.parse::<f64>().expect("diffusivity")),
+        }
+    }
+    if schemes.is_empty() {
+        schemes = vec![Advection::Upwind, Advection::VanLeer];
+    }
+    if ds.is_empty() {
+        ds = vec![0.01];
+    }
     let s = generate(&SynthOptions::new(Preset::Demo, 1).with_reference_runs(false)).unwrap();
     let alpha: Vec<f64> = s
         .truth
@@ -34,78 +99,89 @@ fn main() {
                 .unwrap()
         })
         .collect();
-    for d in ds {
-        let mut res = Vec::new();
-        for cell in [0.2, 0.1] {
-            let cfg = SimConfig {
-                cell_m: cell,
-                diffusivity_m2_s: d,
-                ..SimConfig::default()
-            };
-            let sim = Simulator::new(&s.hall, cfg).unwrap();
-            let r: Vec<Vec<f64>> = s
-                .snapshots
+    let mut rows = Vec::new();
+    for &adv in &schemes {
+        for &d in &ds {
+            let mut res = Vec::new();
+            let mut secs = Vec::new();
+            let mut passes = 0;
+            for cell in [0.2, 0.1] {
+                let cfg = config(d, adv, passes_cfg).with_cell_m(cell);
+                let sim = Simulator::new(&s.hall, cfg).unwrap();
+                let r: Vec<Vec<f64>> = s
+                    .snapshots
+                    .iter()
+                    .map(|sn| {
+                        let t = Instant::now();
+                        let sol = sim.solve(&sn.state, &alpha, &[]).unwrap();
+                        secs.push((cell, t.elapsed().as_secs_f64()));
+                        passes = passes.max(sol.advection_stats.passes);
+                        eprintln!(
+                            "  {adv:?} cell {cell}: {} passes, last change {:.2e} C, {} BiCGSTAB iterations",
+                            sol.advection_stats.passes,
+                            sol.advection_stats.last_change_c,
+                            sol.heat_stats.iterations
+                        );
+                        sol.sensor_c().to_vec()
+                    })
+                    .collect();
+                res.push(r);
+            }
+            let mut diffs: Vec<(usize, usize, f64)> = Vec::new();
+            for (k, (a, b)) in res[0].iter().zip(&res[1]).enumerate() {
+                for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                    diffs.push((k, i, x - y));
+                }
+            }
+            diffs.sort_by(|a, b| b.2.abs().total_cmp(&a.2.abs()));
+            for (k, i, dd) in diffs.iter().take(4) {
+                let sen = &s.hall.sensors[*i];
+                println!(
+                    "  {adv:?} D {d}: snap {k} {} at {:?}: 0.2 {:.2} 0.1 {:.2} diff {:+.2}",
+                    sen.id, sen.position_m, res[0][*k][*i], res[1][*k][*i], dd
+                );
+            }
+            let mut sd: Vec<f64> = diffs.iter().map(|x| x.2.abs()).collect();
+            sd.sort_by(f64::total_cmp);
+            let mean = sd.iter().sum::<f64>() / sd.len() as f64;
+            let demo_s = secs
                 .iter()
-                .map(|sn| {
-                    sim.solve(&sn.state, &alpha, &[])
-                        .unwrap()
-                        .sensor_c()
-                        .to_vec()
-                })
-                .collect();
-            res.push(r);
-        }
-        let diffs: Vec<f64> = res[0]
-            .iter()
-            .zip(&res[1])
-            .flat_map(|(a, b)| {
-                a.iter()
-                    .zip(b)
-                    .map(|(x, y)| (x - y).abs())
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        let mut sd = diffs.clone();
-        sd.sort_by(f64::total_cmp);
-        let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
-        // noise-free synth truth readings vs fine
-        let cfg = SimConfig {
-            diffusivity_m2_s: d,
-            ..SimConfig::default()
-        };
-        let sim = Simulator::new(&of_hall, cfg).unwrap();
-        let (mut e, mut n, mut mx) = (0.0, 0.0, 0.0f64);
-        for sn in &of_snaps {
-            let sol = sim.solve(&sn.state, &of_alpha, &[]).unwrap();
-            let of = &truth["snapshots"][&sn.state.label]["sensor_c_noise_free"];
-            for (sen, p) in of_hall.sensors.iter().zip(sol.sensor_c()) {
-                let o = of[&sen.id].as_f64().unwrap();
-                e += (p - o).abs();
-                n += 1.0;
-                mx = mx.max((p - o).abs());
+                .filter(|x| x.0 == 0.2)
+                .map(|x| x.1)
+                .fold(0.0, f64::max);
+            // Realism against OpenFOAM at the default grid.
+            let sim = Simulator::new(&of_hall, config(d, adv, passes_cfg)).unwrap();
+            let (mut e, mut n, mut mx) = (0.0, 0.0, 0.0f64);
+            for sn in &of_snaps {
+                let sol = sim.solve(&sn.state, &of_alpha, &[]).unwrap();
+                let of = &truth["snapshots"][&sn.state.label]["sensor_c_noise_free"];
+                for (sen, p) in of_hall.sensors.iter().zip(sol.sensor_c()) {
+                    let o = of[&sen.id].as_f64().unwrap();
+                    e += (p - o).abs();
+                    n += 1.0;
+                    mx = mx.max((p - o).abs());
+                }
             }
+            let timing_cols = if with_timing {
+                let (td, pd, _, ed) =
+                    timing(&sim_halls::demo_hall(), 400.0, config(d, adv, passes_cfg));
+                let (ta, pa, _, ea) =
+                    timing(&sim_halls::hall_a(), 250.0, config(d, adv, passes_cfg));
+                format!("{td:.3} ({pd} passes, err {ed:.1e}) | {ta:.3} ({pa} passes, err {ea:.1e})")
+            } else {
+                "- | -".to_string()
+            };
+            rows.push(format!(
+                "| {adv:?} | {d} | {mean:.3} | {:.3} | {:.3} | {:.3} | {mx:.2} | {demo_s:.3} ({passes} passes) | {timing_cols} |",
+                sd[sd.len() * 9 / 10],
+                sd[sd.len() - 1],
+                e / n,
+            ));
         }
-        let mut idx: Vec<(usize, usize, f64)> = Vec::new();
-        for (k, (a, b)) in res[0].iter().zip(&res[1]).enumerate() {
-            for (i, (x, y)) in a.iter().zip(b).enumerate() {
-                idx.push((k, i, x - y));
-            }
-        }
-        idx.sort_by(|a, b| b.2.abs().total_cmp(&a.2.abs()));
-        for (k, i, dd) in idx.iter().take(8) {
-            let sen = &s.hall.sensors[*i];
-            println!(
-                "  snap {k} {} at {:?}: 0.2 {:.2} 0.1 {:.2} diff {:+.2}",
-                sen.id, sen.position_m, res[0][*k][*i], res[1][*k][*i], dd
-            );
-        }
-        println!(
-            "D {d}: grid 0.2->0.1 mean {:.3} p90 {:.3} max {:.3} | OF MAE {:.3} max {:.2}",
-            mean,
-            sd[sd.len() * 9 / 10],
-            sd[sd.len() - 1],
-            e / n,
-            mx
-        );
+    }
+    println!("\n| advection | diffusivity m2/s | grid 0.2->0.1 mean C | p90 C | max C | MAE vs OpenFOAM C | max abs vs OpenFOAM C | synth demo s/solve (max of 3) | bench demo s/solve (median) | bench hall-a s/solve (median) |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        println!("{r}");
     }
 }

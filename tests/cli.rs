@@ -224,13 +224,17 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert!(o.status.success(), "{}", stderr(&o));
     let resumed: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(cut.join("report.json")).unwrap()).unwrap();
+    // A calibration may itself meet a point it already ran (the polish stage's
+    // finite-difference step can land on a geometry step of the loop): the journal
+    // replays those in the uninterrupted run too.
+    let replayed_in_whole = report["runs"]["cached"].as_u64().unwrap() as usize;
     assert_eq!(
         resumed["runs"]["cached"].as_u64().unwrap() as usize,
-        done_before
+        done_before + replayed_in_whole
     );
     assert_eq!(
         resumed["runs"]["new"].as_u64().unwrap() as usize,
-        total - done_before,
+        total - done_before - replayed_in_whole,
         "no finished run is repeated"
     );
     assert_eq!(
@@ -247,7 +251,7 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     keys.sort();
     keys.dedup();
     assert_eq!(keys.len(), n, "a run was repeated");
-    assert_eq!(n, total);
+    assert_eq!(n, total - replayed_in_whole);
 }
 
 /// `kalibre diagnose --json` prints the `kalibre.diagnosis/1` schema, and a calibration

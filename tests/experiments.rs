@@ -21,7 +21,15 @@ fn quiet(_: &str) {}
 
 #[test]
 fn table4_quick_every_approach_improves_and_files_are_written() {
-    let t = table4::run_hall(Preset::Demo, 1, table4::Budgets::quick(), false, &quiet).unwrap();
+    let t = table4::run_hall(
+        Preset::Demo,
+        1,
+        table4::Budgets::quick(),
+        &table4::Approach::ALL,
+        false,
+        &quiet,
+    )
+    .unwrap();
     assert_eq!(t.rows.len(), 4);
     assert!(t.initial_mae_c.is_finite() && t.initial_mae_c > 1.0);
     for row in &t.rows {
@@ -194,4 +202,54 @@ fn bad_arguments_are_named() {
         .unwrap_err()
         .contains("hall-a:x"));
     assert!(parse(&["--fast"]).unwrap_err().contains("--fast"));
+}
+
+#[test]
+fn table4_combine_merges_approaches_and_refuses_other_measurements() {
+    use table4::Approach;
+    let run = |a: &[Approach]| {
+        table4::run_hall(Preset::Demo, 1, table4::Budgets::quick(), a, false, &quiet).unwrap()
+    };
+    let (es, manual) = (run(&[Approach::Es]), run(&[Approach::Manual]));
+    assert_eq!(es.rows.len(), 1);
+    assert!(es.targets.best_after_10.is_none() && es.targets.es_ratio_met.is_none());
+    let dir = temp_dir("table4-combine");
+    let write = |name: &str, t: &table4::HallTable| {
+        experiments::write_json(&dir, name, &serde_json::json!({ "halls": [t] })).unwrap()
+    };
+    // A second manual row that must win over the first (the later file).
+    let mut later = manual.clone();
+    later.rows[0].lowest_mae_c.mean = 0.125;
+    let files = [
+        write("manual.json", &manual),
+        write("es.json", &es),
+        write("later.json", &later),
+    ];
+    let merged = table4::combine(&files).unwrap();
+    assert_eq!(merged.len(), 1);
+    let names: Vec<&str> = merged[0].rows.iter().map(|r| r.approach.as_str()).collect();
+    assert_eq!(names, [Approach::Es.title(), Approach::Manual.title()]);
+    assert_eq!(merged[0].rows[1].lowest_mae_c.mean, 0.125);
+    // Different measurements (another initial MAE) are refused, naming both files.
+    let mut other = es.clone();
+    other.initial_mae_c += 0.01;
+    let bad = write("other.json", &other);
+    let err = table4::combine(&[files[0].clone(), bad])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("initial MAE") && err.contains("other.json"),
+        "{err}"
+    );
+    assert_eq!(
+        Approach::parse_list("manual, kalibre,manual").unwrap(),
+        [Approach::Kalibre, Approach::Manual]
+    );
+    assert!(Approach::parse_list("kalibre,nn")
+        .unwrap_err()
+        .contains("nn"));
+    let b = table4::Budgets::full().with_overrides("mlp=5").unwrap();
+    assert_eq!((b.mlp, b.es), (5, 150));
+    assert!(table4::Budgets::full().with_overrides("es=0").is_err());
+    std::fs::remove_dir_all(dir).unwrap();
 }

@@ -5,20 +5,106 @@
 //! MAE after 10 iterations, lowest MAE within the budget, the iteration and model runs
 //! that reached it, model runs to reach 1.0 C, wall time; mean and spread over seeds.
 
+use std::sync::Mutex;
 use std::time::Instant;
 
 use kalibre::baselines::{
     run_es, BaselineReport, InputLevel, ManualHeuristic, ManualSettings, Mlp, MlpSettings,
     OnePlusOneEs,
 };
+use kalibre::core::{Event, Surrogate};
 use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::snapshots::OperatingState;
 use kalibre::dc::synth::Preset;
 use serde::{Deserialize, Serialize};
+
+mod combine;
+mod markdown;
+
+pub use combine::combine;
+pub use markdown::markdown;
 
 use super::{best_at, kalibre_surrogate, loop_history, run_loop, setup, Result, Setup, Stats};
 
 /// The MAE the "model runs to reach" column counts to (C), as in the issue.
 pub const REACH_MAE_C: f64 = 1.0;
+
+/// One approach of the table (a row).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Approach {
+    /// The thermal graph in the four-step loop.
+    Kalibre,
+    /// The vanilla MLP in the same loop.
+    Mlp,
+    /// The (1+1)-ES over the model.
+    Es,
+    /// The expert's manual heuristic.
+    Manual,
+}
+
+impl Approach {
+    /// Every approach, in table order.
+    pub const ALL: [Approach; 4] = [
+        Approach::Kalibre,
+        Approach::Mlp,
+        Approach::Es,
+        Approach::Manual,
+    ];
+
+    /// Command-line name (`--approaches kalibre,mlp,es,manual`).
+    pub fn key(self) -> &'static str {
+        match self {
+            Approach::Kalibre => "kalibre",
+            Approach::Mlp => "mlp",
+            Approach::Es => "es",
+            Approach::Manual => "manual",
+        }
+    }
+
+    /// The row's title in the table (and in `table4.json`'s `approach`).
+    pub fn title(self) -> &'static str {
+        match self {
+            Approach::Kalibre => "Kalibre (thermal graph loop)",
+            Approach::Mlp => "Vanilla MLP loop",
+            Approach::Es => "(1+1)-ES",
+            Approach::Manual => "Manual heuristic",
+        }
+    }
+
+    /// The approach of a row title or command-line name.
+    pub fn parse(name: &str) -> Option<Approach> {
+        Approach::ALL
+            .into_iter()
+            .find(|a| a.key() == name || a.title() == name)
+    }
+
+    /// Parses a comma-separated list (`kalibre,es`) into table order, without repeats.
+    pub fn parse_list(list: &str) -> std::result::Result<Vec<Approach>, String> {
+        let mut out = Vec::new();
+        for item in list.split(',').map(str::trim) {
+            let a = Approach::parse(item).ok_or_else(|| {
+                format!("--approaches: unknown approach `{item}` (use kalibre, mlp, es, manual)")
+            })?;
+            out.push(a);
+        }
+        out.sort();
+        out.dedup();
+        Ok(out)
+    }
+
+    /// Copies this approach's budget (and the MLP's seed limit) from `from` into `to`.
+    fn copy_budget(self, from: &Budgets, to: &mut Budgets) {
+        match self {
+            Approach::Kalibre => to.kalibre = from.kalibre,
+            Approach::Mlp => {
+                to.mlp = from.mlp;
+                to.mlp_seeds = from.mlp_seeds;
+            }
+            Approach::Es => to.es = from.es,
+            Approach::Manual => to.manual = from.manual,
+        }
+    }
+}
 
 /// Iteration budgets per approach.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -58,6 +144,30 @@ impl Budgets {
             mlp_seeds: None,
         }
     }
+
+    /// Overrides single budgets from a list such as `mlp=5,es=20` (`--budgets`).
+    pub fn with_overrides(mut self, list: &str) -> std::result::Result<Self, String> {
+        for item in list.split(',').map(str::trim) {
+            let parsed = item.split_once('=').and_then(|(name, n)| {
+                Some((
+                    Approach::parse(name)?,
+                    n.parse::<usize>().ok().filter(|&n| n >= 1)?,
+                ))
+            });
+            let Some((a, n)) = parsed else {
+                return Err(format!(
+                    "--budgets: `{item}` is not approach=iterations (kalibre, mlp, es, manual; at least 1)"
+                ));
+            };
+            match a {
+                Approach::Kalibre => self.kalibre = n,
+                Approach::Mlp => self.mlp = n,
+                Approach::Es => self.es = n,
+                Approach::Manual => self.manual = n,
+            }
+        }
+        Ok(self)
+    }
 }
 
 /// One approach, one seed.
@@ -81,8 +191,38 @@ pub struct ApproachRun {
     pub model_runs: usize,
     /// Wall time, seconds.
     pub wall_s: f64,
+    /// Where a loop approach's wall time went (none for the model-only baselines).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loop_time: Option<LoopTime>,
     /// `(iteration, model_runs, best_mae_c)` per iteration.
     pub history: Vec<(usize, usize, f64)>,
+}
+
+/// Seconds spent in the steps of the four-step loop, summed over its iterations.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoopTime {
+    /// Step 1: surrogate fits.
+    pub fit_s: f64,
+    /// Step 2: searches on the surrogate.
+    pub search_s: f64,
+    /// Step 3: model runs, summed over runs (above the wall time when runs overlap).
+    pub model_runs_s: f64,
+}
+
+impl LoopTime {
+    /// Adds one loop event's wall time to its step.
+    fn add(&mut self, e: &Event<'_>) {
+        match e {
+            Event::FitDone { wall_s, .. } => self.fit_s += wall_s,
+            Event::SearchDone { wall_s, .. } => self.search_s += wall_s,
+            Event::RunFinished {
+                wall_s,
+                cached: false,
+                ..
+            } => self.model_runs_s += wall_s,
+            _ => {}
+        }
+    }
 }
 
 impl ApproachRun {
@@ -108,6 +248,7 @@ impl ApproachRun {
             model_runs_to_1c: h.iter().find(|p| p.2 <= REACH_MAE_C).map(|p| p.1),
             model_runs: h.last().map_or(0, |p| p.1),
             wall_s,
+            loop_time: None,
             history: h,
         }
     }
@@ -182,13 +323,13 @@ impl ApproachRow {
     }
 }
 
-/// Whether the issue's targets hold on one hall.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// Whether the issue's targets hold on one hall (none: undefined, e.g. no Kalibre row).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Targets {
-    /// Kalibre has the lowest mean MAE after 10 iterations.
-    pub best_after_10: bool,
-    /// Kalibre needs the fewest mean model runs to its lowest MAE.
-    pub fewest_runs_to_lowest: bool,
+    /// Kalibre has the lowest mean MAE after 10 iterations among the rows present.
+    pub best_after_10: Option<bool>,
+    /// Kalibre needs the fewest mean model runs to its lowest MAE among the rows present.
+    pub fewest_runs_to_lowest: Option<bool>,
     /// ES model runs to 1.0 C over Kalibre's (a lower bound when ES never got there).
     pub es_over_kalibre_runs_to_1c: Option<f64>,
     /// MLP model runs to 1.0 C over Kalibre's (a lower bound when it never got there).
@@ -206,7 +347,7 @@ pub struct HallTable {
     pub preset: String,
     /// Servers, sensors, calibrated parameters, snapshots (model runs per point).
     pub size: (usize, usize, usize, usize),
-    /// Seeds per seeded approach.
+    /// Seeds per seeded approach (the most of any row, after `--combine`).
     pub seeds: usize,
     /// Budgets used.
     pub budgets: Budgets,
@@ -216,58 +357,76 @@ pub struct HallTable {
     pub model_at_truth_mae_c: Option<f64>,
     /// MAE of the noise alone (C), when measured.
     pub noise_only_mae_c: Option<f64>,
-    /// Rows: Kalibre, MLP, ES, manual.
+    /// Rows in table order (Kalibre, MLP, ES, manual), those that were run.
     pub rows: Vec<ApproachRow>,
     /// The issue's targets.
     pub targets: Targets,
 }
 
-/// Runs every approach on `preset` with seeds `1..=seeds`. `progress` receives one line
+/// Runs `approaches` on `preset` with seeds `1..=seeds`. `progress` receives one line
 /// per finished run.
 pub fn run_hall(
     preset: Preset,
     seeds: usize,
     budgets: Budgets,
+    approaches: &[Approach],
     reference: bool,
     progress: &dyn Fn(&str),
 ) -> Result<HallTable> {
+    if approaches.is_empty() || seeds == 0 {
+        return Err("table4: needs at least one approach and one seed".into());
+    }
     let s = setup(preset, reference)?;
     progress(&format!("{preset}: synthesised in {:.0} s", s.synth_s));
-    let settings = HallCalibrationSettings::default();
-    let mut kal = Vec::new();
-    let mut mlp = Vec::new();
-    let mut es = Vec::new();
-    for seed in 1..=seeds as u64 {
-        kal.push(kalibre_run(&s, &settings, seed, budgets.kalibre)?);
-        progress(&line(preset, "kalibre", &kal[kal.len() - 1]));
-        if budgets.mlp_seeds.unwrap_or(usize::MAX) >= seed as usize {
-            mlp.push(mlp_run(&s, &settings, seed, budgets.mlp)?);
-            progress(&line(preset, "mlp", &mlp[mlp.len() - 1]));
+    // The four-step loop alone, as the paper runs it: without the polish stage, which
+    // would spend its Levenberg-Marquardt model runs on both loop rows alike and hide
+    // what the surrogate does (it is measured in docs/performance.md).
+    let mut settings = HallCalibrationSettings::default();
+    settings.core.polish_iterations = 0;
+    let wanted = |a: Approach| approaches.contains(&a);
+    let mut runs: Vec<(Approach, Vec<ApproachRun>)> = Approach::ALL
+        .into_iter()
+        .filter(|&a| wanted(a))
+        .map(|a| (a, Vec::new()))
+        .collect();
+    let mut push = |a: Approach, r: ApproachRun| {
+        progress(&line(preset, a.key(), &r));
+        if let Some((_, v)) = runs.iter_mut().find(|(b, _)| *b == a) {
+            v.push(r);
         }
-        let e = OnePlusOneEs::default()
-            .with_seed(seed)
-            .with_max_iterations(budgets.es);
-        let r = run_es(&s.model, &s.obs, s.model.layout().space(), &e, None)?;
-        es.push(ApproachRun::from_baseline(Some(seed), &r));
-        progress(&line(preset, "es", &es[es.len() - 1]));
+    };
+    for seed in 1..=seeds as u64 {
+        if wanted(Approach::Kalibre) {
+            push(
+                Approach::Kalibre,
+                kalibre_run(&s, &settings, seed, budgets.kalibre)?,
+            );
+        }
+        if wanted(Approach::Mlp) && budgets.mlp_seeds.unwrap_or(usize::MAX) >= seed as usize {
+            push(Approach::Mlp, mlp_run(&s, &settings, seed, budgets.mlp)?);
+        }
+        if wanted(Approach::Es) {
+            let e = OnePlusOneEs::default()
+                .with_seed(seed)
+                .with_max_iterations(budgets.es);
+            let r = run_es(&s.model, &s.obs, s.model.layout().space(), &e, None)?;
+            push(Approach::Es, ApproachRun::from_baseline(Some(seed), &r));
+        }
     }
-    // The expert's procedure is deterministic: one run stands for every seed.
-    let m = ManualHeuristic::new(
-        &s.hall,
-        s.model.layout().clone(),
-        ManualSettings::default().with_max_iterations(budgets.manual),
-    )?;
-    let manual = vec![ApproachRun::from_baseline(
-        None,
-        &m.run(&s.model, &s.obs, None)?,
-    )];
-    progress(&line(preset, "manual", &manual[0]));
-    let rows = vec![
-        ApproachRow::new("Kalibre (thermal graph loop)", kal),
-        ApproachRow::new("Vanilla MLP loop", mlp),
-        ApproachRow::new("(1+1)-ES", es),
-        ApproachRow::new("Manual heuristic", manual),
-    ];
+    if wanted(Approach::Manual) {
+        // The expert's procedure is deterministic: one run stands for every seed.
+        let m = ManualHeuristic::new(
+            &s.hall,
+            s.model.layout().clone(),
+            ManualSettings::default().with_max_iterations(budgets.manual),
+        )?;
+        let r = m.run(&s.model, &s.obs, None)?;
+        push(Approach::Manual, ApproachRun::from_baseline(None, &r));
+    }
+    let rows: Vec<ApproachRow> = runs
+        .into_iter()
+        .map(|(a, v)| ApproachRow::new(a.title(), v))
+        .collect();
     let targets = targets(&rows);
     Ok(HallTable {
         preset: preset.to_string(),
@@ -299,7 +458,12 @@ fn line(preset: Preset, name: &str, r: &ApproachRun) -> String {
         r.model_runs_to_lowest,
         r.model_runs_to_1c,
         r.wall_s
-    )
+    ) + &r.loop_time.map_or(String::new(), |t| {
+        format!(
+            " (fit {:.0} s, search {:.0} s, model runs {:.0} s)",
+            t.fit_s, t.search_s, t.model_runs_s
+        )
+    })
 }
 
 fn kalibre_run(
@@ -308,24 +472,9 @@ fn kalibre_run(
     seed: u64,
     iterations: usize,
 ) -> Result<ApproachRun> {
-    let mut st = settings.clone();
-    st.core.seed = seed;
-    st.core.max_iterations = iterations;
-    let t = Instant::now();
-    let r = run_loop(
-        s,
-        kalibre_surrogate(s, &st)?,
-        st.searcher.clone(),
-        &st,
-        None,
-    )?;
-    let initial = r.initial.mae_c.unwrap_or(f64::INFINITY);
-    Ok(ApproachRun::from_history(
-        Some(seed),
-        initial,
-        loop_history(&r),
-        t.elapsed().as_secs_f64(),
-    ))
+    let st = loop_settings(settings, seed, iterations);
+    let surrogate = kalibre_surrogate(s, &st)?;
+    timed_loop(s, surrogate, &st, seed)
 }
 
 /// The vanilla MLP (518-128-32 style, rack-level inputs) in the same loop, with the same
@@ -336,39 +485,81 @@ fn mlp_run(
     seed: u64,
     iterations: usize,
 ) -> Result<ApproachRun> {
-    let mut st = settings.clone();
-    st.core.seed = seed;
-    st.core.max_iterations = iterations;
+    let st = loop_settings(settings, seed, iterations);
     let net = Mlp::new(
         &s.hall,
         s.model.layout().clone(),
         MlpSettings::default().with_inputs(InputLevel::Rack),
     )?;
-    let t = Instant::now();
-    let r = run_loop(s, net, st.searcher.clone(), &st, None)?;
-    let initial = r.initial.mae_c.unwrap_or(f64::INFINITY);
-    Ok(ApproachRun::from_history(
-        Some(seed),
-        initial,
-        loop_history(&r),
-        t.elapsed().as_secs_f64(),
-    ))
+    timed_loop(s, net, &st, seed)
 }
 
+fn loop_settings(
+    settings: &HallCalibrationSettings,
+    seed: u64,
+    iterations: usize,
+) -> HallCalibrationSettings {
+    let mut st = settings.clone();
+    st.core.seed = seed;
+    st.core.max_iterations = iterations;
+    st
+}
+
+/// Runs the loop with `surrogate`, timing it and its steps.
+fn timed_loop<Su>(
+    s: &Setup,
+    surrogate: Su,
+    st: &HallCalibrationSettings,
+    seed: u64,
+) -> Result<ApproachRun>
+where
+    Su: Surrogate<Scenario = OperatingState> + Sync,
+{
+    let steps = Mutex::new(LoopTime::default());
+    let observe = |e: &Event<'_>| {
+        if let Ok(mut t) = steps.lock() {
+            t.add(e);
+        }
+    };
+    let t = Instant::now();
+    let r = run_loop(s, surrogate, st.searcher.clone(), st, Some(&observe))?;
+    let wall_s = t.elapsed().as_secs_f64();
+    let initial = r.initial.mae_c.unwrap_or(f64::INFINITY);
+    let mut run = ApproachRun::from_history(Some(seed), initial, loop_history(&r), wall_s);
+    run.loop_time = steps.into_inner().ok();
+    Ok(run)
+}
+
+/// The targets over the rows present: undefined where Kalibre's row (or the compared
+/// row) is missing.
 fn targets(rows: &[ApproachRow]) -> Targets {
-    let k = &rows[0];
-    let others = &rows[1..];
-    let best_after_10 = others
-        .iter()
-        .all(|o| k.mae_after_10_c.mean < o.mae_after_10_c.mean);
-    let fewest_runs_to_lowest = others
-        .iter()
-        .all(|o| k.model_runs_to_lowest.mean < o.model_runs_to_lowest.mean);
+    let find = |a: Approach| {
+        rows.iter()
+            .find(|r| Approach::parse(&r.approach) == Some(a))
+    };
+    let Some(k) = find(Approach::Kalibre) else {
+        return Targets::default();
+    };
+    let others: Vec<&ApproachRow> = rows.iter().filter(|r| !std::ptr::eq(*r, k)).collect();
+    let compared = !others.is_empty();
+    let best_after_10 = compared.then(|| {
+        others
+            .iter()
+            .all(|o| k.mae_after_10_c.mean < o.mae_after_10_c.mean)
+    });
+    let fewest_runs_to_lowest = compared.then(|| {
+        others
+            .iter()
+            .all(|o| k.model_runs_to_lowest.mean < o.model_runs_to_lowest.mean)
+    });
     // A ratio is only defined when Kalibre reached 1.0 C on every seed.
     let kal_runs = (k.reached_1c == k.runs.len()).then(|| k.runs_to_1c_bound().0);
-    let ratio = |o: &ApproachRow| kal_runs.map(|kr| o.runs_to_1c_bound().0 / kr);
-    let es = ratio(&rows[2]);
-    let mlp = ratio(&rows[1]);
+    let ratio = |a: Approach| {
+        let o = find(a)?;
+        kal_runs.map(|kr| o.runs_to_1c_bound().0 / kr)
+    };
+    let es = ratio(Approach::Es);
+    let mlp = ratio(Approach::Mlp);
     Targets {
         best_after_10,
         fewest_runs_to_lowest,
@@ -377,74 +568,4 @@ fn targets(rows: &[ApproachRow]) -> Targets {
         es_ratio_met: es.map(|r| r >= 5.0),
         mlp_ratio_met: mlp.map(|r| r >= 2.0),
     }
-}
-
-/// Reads the halls of `table4.json` files written by separate invocations (e.g. one
-/// hall each, run side by side); a later file's hall replaces an earlier one's.
-pub fn combine(files: &[std::path::PathBuf]) -> Result<Vec<HallTable>> {
-    let mut out: Vec<HallTable> = Vec::new();
-    for f in files {
-        let text = std::fs::read_to_string(f).map_err(|e| format!("{}: {e}", f.display()))?;
-        #[derive(Deserialize)]
-        struct Doc {
-            halls: Vec<HallTable>,
-        }
-        let doc: Doc = serde_json::from_str(&text)
-            .map_err(|e| format!("{}: not a table4.json ({e})", f.display()))?;
-        for h in doc.halls {
-            out.retain(|o| o.preset != h.preset);
-            out.push(h);
-        }
-    }
-    Ok(out)
-}
-
-/// The tables as markdown.
-pub fn markdown(tables: &[HallTable]) -> String {
-    let mut s = String::from(
-        "| hall | approach | seeds | MAE after 10 it. (C) | lowest MAE (C) | iteration of lowest | model runs to lowest | model runs to 1.0 C | wall s |\n|---|---|---|---|---|---|---|---|---|\n",
-    );
-    for t in tables {
-        for r in &t.rows {
-            let reach = match &r.model_runs_to_1c {
-                Some(st) if r.reached_1c == r.runs.len() => st.show(0),
-                Some(st) => format!("{} ({}/{} seeds)", st.show(0), r.reached_1c, r.runs.len()),
-                None => format!("not reached (> {})", r.runs_to_1c_bound().0 as usize),
-            };
-            s.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-                t.preset,
-                r.approach,
-                r.runs.len(),
-                r.mae_after_10_c.show(2),
-                r.lowest_mae_c.show(2),
-                r.iterations_to_lowest.show(1),
-                r.model_runs_to_lowest.show(0),
-                reach,
-                r.wall_s.show(0)
-            ));
-        }
-    }
-    s.push('\n');
-    for t in tables {
-        let g = &t.targets;
-        let ratio = |r: Option<f64>, met: Option<bool>, need: f64| match (r, met) {
-            (Some(r), Some(m)) => format!(
-                "{r:.1}x (need >= {need}x: {})",
-                if m { "met" } else { "NOT met" }
-            ),
-            _ => "undefined (Kalibre did not reach 1.0 C on every seed)".into(),
-        };
-        s.push_str(&format!(
-            "- {}: initial MAE {:.2} C; model at truth {}; Kalibre best after 10 iterations: {}; fewest model runs to lowest: {}; ES/Kalibre runs to 1.0 C: {}; MLP/Kalibre: {}\n",
-            t.preset,
-            t.initial_mae_c,
-            t.model_at_truth_mae_c.map_or("n/a".into(), |v| format!("{v:.2} C")),
-            if g.best_after_10 { "met" } else { "NOT met" },
-            if g.fewest_runs_to_lowest { "met" } else { "NOT met" },
-            ratio(g.es_over_kalibre_runs_to_1c, g.es_ratio_met, 5.0),
-            ratio(g.mlp_over_kalibre_runs_to_1c, g.mlp_ratio_met, 2.0),
-        ));
-    }
-    s
 }

@@ -119,6 +119,10 @@ pub struct CalibrateArgs {
     /// (`true` or `false`).
     #[arg(long = "output-correction", default_value_t = true, action = clap::ArgAction::Set)]
     output_correction: bool,
+    /// With the output correction, also correct the surrogate's slopes: a linear term
+    /// fitted to the model-minus-surrogate discrepancy at the other runs (`true` or `false`).
+    #[arg(long = "linear-correction", default_value_t = true, action = clap::ArgAction::Set)]
+    linear_correction: bool,
     /// Search only within this distance (unit box) of the best point, growing after a
     /// step that improved the model and shrinking after one that did not; 0: whole box.
     #[arg(long = "trust-region", default_value_t = 0.1)]
@@ -217,6 +221,10 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         explore_on_repeat: (args.explore != 0.0).then_some(args.explore),
         trust_region: (args.trust_region != 0.0).then_some(args.trust_region),
         output_correction: args.output_correction,
+        linear_correction: args.linear_correction && args.output_correction,
+        stall_step: HallCalibrationSettings::loop_defaults()
+            .stall_step
+            .filter(|_| args.linear_correction && args.output_correction),
         polish_iterations: args.polish.unwrap_or(match args.model {
             ModelArg::Builtin => HallCalibrationSettings::loop_defaults().polish_iterations,
             ModelArg::Openfoam | ModelArg::Command => 0,

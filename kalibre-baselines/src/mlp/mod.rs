@@ -376,30 +376,18 @@ impl Mlp {
         let mut sizes = vec![d_in];
         sizes.extend(&st.hidden);
         sizes.push(self.n_sensors);
-        let mut net = Network::new(&sizes, st.activation, &mut rng);
-        let mut adam = AdamState::new(&net);
-        let mut order: Vec<usize> = (0..n).collect();
-        let mut best = (weighted_mse(&net, &x, &y, &w, &order).0, net.clone());
-        for epoch in 0..st.epochs {
-            let lr = st.learning_rate * st.decay.powf((epoch / st.decay_every) as f64);
-            order.shuffle(&mut rng);
-            for batch in order.chunks(st.batch_size) {
-                let (_, grads) = loss_and_gradients(&net, &x, &y, &w, batch);
-                adam.step(&mut net, &grads, lr);
-            }
-            let loss = weighted_mse(&net, &x, &y, &w, &order).0;
-            if loss < best.0 {
-                best = (loss, net.clone());
-            }
-        }
+        let net = Network::new(&sizes, st.activation, &mut rng);
+        // On a pool thread, the products' and Adam's rayon splits are cheap pushes to the
+        // local queue instead of a hand-over from an outside thread per call.
+        let best = rayon::scope(|_| train(net, &x, &y, &w, st, &mut rng));
         if !best.0.is_finite() {
             return Err(fail(format!("training loss is not finite ({})", best.0)));
         }
         let net = best.1;
         // Train MSE in the outputs' own units (C^2), unweighted.
-        let pred = net.forward(x.view());
+        let pred = net.predict(x.view());
         let mut se = 0.0;
-        for (r, t) in pred.outputs().rows().into_iter().zip(y.rows()) {
+        for (r, t) in pred.rows().into_iter().zip(y.rows()) {
             for ((p, t), sc) in r.iter().zip(t).zip(&ys.scale) {
                 se += ((p - t) * sc).powi(2);
             }
@@ -410,6 +398,34 @@ impl Mlp {
             epochs: st.epochs,
         })
     }
+}
+
+/// Mini-batch Adam from `net` over the rows of `x`; the lowest full-batch loss and its
+/// weights.
+fn train(
+    mut net: Network,
+    x: &Array2<f64>,
+    y: &Array2<f64>,
+    w: &[f64],
+    st: &MlpSettings,
+    rng: &mut Xoshiro256PlusPlus,
+) -> (f64, Network) {
+    let mut adam = AdamState::new(&net);
+    let mut order: Vec<usize> = (0..x.nrows()).collect();
+    let mut best = (epoch_loss(&net, x, y, w, &order), net.clone());
+    for epoch in 0..st.epochs {
+        let lr = st.learning_rate * st.decay.powf((epoch / st.decay_every) as f64);
+        order.shuffle(rng);
+        for batch in order.chunks(st.batch_size) {
+            let (_, grads) = loss_and_gradients(&net, x, y, w, batch);
+            adam.step(&mut net, &grads, lr);
+        }
+        let loss = epoch_loss(&net, x, y, w, &order);
+        if loss < best.0 {
+            best = (loss, net.clone());
+        }
+    }
+    best
 }
 
 fn standardise(a: &mut Array2<f64>, s: &Scaler) {
@@ -429,9 +445,8 @@ fn weighted_mse(
     w: &[f64],
     idx: &[usize],
 ) -> (f64, Array2<f64>, Tape) {
-    let xb = x.select(Axis(0), idx);
     let yb = y.select(Axis(0), idx);
-    let tape = net.forward(xb.view());
+    let tape = net.forward_owned(x.select(Axis(0), idx));
     let wsum: f64 = idx
         .iter()
         .map(|&i| w[i])
@@ -457,8 +472,31 @@ pub fn loss_and_gradients(
     idx: &[usize],
 ) -> (f64, Gradients) {
     let (loss, grad_out, tape) = weighted_mse(net, x, y, w, idx);
-    let (grads, _) = net.backward(&tape, grad_out);
-    (loss, grads)
+    (loss, net.backward_weights(&tape, grad_out))
+}
+
+/// The loss of [`weighted_mse`] alone over every row, summed in the order `idx` (a
+/// permutation of the rows): the forward pass runs on `x` as it is, since a row's
+/// outputs do not depend on its place in the batch.
+fn epoch_loss(net: &Network, x: &Array2<f64>, y: &Array2<f64>, w: &[f64], idx: &[usize]) -> f64 {
+    let out = net.predict(x.view());
+    let wsum: f64 = idx
+        .iter()
+        .map(|&i| w[i])
+        .sum::<f64>()
+        .max(f64::MIN_POSITIVE);
+    let denom = wsum * y.ncols() as f64;
+    let mut loss = 0.0;
+    for &i in idx {
+        let se = out
+            .row(i)
+            .iter()
+            .zip(y.row(i))
+            .map(|(p, t)| (p - t) * (p - t))
+            .sum::<f64>();
+        loss += w[i] * se;
+    }
+    loss / denom
 }
 
 impl Surrogate for Mlp {
@@ -483,8 +521,8 @@ impl Surrogate for Mlp {
         let Some(row) = self.standardised_row(fit, scenario, params) else {
             return nan;
         };
-        let tape = fit.net.forward(row.view());
-        tape.outputs()
+        fit.net
+            .predict(row.view())
             .iter()
             .zip(fit.y.mean.iter().zip(&fit.y.scale))
             .map(|(v, (m, sc))| v * sc + m)
@@ -503,14 +541,14 @@ impl Surrogate for Mlp {
         if cotangent.len() != self.n_sensors {
             return nan;
         }
-        let tape = fit.net.forward(row.view());
+        let tape = fit.net.forward_owned(row);
         let g: Vec<f64> = cotangent
             .iter()
             .zip(&fit.y.scale)
             .map(|(g, s)| g * s)
             .collect();
         let g = Array2::from_shape_vec((1, g.len()), g).expect("one row of outputs");
-        let (_, dx) = fit.net.backward(&tape, g);
+        let dx = fit.net.input_gradient(&tape, g);
         let dx: Vec<f64> = dx.iter().zip(&fit.x.scale).map(|(d, s)| d / s).collect();
         let mut grad = vec![0.0; dim];
         let units = self.units();

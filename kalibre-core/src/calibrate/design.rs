@@ -15,6 +15,7 @@ pub(crate) enum Stream {
     Search = 3,
     Perturb = 4,
     Explore = 5,
+    Geometry = 6,
 }
 
 fn splitmix64(mut z: u64) -> u64 {

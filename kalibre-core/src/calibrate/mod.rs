@@ -3,7 +3,9 @@
 //! The [`Calibrator`] reads like argmin's `Executor`: a builder with `with_*` setters,
 //! settings checked once, and [`Calibrator::run`] returning a serialisable [`Report`].
 
+mod correction;
 mod design;
+mod geometry;
 mod polish;
 mod report;
 mod runner;
@@ -20,6 +22,7 @@ pub use settings::Settings;
 use std::time::Instant;
 
 use crate::observe::{Event, Observe};
+use crate::search::Objective as _;
 use crate::{
     Error, ErrorMetrics, Model, Observations, ParamSpace, Regularizer, Result, RunStore, Sample,
     Searcher, Surrogate, SurrogateObjective, TrainingSet, Validation, Validator,
@@ -27,6 +30,10 @@ use crate::{
 use design::{derive_seed, Stream};
 use runner::Runner;
 use state::State;
+
+/// A proposal whose corrected-surrogate loss is less than this fraction below the best
+/// run's counts as a stall: the surrogate promises too little to spend a model run on (see `Settings::stall_step`).
+const STALL_GAIN: f64 = 0.1;
 
 /// The calibration loop over a model, a surrogate, a searcher and a validator.
 ///
@@ -385,16 +392,13 @@ where
             let mut objective = SurrogateObjective::new(&self.surrogate, obs, space);
             if st.output_correction {
                 if let Some(best) = &state.best {
-                    let offsets = obs
-                        .snapshots()
-                        .iter()
-                        .zip(&best.outputs)
-                        .map(|(snap, model)| {
-                            let sur = self.surrogate.predict(&snap.scenario, &best.params);
-                            model.iter().zip(sur).map(|(m, s)| m - s).collect()
-                        })
-                        .collect();
-                    objective = objective.with_offsets(offsets);
+                    objective = objective.with_correction(correction::fit(
+                        &self.surrogate,
+                        obs,
+                        &state,
+                        best,
+                        st.linear_correction,
+                    ));
                 }
             }
             if let Some(reg) = self.regularizer {
@@ -456,6 +460,31 @@ where
                     .any(|p| design::distance(p, u) <= st.duplicate_tol)
             };
             let mut perturbed = false;
+            let mut geometry_step = false;
+            if let (Some(h), Some(best)) = (st.stall_step, &state.best) {
+                // The corrected surrogate matches the model at the best run, so its loss
+                // there is the best run's loss (plus the regulariser's).
+                let anchor_cost = objective.cost(&best.unit);
+                let stalled = outcome.best_cost > anchor_cost - STALL_GAIN * anchor_cost.abs()
+                    || near(&state.ok_units, &unit);
+                if stalled {
+                    let moved = geometry::least_covered_step(
+                        &best.unit,
+                        &state.ok_units,
+                        3.0 * crate::search::CORRECTION_LENGTH_UNIT,
+                        h,
+                        derive_seed(st.seed, iteration, Stream::Geometry),
+                    );
+                    self.emit(Event::Perturbed {
+                        iteration,
+                        from_unit: &unit,
+                        to_unit: &moved,
+                    });
+                    unit = moved;
+                    perturbed = true;
+                    geometry_step = true;
+                }
+            }
             if near(&state.failed_units, &unit) {
                 let moved = design::perturb(
                     &unit,
@@ -509,7 +538,9 @@ where
                 .unwrap_or_default();
             let model_s = t.elapsed().as_secs_f64();
             let eval = state.absorb(&self.validator, obs, iteration, &unit, &params, results);
-            if let Some(r) = radius.as_mut() {
+            // A geometry step tests the model, not the surrogate's proposal: the radius
+            // stays.
+            if let Some(r) = radius.as_mut().filter(|_| !geometry_step) {
                 let improved = state
                     .best
                     .as_ref()

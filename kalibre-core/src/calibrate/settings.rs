@@ -21,6 +21,8 @@ use crate::{Error, Result};
 /// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point, unit box | finite, > 0 |
 /// | `explore_on_repeat` | none | when the search proposes a point already run: none stops (converged); a sigma moves the proposal with that much seeded noise (unit box) and goes on | finite, > 0 |
 /// | `output_correction` | false | search the surrogate plus, per snapshot and output, the model's outputs minus the surrogate's at the best run (the corrected surrogate matches the model there) | bool |
+/// | `linear_correction` | false | with `output_correction`: add a linear term in the unit box fitted to the model-minus-surrogate discrepancy at the other runs (weighted by distance, minimum norm), so the search also follows the model's slopes along explored directions | bool |
+/// | `stall_step` | none | with `linear_correction`: when the search's proposal promises less than 10% below the best run's loss (or repeats a run), run instead at the best point moved by this much (max norm, unit box) along the direction the runs near it covered least, so the next correction learns the model's slope there | finite, (0, 1] |
 /// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1 | finite, > 0 |
@@ -55,6 +57,14 @@ pub struct Settings {
     pub explore_on_repeat: Option<f64>,
     /// Correct the surrogate to match the model at the best run before each search.
     pub output_correction: bool,
+    /// With `output_correction`, also correct the surrogate's slopes from the other runs.
+    /// Missing in older reports: false.
+    #[serde(default)]
+    pub linear_correction: bool,
+    /// With the linear correction, the geometry step taken instead of a stalled proposal.
+    /// Missing in older reports: none.
+    #[serde(default)]
+    pub stall_step: Option<f64>,
     /// Initial trust-region radius (unit box); none searches the whole box.
     pub trust_region: Option<f64>,
     /// Levenberg-Marquardt steps on the model after the loop (0: none). Missing in older
@@ -80,6 +90,8 @@ impl Default for Settings {
             focus: None,
             explore_on_repeat: None,
             output_correction: false,
+            linear_correction: false,
+            stall_step: None,
             trust_region: None,
             polish_iterations: 0,
         }
@@ -123,6 +135,24 @@ impl Settings {
         }
         if self.max_parallel_runs == Some(0) {
             return Err(bad("max_parallel_runs", "must be at least 1".into()));
+        }
+        if self.linear_correction && !self.output_correction {
+            return Err(bad(
+                "linear_correction",
+                "needs output_correction (the linear term is anchored at the corrected best run)"
+                    .into(),
+            ));
+        }
+        if let Some(h) = self.stall_step {
+            if !(h.is_finite() && h > 0.0 && h <= 1.0) {
+                return Err(bad("stall_step", format!("must be in (0, 1], got {h}")));
+            }
+            if !self.linear_correction {
+                return Err(bad(
+                    "stall_step",
+                    "needs linear_correction (the step feeds the linear term)".into(),
+                ));
+            }
         }
         if self.augment_copies == 0 {
             return Err(bad(

@@ -27,6 +27,8 @@ pub(crate) struct PointEval {
 pub(crate) struct State {
     pub(crate) samples: Vec<Sample>,
     pub(crate) ok_units: Vec<Vec<f64>>,
+    /// Per successful point (as `ok_units`): physical parameters and outputs per snapshot.
+    pub(crate) ok_runs: Vec<(Vec<f64>, Vec<Vec<f64>>)>,
     pub(crate) failed_units: Vec<Vec<f64>>,
     pub(crate) best: Option<BestPoint>,
     pub(crate) counts: RunCounts,
@@ -75,6 +77,7 @@ impl State {
             };
         }
         self.ok_units.push(unit.to_vec());
+        self.ok_runs.push((params.to_vec(), outputs.clone()));
         let validation = validator.validate(obs, &outputs);
         let score = validator.score(&validation);
         if score.is_finite() && self.best.as_ref().is_none_or(|b| score < b.score) {

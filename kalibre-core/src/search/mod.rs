@@ -6,13 +6,16 @@
 //! as the paper does.
 
 mod adam;
+mod correction;
 mod de;
 mod hybrid;
 mod kernels;
 mod objective;
 mod problem;
+mod spg;
 
 pub use adam::{Adam, AdamBuilder, AdamSolver};
+pub use correction::{OutputCorrection, CORRECTION_LENGTH_UNIT, CORRECTION_RIDGE_REL};
 pub use de::{
     DeSolver, DifferentialEvolution, DifferentialEvolutionBuilder, PopulationEval,
     AUTO_PARALLEL_MIN_EVAL_US,
@@ -20,6 +23,7 @@ pub use de::{
 pub use hybrid::{Hybrid, HYBRID_DE_GIVE_UP_AFTER};
 pub use objective::{Regularizer, SurrogateObjective};
 pub use problem::{BoxState, UnitBoxProblem};
+pub use spg::ProjectedGradient;
 
 use serde::{Deserialize, Serialize};
 

@@ -2,7 +2,7 @@
 
 use crate::{Observations, ParamSpace, Surrogate};
 
-use super::Objective;
+use super::{Objective, OutputCorrection};
 
 /// A domain prior on physical parameters (e.g. the paper's penalty on server temperature
 /// rises outside a plausible range).
@@ -19,8 +19,8 @@ pub struct SurrogateObjective<'a, Su: Surrogate> {
     space: &'a ParamSpace,
     regularizer: Option<(&'a dyn Regularizer, f64)>,
     measured_count: f64,
-    /// Per snapshot, per output: added to the surrogate's prediction (output correction).
-    offsets: Option<Vec<Vec<f64>>>,
+    /// Added to the surrogate's prediction per snapshot and output (output correction).
+    correction: Option<OutputCorrection>,
 }
 
 impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
@@ -37,7 +37,7 @@ impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
             space,
             regularizer: None,
             measured_count,
-            offsets: None,
+            correction: None,
         }
     }
 
@@ -45,18 +45,27 @@ impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
     /// outputs minus the surrogate's at the best run so far, the corrected surrogate
     /// matches the model there exactly (zero-order consistency, as in trust-region model
     /// management), and the search follows the surrogate's slopes from the model's answer.
-    pub fn with_offsets(mut self, offsets: Vec<Vec<f64>>) -> Self {
-        self.offsets = Some(offsets);
+    pub fn with_offsets(self, offsets: Vec<Vec<f64>>) -> Self {
+        self.with_correction(OutputCorrection::constant(offsets))
+    }
+
+    /// Adds a correction (constant or with a linear term) to every prediction.
+    pub fn with_correction(mut self, correction: OutputCorrection) -> Self {
+        self.correction = Some(correction);
         self
     }
 
-    fn offset(&self, snapshot: usize, output: usize) -> f64 {
-        self.offsets
+    /// Projections of the point on the correction's explored directions.
+    fn projections(&self, x_unit: &[f64]) -> Vec<f64> {
+        self.correction
             .as_ref()
-            .and_then(|o| o.get(snapshot))
-            .and_then(|o| o.get(output))
-            .copied()
-            .unwrap_or(0.0)
+            .map_or_else(Vec::new, |c| c.projections(x_unit))
+    }
+
+    fn offset(&self, snapshot: usize, output: usize, projections: &[f64]) -> f64 {
+        self.correction
+            .as_ref()
+            .map_or(0.0, |c| c.value_at(snapshot, output, projections))
     }
 
     /// Adds `weight * regularizer(params)`.
@@ -67,12 +76,21 @@ impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
 
     /// The data term (mean squared error) alone, at physical parameters.
     pub fn data_mse(&self, params: &[f64]) -> f64 {
+        let proj = match (&self.correction, self.space.to_unit(params)) {
+            (Some(_), Ok(u)) => self.projections(&u),
+            (Some(_), Err(_)) => return f64::NAN,
+            (None, _) => Vec::new(),
+        };
+        self.data_mse_at(params, &proj)
+    }
+
+    fn data_mse_at(&self, params: &[f64], proj: &[f64]) -> f64 {
         let mut sum = 0.0;
         for (s, snap) in self.observations.snapshots().iter().enumerate() {
             let pred = self.surrogate.predict(&snap.scenario, params);
             for (k, (p, m)) in pred.iter().zip(&snap.measured).enumerate() {
                 if let Some(m) = m {
-                    let r = p + self.offset(s, k) - m;
+                    let r = p + self.offset(s, k, proj) - m;
                     sum += r * r;
                 }
             }
@@ -95,7 +113,7 @@ where
             Ok(p) => p,
             Err(_) => return f64::INFINITY,
         };
-        let mut cost = self.data_mse(&params);
+        let mut cost = self.data_mse_at(&params, &self.projections(x_unit));
         if let Some((reg, w)) = self.regularizer {
             cost += w * reg.value_and_gradient(&params).0;
         }
@@ -107,8 +125,10 @@ where
             Ok(p) => p,
             Err(_) => return (f64::INFINITY, vec![0.0; x_unit.len()]),
         };
+        let proj = self.projections(x_unit);
         let mut cost = 0.0;
         let mut grad_phys = vec![0.0; params.len()];
+        let mut grad_correction = vec![0.0; x_unit.len()];
         for (s, snap) in self.observations.snapshots().iter().enumerate() {
             let pred = self.surrogate.predict(&snap.scenario, &params);
             let mut cotangent = vec![0.0; pred.len()];
@@ -119,10 +139,13 @@ where
                 .enumerate()
             {
                 if let Some(m) = m {
-                    let r = p + self.offset(s, k) - m;
+                    let r = p + self.offset(s, k, &proj) - m;
                     cost += r * r;
                     *c = 2.0 * r / self.measured_count;
                 }
+            }
+            if let Some(corr) = &self.correction {
+                corr.add_vjp(s, &cotangent, &mut grad_correction);
             }
             let g = self.surrogate.vjp(&snap.scenario, &params, &cotangent);
             for (acc, gi) in grad_phys.iter_mut().zip(g) {
@@ -138,7 +161,12 @@ where
             }
         }
         let scale = self.space.dphys_dunit(x_unit);
-        let grad_unit = grad_phys.iter().zip(scale).map(|(g, s)| g * s).collect();
+        let grad_unit = grad_phys
+            .iter()
+            .zip(scale)
+            .zip(&grad_correction)
+            .map(|((g, s), gc)| g * s + gc)
+            .collect();
         (cost, grad_unit)
     }
 }

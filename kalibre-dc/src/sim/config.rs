@@ -17,6 +17,13 @@ use crate::{Error, Result};
 /// | `preconditioner` | `multigrid` | Krylov preconditioner of both solves | `multigrid`, `jacobi` |
 /// | `air_density_kg_m3` | 1.2 | rho | > 0 |
 /// | `air_cp_j_kg_k` | 1005 | cp | > 0 |
+/// | `advection` | `upwind` | advection scheme of the temperature equation | `upwind`, `van_leer`, `minmod` |
+/// | `advection_max_outer` | 10 | deferred-correction passes after the upwind solve (TVD schemes only) | [1, 100] |
+/// | `advection_tol_c` | 1e-3 | stop the passes when no cell temperature moves more than this (C) | (0, 1] |
+///
+/// Fields after `preconditioner` are optional in files (missing: the default) and are
+/// written only when not at their default, so older files parse and the serialized form
+/// of a default configuration (a model fingerprint) is unchanged.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimConfig {
@@ -40,6 +47,62 @@ pub struct SimConfig {
     pub air_density_kg_m3: f64,
     /// Air heat capacity (J/(kg K)).
     pub air_cp_j_kg_k: f64,
+    /// Advection scheme of the temperature equation (missing in older files: upwind).
+    #[serde(default, skip_serializing_if = "Advection::is_upwind")]
+    pub advection: Advection,
+    /// Deferred-correction passes after the first (upwind) solve, TVD schemes only.
+    #[serde(
+        default = "default_max_outer",
+        skip_serializing_if = "is_default_max_outer"
+    )]
+    pub advection_max_outer: usize,
+    /// Largest cell temperature change (C) of a pass below which the passes stop.
+    #[serde(default = "default_tol_c", skip_serializing_if = "is_default_tol_c")]
+    pub advection_tol_c: f64,
+}
+
+const DEFAULT_MAX_OUTER: usize = 10;
+const DEFAULT_TOL_C: f64 = 1e-3;
+
+fn default_max_outer() -> usize {
+    DEFAULT_MAX_OUTER
+}
+
+fn is_default_max_outer(v: &usize) -> bool {
+    *v == DEFAULT_MAX_OUTER
+}
+
+fn default_tol_c() -> f64 {
+    DEFAULT_TOL_C
+}
+
+fn is_default_tol_c(v: &f64) -> bool {
+    *v == DEFAULT_TOL_C
+}
+
+/// Advection scheme of the temperature equation.
+///
+/// The TVD schemes keep the upwind matrix (and so the multigrid-preconditioned BiCGSTAB
+/// solve) and add the difference between the limited second-order face value and the
+/// upwind one as an explicit source, updated in a few deferred-correction passes. Their
+/// limiters stay in Sweby's second-order TVD region, so no new extrema appear.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Advection {
+    /// First-order upwind (numerical diffusion about `|U| dx / 2`).
+    #[default]
+    Upwind,
+    /// TVD with the van Leer limiter `psi(r) = (r + |r|) / (1 + |r|)`.
+    VanLeer,
+    /// TVD with the minmod limiter `psi(r) = max(0, min(1, r))` (the most diffusive TVD).
+    Minmod,
+}
+
+impl Advection {
+    /// True for first-order upwind.
+    pub fn is_upwind(&self) -> bool {
+        *self == Advection::Upwind
+    }
 }
 
 /// Preconditioner of the simulator's Krylov solves. Both give the same answers to solver
@@ -66,6 +129,9 @@ impl Default for SimConfig {
             preconditioner: Preconditioner::Multigrid,
             air_density_kg_m3: 1.2,
             air_cp_j_kg_k: 1005.0,
+            advection: Advection::Upwind,
+            advection_max_outer: DEFAULT_MAX_OUTER,
+            advection_tol_c: DEFAULT_TOL_C,
         }
     }
 }
@@ -105,6 +171,20 @@ impl SimConfig {
     /// Sets the iteration limit.
     pub fn with_max_iterations(mut self, n: usize) -> Self {
         self.max_iterations = n;
+        self
+    }
+
+    /// Sets the advection scheme of the temperature equation.
+    pub fn with_advection(mut self, advection: Advection) -> Self {
+        self.advection = advection;
+        self
+    }
+
+    /// Sets the deferred-correction passes (TVD schemes): at most `max_outer`, stopping
+    /// when no cell temperature changes by more than `tol_c` (C).
+    pub fn with_advection_outer(mut self, max_outer: usize, tol_c: f64) -> Self {
+        self.advection_max_outer = max_outer;
+        self.advection_tol_c = tol_c;
         self
     }
 
@@ -158,6 +238,20 @@ impl SimConfig {
         }
         if !in_range(self.air_cp_j_kg_k, 0.0, f64::MAX, true) {
             return bad("air_cp_j_kg_k", self.air_cp_j_kg_k.to_string(), "> 0");
+        }
+        if !(1..=100).contains(&self.advection_max_outer) {
+            return bad(
+                "advection_max_outer",
+                self.advection_max_outer.to_string(),
+                "[1, 100]",
+            );
+        }
+        if !in_range(self.advection_tol_c, 0.0, 1.0, true) {
+            return bad(
+                "advection_tol_c",
+                self.advection_tol_c.to_string(),
+                "(0, 1]",
+            );
         }
         Ok(())
     }

@@ -1,7 +1,8 @@
 //! Heat: steady first-order upwind advection with an effective (turbulent) diffusivity on
 //! the face fluxes of the flow solution, plus the non-local server coupling (exhaust =
 //! flow-weighted mean intake + rise) inside the operator, so one BiCGSTAB solve gives a
-//! consistent field with no outer iteration.
+//! consistent field with no outer iteration. The TVD advection option keeps this operator
+//! and adds its higher-order part as a deferred correction (`advection.rs`).
 
 use rayon::prelude::*;
 

@@ -20,6 +20,7 @@
 //!
 //! Effects ([`crate::effects::Effect`]) change a run through [`SimMods`].
 
+mod advection;
 mod config;
 mod dense;
 mod flow;
@@ -33,7 +34,8 @@ mod solution;
 mod topology;
 mod vtk;
 
-pub use config::{Preconditioner, SimConfig};
+pub use advection::AdvectionStats;
+pub use config::{Advection, Preconditioner, SimConfig};
 pub use grid::Grid;
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};

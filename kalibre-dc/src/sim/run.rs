@@ -3,7 +3,8 @@
 
 use std::borrow::Cow;
 
-use super::config::Preconditioner;
+use super::advection::{solve_deferred, AdvectionStats, Faces};
+use super::config::{Advection, Preconditioner};
 use super::flow::{face_fluxes, pressure_spec, PressureOp};
 use super::grid::Grid;
 use super::heat::{heat_spec, stencil_value, HeatOp, Transfer};
@@ -391,7 +392,13 @@ pub(super) fn solve(
         .iter()
         .map(|s| if *s { 0.0 } else { t_supply_mean })
         .collect();
-    let hstats = heat_solve(
+    let faces = Faces {
+        grid,
+        g: gref,
+        full_g: std::array::from_fn(|a| open_face_g(grid, a)),
+        flux: &flux,
+    };
+    let (hstats, advection_stats) = heat_solve(
         cfg.preconditioner,
         HeatInputs {
             grid,
@@ -406,6 +413,11 @@ pub(super) fn solve(
         &rhs,
         &mut temp,
         (cfg.heat_tol, cfg.max_iterations),
+        (
+            &faces,
+            cfg.advection,
+            (cfg.advection_max_outer, cfg.advection_tol_c),
+        ),
     );
     if hstats.rel_residual.is_nan() || hstats.rel_residual > cfg.heat_tol {
         return Err(Error::Simulation(format!(
@@ -474,6 +486,7 @@ pub(super) fn solve(
         heat_removed_w,
         pressure_stats: pstats,
         heat_stats: hstats,
+        advection_stats,
     })
 }
 
@@ -489,14 +502,20 @@ struct HeatInputs<'a> {
     transfers: &'a [Transfer],
 }
 
-/// The temperature solve with the chosen preconditioner.
+/// The temperature solve with the chosen preconditioner and advection scheme (the
+/// operator is built once; TVD schemes re-solve it with corrected right-hand sides).
 fn heat_solve(
     pc: Preconditioner,
     h: HeatInputs,
     rhs: &[f64],
     temp: &mut [f64],
     (tol, max_iter): (f64, usize),
-) -> SolveStats {
+    (faces, scheme, passes): (&Faces, Advection, (usize, f64)),
+) -> (SolveStats, AdvectionStats) {
+    let deferred =
+        |rhs: &[f64], temp: &mut [f64], solve: &mut dyn FnMut(&[f64], &mut [f64]) -> SolveStats| {
+            solve_deferred(faces, scheme, passes, tol, rhs, temp, solve)
+        };
     match pc {
         Preconditioner::Multigrid => {
             let spec = heat_spec(
@@ -510,7 +529,9 @@ fn heat_solve(
                 h.transfers,
             );
             let mg = Multigrid::build(spec, false, HEAT_SWEEPS);
-            bicgstab(&mg, &mut mg.workspace(), rhs, temp, tol, max_iter)
+            deferred(rhs, temp, &mut |b, x| {
+                bicgstab(&mg, &mut mg.workspace(), b, x, tol, max_iter)
+            })
         }
         Preconditioner::Jacobi => {
             let hop = HeatOp::new(
@@ -523,7 +544,9 @@ fn heat_solve(
                 h.sink,
                 h.transfers,
             );
-            bicgstab(&hop, &mut Jacobi(hop.inv_diag()), rhs, temp, tol, max_iter)
+            deferred(rhs, temp, &mut |b, x| {
+                bicgstab(&hop, &mut Jacobi(hop.inv_diag()), b, x, tol, max_iter)
+            })
         }
     }
 }

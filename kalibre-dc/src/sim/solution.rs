@@ -1,5 +1,6 @@
 //! The result of one simulator run: fields, sensor readings, balances, solver figures.
 
+use super::advection::AdvectionStats;
 use super::flow::mass_imbalance;
 use super::grid::Grid;
 use super::linalg::SolveStats;
@@ -43,8 +44,10 @@ pub struct Solution {
     pub heat_removed_w: f64,
     /// Pressure solve figures.
     pub pressure_stats: SolveStats,
-    /// Temperature solve figures.
+    /// Temperature solve figures (iterations summed over the deferred-correction passes).
     pub heat_stats: SolveStats,
+    /// Deferred-correction passes of a TVD advection scheme (zero for upwind).
+    pub advection_stats: AdvectionStats,
 }
 
 impl Solution {
