@@ -21,7 +21,10 @@ use serde::{Deserialize, Serialize};
 mod combine;
 mod markdown;
 
+// Used by the table4 binary and the tests; fig7 and fig8 include this module too.
+#[allow(unused_imports)]
 pub use combine::combine;
+#[allow(unused_imports)]
 pub use markdown::markdown;
 
 use super::{best_at, kalibre_surrogate, loop_history, run_loop, setup, Result, Setup, Stats};
