@@ -8,7 +8,8 @@
 
 use std::sync::Mutex;
 
-use kalibre::core::{Adam, Event};
+use kalibre::core::search::{Adam, Objective, ProjectedGradient};
+use kalibre::core::{Event, SearchOutcome, Searcher};
 use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::synth::Preset;
 use serde::{Deserialize, Serialize};
@@ -101,6 +102,38 @@ pub struct Fig8Result {
     pub variants: Vec<Variant>,
 }
 
+/// The hybrid without its DE phase: Adam from the start, then the local phase from
+/// Adam's best (none when it has 0 steps).
+struct AdamThenLocal {
+    adam: Adam,
+    local: ProjectedGradient,
+}
+
+impl Searcher for AdamThenLocal {
+    fn search(
+        &self,
+        objective: &dyn Objective,
+        start: &[f64],
+        seed: u64,
+    ) -> kalibre::core::Result<SearchOutcome> {
+        let mut out = self.adam.search(objective, start, seed)?;
+        if self.local.steps() > 0 && out.best_cost.is_finite() {
+            let local = self.local.search(objective, &out.best_unit, seed)?;
+            let offset = out.trace.len();
+            out.trace.extend(local.trace.into_iter().map(|mut t| {
+                t.iteration += offset;
+                t
+            }));
+            out.evaluations += local.evaluations;
+            if local.best_cost < out.best_cost {
+                out.best_unit = local.best_unit;
+                out.best_cost = local.best_cost;
+            }
+        }
+        Ok(out)
+    }
+}
+
 fn one_run(
     s: &super::Setup,
     seed: u64,
@@ -113,9 +146,16 @@ fn one_run(
     if cfg.paper_loop {
         // Algorithm 1 as the paper gives it: the whole box, the surrogate as fitted, every
         // run weighted alike (a repeated proposal still moves on rather than stopping).
+        // Its searcher is DE then Adam, without kalibre's local phase.
         st.core.trust_region = None;
         st.core.output_correction = false;
+        st.core.linear_correction = false;
+        st.core.stall_step = None;
         st.core.focus = None;
+        st.searcher = st
+            .searcher
+            .clone()
+            .with_local(ProjectedGradient::with_steps(0)?);
     }
     let seen: Mutex<Vec<IterationTrace>> = Mutex::new(Vec::new());
     let record = |e: &Event<'_>| match e {
@@ -147,9 +187,12 @@ fn one_run(
     let report = if with_de {
         run_loop(s, g, st.searcher.clone(), &st, Some(&record))?
     } else {
-        // The hybrid's own Adam phase, alone.
-        let adam: Adam = st.searcher.adam().clone();
-        run_loop(s, g, adam, &st, Some(&record))?
+        // The hybrid without its DE phase: its own Adam phase, then its local phase.
+        let adam_only = AdamThenLocal {
+            adam: st.searcher.adam().clone(),
+            local: st.searcher.local().clone(),
+        };
+        run_loop(s, g, adam_only, &st, Some(&record))?
     };
     let trace = seen.into_inner().expect("recorder");
     Ok((report.initial.mae_c.unwrap_or(f64::INFINITY), trace))
