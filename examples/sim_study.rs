@@ -3,24 +3,34 @@
 //! demo and hall-a halls, per advection scheme and diffusivity.
 //!
 //! `cargo run --release --example sim_study -- [--advection upwind|van_leer|minmod]...
-//! [--passes MAX:TOL_C] [--no-timing] [DIFFUSIVITY...]` (run from the workspace root; defaults: upwind and
-//! van_leer, diffusivity 0.01). Prints a markdown table.
+//! [--passes MAX:TOL_C] [--panel-m T] [--diagnose] [--no-timing] [DIFFUSIVITY...]` (run from the workspace root; defaults: upwind and
+//! van_leer, diffusivity 0.01; `--panel-m T|none`: containment panel thickness,
+//! `SimConfig::containment_panel_m`, default 0.2 m; `none`: one cell thick). Prints a markdown table; `--diagnose`
+//! prints instead how row A's containment, rack A01 and sensor `c-A01-17` land on both
+//! grids and the flow through each containment side.
 
 #[path = "../kalibre-dc/tests/support/sim_halls.rs"]
 mod sim_halls;
 
 use std::time::Instant;
 
-use kalibre_dc::hall::Hall;
-use kalibre_dc::sim::{Advection, SimConfig, Simulator};
-use kalibre_dc::snapshots::load_snapshots;
+use kalibre_dc::hall::{Aabb, Containment, Hall};
+use kalibre_dc::sim::{Advection, Grid, SimConfig, Simulator, Solution};
+use kalibre_dc::snapshots::{load_snapshots, OperatingState};
 use kalibre_dc::synth::{generate, Preset, SynthOptions};
 
-/// The study's configuration: default grid, `d`, `advection`, optional pass settings.
-fn config(d: f64, advection: Advection, passes: Option<(usize, f64)>) -> SimConfig {
+/// The study's configuration: default grid, `d`, `advection`, optional pass settings and
+/// containment panel thickness.
+fn config(
+    d: f64,
+    advection: Advection,
+    passes: Option<(usize, f64)>,
+    panel_m: Option<f64>,
+) -> SimConfig {
     let cfg = SimConfig::default()
         .with_diffusivity_m2_s(d)
-        .with_advection(advection);
+        .with_advection(advection)
+        .with_containment_panel_m(panel_m);
     match passes {
         Some((m, t)) => cfg.with_advection_outer(m, t),
         None => cfg,
@@ -60,11 +70,23 @@ fn main() {
     let mut ds = Vec::new();
     let mut with_timing = true;
     let mut passes_cfg: Option<(usize, f64)> = None;
+    let mut diagnose_only = false;
+    // The simulator's default panels; `--panel-m none` gives the old one-cell panels.
+    let mut panel_m: Option<f64> = SimConfig::default().containment_panel_m;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--advection" => schemes.push(parse_advection(&args.next().expect("scheme"))),
             "--no-timing" => with_timing = false,
+            "--diagnose" => diagnose_only = true,
+            "--panel-m" => {
+                let v = args.next().expect("PANEL_M");
+                panel_m = if v == "none" {
+                    None
+                } else {
+                    Some(v.parse().expect("PANEL_M: a thickness in m or `none`"))
+                };
+            }
             "--passes" => {
                 let v = args.next().expect("MAX:TOL");
                 let (m, t) = v.split_once(':').expect("--passes MAX:TOL");
@@ -86,6 +108,16 @@ fn main() {
         .iter()
         .map(|a| a.alpha_cfm_per_w)
         .collect();
+    if diagnose_only {
+        let states: Vec<OperatingState> = s.snapshots.iter().map(|sn| sn.state.clone()).collect();
+        diagnose(
+            &s.hall,
+            &alpha,
+            &states,
+            &config(ds[0], schemes[0], passes_cfg, panel_m),
+        );
+        return;
+    }
     let root = std::path::Path::new("data/openfoam/of-dev-clean");
     let of_hall = Hall::load(&root.join("hall.json")).unwrap();
     let of_snaps = load_snapshots(&of_hall, &root.join("snapshots.csv")).unwrap();
@@ -106,7 +138,7 @@ fn main() {
             let mut secs = Vec::new();
             let mut passes = 0;
             for cell in [0.2, 0.1] {
-                let cfg = config(d, adv, passes_cfg).with_cell_m(cell);
+                let cfg = config(d, adv, passes_cfg, panel_m).with_cell_m(cell);
                 let sim = Simulator::new(&s.hall, cfg).unwrap();
                 let r: Vec<Vec<f64>> = s
                     .snapshots
@@ -150,7 +182,7 @@ fn main() {
                 .map(|x| x.1)
                 .fold(0.0, f64::max);
             // Realism against OpenFOAM at the default grid.
-            let sim = Simulator::new(&of_hall, config(d, adv, passes_cfg)).unwrap();
+            let sim = Simulator::new(&of_hall, config(d, adv, passes_cfg, panel_m)).unwrap();
             let (mut e, mut n, mut mx) = (0.0, 0.0, 0.0f64);
             for sn in &of_snaps {
                 let sol = sim.solve(&sn.state, &of_alpha, &[]).unwrap();
@@ -163,10 +195,16 @@ fn main() {
                 }
             }
             let timing_cols = if with_timing {
-                let (td, pd, _, ed) =
-                    timing(&sim_halls::demo_hall(), 400.0, config(d, adv, passes_cfg));
-                let (ta, pa, _, ea) =
-                    timing(&sim_halls::hall_a(), 250.0, config(d, adv, passes_cfg));
+                let (td, pd, _, ed) = timing(
+                    &sim_halls::demo_hall(),
+                    400.0,
+                    config(d, adv, passes_cfg, panel_m),
+                );
+                let (ta, pa, _, ea) = timing(
+                    &sim_halls::hall_a(),
+                    250.0,
+                    config(d, adv, passes_cfg, panel_m),
+                );
                 format!("{td:.3} ({pd} passes, err {ed:.1e}) | {ta:.3} ({pa} passes, err {ea:.1e})")
             } else {
                 "- | -".to_string()
@@ -184,4 +222,139 @@ fn main() {
     for r in rows {
         println!("{r}");
     }
+}
+
+/// `--diagnose`: how the containment of row A, rack A01 and sensor `c-A01-17` land on the
+/// 0.2 m and 0.1 m grids, the flow through each containment side, and the temperatures
+/// along the sensor's line (why the sensor moves between grids).
+fn diagnose(hall: &Hall, alpha: &[f64], states: &[OperatingState], cfg: &SimConfig) {
+    let sensor = hall
+        .sensors
+        .iter()
+        .position(|s| s.id == "c-A01-17")
+        .expect("sensor c-A01-17");
+    let p = hall.sensors[sensor].position_m;
+    for cell in [0.2, 0.1] {
+        let sim = Simulator::new(hall, cfg.clone().with_cell_m(cell)).unwrap();
+        let g = sim.grid().clone();
+        let solid = sim.solid();
+        println!("## cell {cell}: n {:?} d {:?}", g.n, g.d);
+        for (ci, cb) in hall.containment.iter().enumerate() {
+            let snapped: Vec<String> = (0..3)
+                .map(|a| {
+                    let lo = (cb.min_m[a] / g.d[a]).round() * g.d[a];
+                    let hi = (cb.max_m[a] / g.d[a]).round() * g.d[a];
+                    format!(
+                        "{:.3}..{:.3} (given {}..{})",
+                        lo, hi, cb.min_m[a], cb.max_m[a]
+                    )
+                })
+                .collect();
+            println!("containment {ci} wall planes: {}", snapped.join(", "));
+        }
+        let rack = &hall.racks[0];
+        let rb = Aabb::from_position_size(rack.position_m, rack.size_m);
+        let cells = g.cells_in_box(&rb);
+        let ext: Vec<String> = (0..3)
+            .map(|a| {
+                let lo = cells.iter().map(|&c| g.ijk(c)[a]).min().unwrap();
+                let hi = cells.iter().map(|&c| g.ijk(c)[a]).max().unwrap();
+                format!(
+                    "{:.3}..{:.3} (given {:.3}..{:.3})",
+                    lo as f64 * g.d[a],
+                    (hi + 1) as f64 * g.d[a],
+                    rb.min[a],
+                    rb.max[a]
+                )
+            })
+            .collect();
+        println!("rack {} solid cells: {}", rack.id, ext.join(", "));
+        // The trilinear stencil as the topology builds it.
+        let mut i0 = [0usize; 3];
+        let mut t = [0.0; 3];
+        for a in 0..3 {
+            let s = (p[a] / g.d[a] - 0.5).clamp(0.0, (g.n[a] - 1) as f64);
+            i0[a] = (s.floor() as usize).min(g.n[a] - 2);
+            t[a] = s - i0[a] as f64;
+        }
+        println!("sensor c-A01-17 at {p:?}: base cell {i0:?}, fractions {t:.3?}");
+        let sols: Vec<_> = states
+            .iter()
+            .map(|st| sim.solve(st, alpha, &[]).unwrap())
+            .collect();
+        for corner in 0..8usize {
+            let mut w = 1.0;
+            let mut ijk = [0usize; 3];
+            for a in 0..3 {
+                let up = (corner >> a) & 1 == 1;
+                ijk[a] = i0[a] + up as usize;
+                w *= if up { t[a] } else { 1.0 - t[a] };
+            }
+            if w > 1e-12 {
+                let c = g.idx(ijk[0], ijk[1], ijk[2]);
+                println!(
+                    "  corner {ijk:?} centre {:.3?} weight {w:.3} solid {} T(snap 3) {:.2}",
+                    g.cell_centre(c),
+                    solid[c],
+                    sols[2].temperature_c[c]
+                );
+            }
+        }
+        for (k, sol) in sols.iter().enumerate() {
+            print!("snap {k}: sensor {:.2} C;", sol.sensor_c()[sensor]);
+            for (ci, cb) in hall.containment.iter().enumerate() {
+                let flows = containment_flows(&g, sol, cb);
+                print!(" containment {ci} outflow per side -x,+x,-y,+y: {flows:.4?} m3/s;");
+            }
+            println!(" supply {:.3} m3/s", sol.supply_flow_m3_s);
+        }
+        // Temperatures along x through the sensor (snapshot 3), and along z at x = 2.3.
+        let j = g.cell_of(1, p[1]);
+        let k = g.cell_of(2, p[2]);
+        let row: Vec<String> = (0..g.n[0])
+            .filter(|&i| g.centre(0, i) > 1.4 && g.centre(0, i) < 3.4)
+            .map(|i| {
+                format!(
+                    "{:.2}:{:.1}",
+                    g.centre(0, i),
+                    sols[2].temperature_c[g.idx(i, j, k)]
+                )
+            })
+            .collect();
+        println!(
+            "T along x at y {:.3} z {:.3}: {}",
+            g.centre(1, j),
+            g.centre(2, k),
+            row.join(" ")
+        );
+    }
+}
+
+/// Net outflow (m3/s) through each vertical side of a containment box (-x, +x, -y, +y).
+fn containment_flows(g: &Grid, sol: &Solution, cb: &Containment) -> [f64; 4] {
+    let mut out = [0.0; 4];
+    for (si, (a, at_max)) in [(0, false), (0, true), (1, false), (1, true)]
+        .into_iter()
+        .enumerate()
+    {
+        let x = if at_max { cb.max_m[a] } else { cb.min_m[a] };
+        let f = (x / g.d[a]).round() as usize;
+        if f == 0 || f >= g.n[a] {
+            continue;
+        }
+        let t: Vec<usize> = (0..3).filter(|&b| b != a).collect();
+        let r0 = g.range_in(t[0], cb.min_m[t[0]], cb.max_m[t[0]]);
+        let r1 = g.range_in(t[1], cb.min_m[t[1]], cb.max_m[t[1]]);
+        for i1 in r1 {
+            for i0 in r0.clone() {
+                let mut ijk = [0usize; 3];
+                ijk[a] = f - 1;
+                ijk[t[0]] = i0;
+                ijk[t[1]] = i1;
+                let q = sol.face_flux_m3_s[a][g.idx(ijk[0], ijk[1], ijk[2])];
+                out[si] += if at_max { q } else { -q };
+            }
+        }
+    }
+    out
 }

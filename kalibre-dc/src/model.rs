@@ -52,7 +52,7 @@ impl HallModel {
         let effects_json =
             serde_json::to_string(&specs).map_err(|e| Error::Mismatch(format!("effects: {e}")))?;
         let fingerprint = format!(
-            "kalibre-dc-sim/1:{:016x}",
+            "kalibre-dc-sim/2:{:016x}",
             fnv1a(&[
                 hall_json.as_bytes(),
                 config_json.as_bytes(),

@@ -29,13 +29,14 @@ mod heat;
 mod linalg;
 mod mods;
 mod multigrid;
+mod panel;
 mod run;
 mod solution;
 mod topology;
 mod vtk;
 
 pub use advection::AdvectionStats;
-pub use config::{Advection, Preconditioner, SimConfig};
+pub use config::{Advection, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
 pub use grid::Grid;
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};

@@ -11,6 +11,7 @@ use super::heat::{heat_spec, stencil_value, HeatOp, Transfer};
 use super::linalg::{bicgstab, pcg, Jacobi, Operator, SolveStats};
 use super::mods::{SimMods, WallSide};
 use super::multigrid::Multigrid;
+use super::panel::panel_face_g;
 use super::solution::Solution;
 use super::topology::{open_face_g, Stencil};
 use super::{Simulator, M3_S_PER_CFM};
@@ -321,8 +322,11 @@ pub(super) fn solve(
             for side in &o.sides {
                 let si = WallSide::ALL.iter().position(|w| w == side).unwrap_or(0);
                 for f in &walls[si] {
-                    let full = open_face_g(grid, f.axis);
-                    g[f.axis][f.low] = full * (leak + (1.0 - leak) * o.open_fraction);
+                    let open = leak + (1.0 - leak) * o.open_fraction;
+                    g[f.axis][f.low] = match cfg.containment_panel_m {
+                        None => open_face_g(grid, f.axis) * open,
+                        panel_m => panel_face_g(grid, f.axis, open, panel_m),
+                    };
                 }
             }
         }

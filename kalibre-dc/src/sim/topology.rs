@@ -4,6 +4,7 @@
 
 use super::grid::{Grid, GEOM_EPS};
 use super::mods::WallSide;
+use super::panel::panel_face_g;
 use super::SimConfig;
 use crate::hall::{Aabb, Hall, Side, SupplyKind};
 use crate::{Error, Result};
@@ -85,6 +86,7 @@ impl Topology {
             &solid,
             &mut g,
             config.containment_leak_fraction,
+            config.containment_panel_m,
         );
 
         // Returns: ceiling cells under each grille, Dirichlet p = 0 half a cell away.
@@ -465,6 +467,7 @@ fn containment_walls(
     solid: &[bool],
     g: &mut [Vec<f64>; 3],
     leak: f64,
+    panel_m: Option<f64>,
 ) -> Vec<[Vec<WallFace>; 5]> {
     let room = hall.room.size_m;
     let mut out = Vec::with_capacity(hall.containment.len());
@@ -501,7 +504,7 @@ fn containment_walls(
                     if solid[low] || solid[high] {
                         continue;
                     }
-                    g[a][low] = leak * full_g(grid, a);
+                    g[a][low] = panel_face_g(grid, a, leak, panel_m);
                     sides[si].push(WallFace { axis: a, low });
                 }
             }
