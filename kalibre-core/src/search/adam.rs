@@ -4,12 +4,12 @@
 //! times a decaying learning rate, then clips every coordinate into `[0, 1]` (projection
 //! onto the box). The best point evaluated is kept: Adam's iterates are not monotone.
 
-use argmin::core::{Executor, Problem, Solver, State, TerminationReason, TerminationStatus, KV};
+use argmin::core::{Problem, Solver, State, TerminationReason, TerminationStatus, KV};
 use ndarray::Array1;
 
 use super::kernels::{adam_update, norm_and_finite, AdamStep};
 use super::problem::{
-    check_start, evaluations, finite_or_inf, from_argmin, require, BoxState, UnitBoxProblem,
+    check_start, finite_or_inf, require, run_from_start, BoxState, UnitBoxProblem,
     COST_GRADIENT_COUNT,
 };
 use super::{Objective, SearchOutcome, Searcher, TracePoint};
@@ -183,22 +183,13 @@ impl Adam {
         check_start(objective, start)?;
         let mut solver = self.solver();
         solver.phase_offset = trace_offset;
-        let steps = self.steps as u64;
-        let result = Executor::new(UnitBoxProblem::new(objective), solver)
-            .configure(|state| state.param(Array1::from(start.to_vec())).max_iters(steps))
-            .ctrlc(false)
-            .run()
-            .map_err(from_argmin)?;
-        let best_cost = result.state.get_best_cost();
-        let best_unit = match result.state.get_best_param() {
-            Some(p) => p.to_vec(),
-            None => start.to_vec(),
-        };
+        let (best_unit, best_cost, evaluations, solver) =
+            run_from_start(objective, solver, start, self.steps as u64)?;
         Ok(SearchOutcome {
             best_unit,
             best_cost,
-            evaluations: evaluations(&result.problem),
-            trace: result.solver.trace,
+            evaluations,
+            trace: solver.trace,
         })
     }
 }

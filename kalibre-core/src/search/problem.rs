@@ -1,7 +1,7 @@
 //! An [`Objective`] seen as an argmin problem, and what the searchers share at the
 //! argmin boundary (state type, start-point checks, error conversion, NaN handling).
 
-use argmin::core::{CostFunction, Gradient, IterState};
+use argmin::core::{CostFunction, Gradient, IterState, State};
 use ndarray::Array1;
 
 use super::Objective;
@@ -106,6 +106,40 @@ pub(crate) fn check_start(objective: &dyn Objective, start: &[f64]) -> Result<()
 }
 
 /// Converts argmin's `anyhow`-style error at the boundary.
+/// Runs a unit-box `solver` from `start` for at most `max_iters` iterations through argmin's
+/// executor: the best point (the start when none was recorded), its cost, the evaluations
+/// and the solver (whose trace the caller keeps).
+pub(crate) fn run_from_start<'a, S>(
+    objective: &'a dyn Objective,
+    solver: S,
+    start: &[f64],
+    max_iters: u64,
+) -> Result<(Vec<f64>, f64, usize, S)>
+where
+    S: argmin::core::Solver<UnitBoxProblem<'a>, BoxState>,
+{
+    let result = argmin::core::Executor::new(UnitBoxProblem::new(objective), solver)
+        .configure(|state| {
+            state
+                .param(Array1::from(start.to_vec()))
+                .max_iters(max_iters)
+        })
+        .ctrlc(false)
+        .run()
+        .map_err(from_argmin)?;
+    let best_cost = result.state.get_best_cost();
+    let best_unit = match result.state.get_best_param() {
+        Some(p) => p.to_vec(),
+        None => start.to_vec(),
+    };
+    Ok((
+        best_unit,
+        best_cost,
+        evaluations(&result.problem),
+        result.solver,
+    ))
+}
+
 pub(crate) fn from_argmin(e: argmin::core::Error) -> Error {
     Error::Argmin(format!("{e:#}"))
 }

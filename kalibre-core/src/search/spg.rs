@@ -7,13 +7,13 @@
 //! valleys of a smooth, ill-conditioned loss (calibration near its optimum); this phase
 //! finds the descent that remains there, in any dimension, from the gradient alone.
 
-use argmin::core::{Executor, Problem, Solver, State, TerminationReason, TerminationStatus, KV};
+use argmin::core::{Problem, Solver, State, TerminationReason, TerminationStatus, KV};
 use ndarray::Array1;
 
 use super::kernels::norm_and_finite;
 use super::problem::{
-    check_start, evaluations, finite_or_inf, from_argmin, require, BoxState, UnitBoxProblem,
-    COST_COUNT, COST_GRADIENT_COUNT,
+    check_start, finite_or_inf, require, run_from_start, BoxState, UnitBoxProblem, COST_COUNT,
+    COST_GRADIENT_COUNT,
 };
 use super::{Objective, SearchOutcome, Searcher, TracePoint};
 use crate::Result;
@@ -95,25 +95,13 @@ impl ProjectedGradient {
             phase_offset: trace_offset,
             trace: Vec::new(),
         };
-        let result = Executor::new(UnitBoxProblem::new(objective), solver)
-            .configure(|state| {
-                state
-                    .param(Array1::from(start.to_vec()))
-                    .max_iters(self.steps as u64)
-            })
-            .ctrlc(false)
-            .run()
-            .map_err(from_argmin)?;
-        let best_cost = result.state.get_best_cost();
-        let best_unit = match result.state.get_best_param() {
-            Some(p) => p.to_vec(),
-            None => start.to_vec(),
-        };
+        let (best_unit, best_cost, evaluations, solver) =
+            run_from_start(objective, solver, start, self.steps as u64)?;
         Ok(SearchOutcome {
             best_unit,
             best_cost,
-            evaluations: evaluations(&result.problem),
-            trace: result.solver.trace,
+            evaluations,
+            trace: solver.trace,
         })
     }
 }
