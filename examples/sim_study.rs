@@ -337,23 +337,9 @@ fn containment_flows(g: &Grid, sol: &Solution, cb: &Containment) -> [f64; 4] {
         .into_iter()
         .enumerate()
     {
-        let x = if at_max { cb.max_m[a] } else { cb.min_m[a] };
-        let f = (x / g.d[a]).round() as usize;
-        if f == 0 || f >= g.n[a] {
-            continue;
-        }
-        let t: Vec<usize> = (0..3).filter(|&b| b != a).collect();
-        let r0 = g.range_in(t[0], cb.min_m[t[0]], cb.max_m[t[0]]);
-        let r1 = g.range_in(t[1], cb.min_m[t[1]], cb.max_m[t[1]]);
-        for i1 in r1 {
-            for i0 in r0.clone() {
-                let mut ijk = [0usize; 3];
-                ijk[a] = f - 1;
-                ijk[t[0]] = i0;
-                ijk[t[1]] = i1;
-                let q = sol.face_flux_m3_s[a][g.idx(ijk[0], ijk[1], ijk[2])];
-                out[si] += if at_max { q } else { -q };
-            }
+        for low in g.box_side_faces(a, at_max, cb.min_m, cb.max_m) {
+            let q = sol.face_flux_m3_s[a][low];
+            out[si] += if at_max { q } else { -q };
         }
     }
     out

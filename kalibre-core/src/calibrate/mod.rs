@@ -198,6 +198,16 @@ where
         }
     }
 
+    /// Replaces the search's proposal `unit` by `moved`, telling the observers.
+    fn move_proposal(&self, iteration: usize, unit: &mut Vec<f64>, moved: Vec<f64>) {
+        self.emit(Event::Perturbed {
+            iteration,
+            from_unit: unit,
+            to_unit: &moved,
+        });
+        *unit = moved;
+    }
+
     /// Runs the loop: initial design, then fit, search, run, validate until a stop rule fires.
     pub fn run(&mut self) -> Result<Report> {
         let t_start = Instant::now();
@@ -475,12 +485,7 @@ where
                         h,
                         derive_seed(st.seed, iteration, Stream::Geometry),
                     );
-                    self.emit(Event::Perturbed {
-                        iteration,
-                        from_unit: &unit,
-                        to_unit: &moved,
-                    });
-                    unit = moved;
+                    self.move_proposal(iteration, &mut unit, moved);
                     perturbed = true;
                     geometry_step = true;
                 }
@@ -493,12 +498,7 @@ where
                     st.perturb_sigma,
                     derive_seed(st.seed, iteration, Stream::Perturb),
                 );
-                self.emit(Event::Perturbed {
-                    iteration,
-                    from_unit: &unit,
-                    to_unit: &moved,
-                });
-                unit = moved;
+                self.move_proposal(iteration, &mut unit, moved);
                 perturbed = true;
             }
             if near(&state.ok_units, &unit) {
@@ -520,12 +520,7 @@ where
                     sigma,
                     derive_seed(st.seed, iteration, Stream::Explore),
                 );
-                self.emit(Event::Perturbed {
-                    iteration,
-                    from_unit: &unit,
-                    to_unit: &moved,
-                });
-                unit = moved;
+                self.move_proposal(iteration, &mut unit, moved);
                 perturbed = true;
             }
 

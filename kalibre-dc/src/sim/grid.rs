@@ -98,6 +98,37 @@ impl Grid {
         first.min(self.n[a])..end.min(self.n[a]).max(first.min(self.n[a]))
     }
 
+    /// Faces of the side of the box `[min_m, max_m]` normal to axis `a` (its upper side
+    /// with `at_max`), each as the index of the cell below it along `a`; none when the
+    /// side lies on the domain's boundary. Face index `f` separates cells `f - 1` and `f`.
+    pub fn box_side_faces(
+        &self,
+        a: usize,
+        at_max: bool,
+        min_m: [f64; 3],
+        max_m: [f64; 3],
+    ) -> Vec<usize> {
+        let x = if at_max { max_m[a] } else { min_m[a] };
+        let f = (x / self.d[a]).round() as usize;
+        if f == 0 || f >= self.n[a] {
+            return Vec::new();
+        }
+        let t: Vec<usize> = (0..3).filter(|&b| b != a).collect();
+        let r0 = self.range_in(t[0], min_m[t[0]], max_m[t[0]]);
+        let r1 = self.range_in(t[1], min_m[t[1]], max_m[t[1]]);
+        let mut faces = Vec::with_capacity(r0.len() * r1.len());
+        for i1 in r1 {
+            for i0 in r0.clone() {
+                let mut ijk = [0usize; 3];
+                ijk[a] = f - 1;
+                ijk[t[0]] = i0;
+                ijk[t[1]] = i1;
+                faces.push(self.idx(ijk[0], ijk[1], ijk[2]));
+            }
+        }
+        faces
+    }
+
     /// Index of the cell containing coordinate `x` along axis `a` (clamped into the grid).
     pub fn cell_of(&self, a: usize, x: f64) -> usize {
         ((x / self.d[a]).floor().max(0.0) as usize).min(self.n[a] - 1)

@@ -485,28 +485,13 @@ fn containment_walls(
             if x <= GEOM_EPS || x >= room[a] - GEOM_EPS {
                 continue; // on a room wall, floor or ceiling
             }
-            // Face index f separates cells f-1 and f.
-            let f = (x / grid.d[a]).round() as usize;
-            if f == 0 || f >= grid.n[a] {
-                continue;
-            }
-            let tang: Vec<usize> = (0..3).filter(|&t| t != a).collect();
-            let r0 = grid.range_in(tang[0], cb.min_m[tang[0]], cb.max_m[tang[0]]);
-            let r1 = grid.range_in(tang[1], cb.min_m[tang[1]], cb.max_m[tang[1]]);
-            for i1 in r1 {
-                for i0 in r0.clone() {
-                    let mut ijk = [0usize; 3];
-                    ijk[a] = f - 1;
-                    ijk[tang[0]] = i0;
-                    ijk[tang[1]] = i1;
-                    let low = grid.idx(ijk[0], ijk[1], ijk[2]);
-                    let high = low + grid.stride(a);
-                    if solid[low] || solid[high] {
-                        continue;
-                    }
-                    g[a][low] = panel_face_g(grid, a, leak, panel_m);
-                    sides[si].push(WallFace { axis: a, low });
+            for low in grid.box_side_faces(a, at_max, cb.min_m, cb.max_m) {
+                let high = low + grid.stride(a);
+                if solid[low] || solid[high] {
+                    continue;
                 }
+                g[a][low] = panel_face_g(grid, a, leak, panel_m);
+                sides[si].push(WallFace { axis: a, low });
             }
         }
         out.push(sides);
