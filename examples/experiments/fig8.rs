@@ -11,6 +11,7 @@ use std::sync::Mutex;
 use kalibre::core::search::{Adam, Objective, ProjectedGradient};
 use kalibre::core::{Event, SearchOutcome, Searcher};
 use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::surrogate::PenaltySettings;
 use kalibre::dc::synth::Preset;
 use serde::{Deserialize, Serialize};
 
@@ -30,7 +31,8 @@ pub struct Fig8Config {
     pub iterations: usize,
     /// Seeds.
     pub seeds: usize,
-    /// Run the paper's loop (no trust region, no output correction, no fit focus)
+    /// Run the paper's loop (no trust region, no output correction, no fit focus,
+    /// the paper's rise prior [5, 15] K)
     /// instead of kalibre's default loop settings.
     #[serde(default)]
     pub paper_loop: bool,
@@ -152,6 +154,7 @@ fn one_run(
         st.core.linear_correction = false;
         st.core.stall_step = None;
         st.core.focus = None;
+        st.penalty = PenaltySettings::paper();
         st.searcher = st
             .searcher
             .clone()
@@ -320,7 +323,7 @@ pub fn markdown(r: &Fig8Result) -> String {
         r.config.seeds,
         r.config.preset,
         if r.config.paper_loop {
-            "the paper's loop: no trust region, output correction or focus"
+            "the paper's loop: no trust region, output correction or focus; rise prior [5, 15] K"
         } else {
             "kalibre's default loop"
         },

@@ -294,3 +294,58 @@ fn stops_on_the_wall_clock_budget_and_on_convergence() {
     assert_eq!(model.calls(), 8 + 2 * r.history.len());
     assert!(r.best.mae_c < 1e-3);
 }
+
+/// [`QuadSurface`] that records the sample weights of every fit.
+#[derive(Default)]
+struct WeightRecorder {
+    inner: QuadSurface,
+    fits: std::sync::Mutex<Vec<Vec<f64>>>,
+}
+
+impl kalibre_core::Surrogate for WeightRecorder {
+    type Scenario = Scen;
+
+    fn fit(
+        &mut self,
+        data: kalibre_core::TrainingSet<'_, Scen>,
+        seed: u64,
+    ) -> kalibre_core::Result<kalibre_core::FitSummary> {
+        let weights = data.samples.iter().map(|s| s.weight).collect();
+        self.fits.lock().unwrap().push(weights);
+        self.inner.fit(data, seed)
+    }
+
+    fn predict(&self, scenario: &Scen, params: &[f64]) -> Vec<f64> {
+        self.inner.predict(scenario, params)
+    }
+
+    fn vjp(&self, scenario: &Scen, params: &[f64], cotangent: &[f64]) -> Vec<f64> {
+        self.inner.vjp(scenario, params, cotangent)
+    }
+}
+
+#[test]
+fn the_first_fit_learns_the_whole_design_and_later_fits_are_focused() {
+    let (model, obs, space) = (Poly::new(), observations(), space());
+    let mut cal =
+        Calibrator::new(&model, WeightRecorder::default(), &obs, &space).with_settings(Settings {
+            seed: 3,
+            max_iterations: 3,
+            focus: Some(0.5),
+            ..Settings::default()
+        });
+    cal.run().unwrap();
+    let fits = cal.surrogate().fits.lock().unwrap().clone();
+    assert_eq!(fits.len(), 3);
+    // The design spans the box: focusing its fit would leave one design point to learn.
+    assert!(
+        fits[0].iter().all(|&w| w == 1.0),
+        "first fit: {:?}",
+        fits[0]
+    );
+    // From the second fit on, runs far from the measurements weigh less.
+    for f in &fits[1..] {
+        assert!(f.iter().any(|&w| w < 0.5), "later fit not focused: {f:?}");
+        assert!(f.iter().any(|&w| w == 1.0));
+    }
+}

@@ -24,7 +24,7 @@ use crate::{HallModel, Result};
 /// | `alpha_mode` | the hall's `calibrate.alpha` | per type, per server or fixed |
 /// | `sim` | [`SimConfig::default`] | the built-in simulator (grid, tolerances) |
 /// | `surrogate` | [`ThermalGraphSettings::default`] | Adam lr 0.1, decay 0.8, 150 epochs, fixed adjacency |
-/// | `penalty` | [`PenaltySettings::default`] | rise range [5, 15] C, weight 1 |
+/// | `penalty` | [`PenaltySettings::default`] | rise range [5, 20] C (the paper: [5, 15]), weight 1 |
 /// | `searcher` | [`Hybrid::default`] | DE (population 10, crossover 0.6, 100 generations), then Adam |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 /// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |

@@ -369,7 +369,9 @@ where
                 &state.samples
             };
             let focused;
-            let samples: &[Sample] = match st.focus {
+            // The first fit learns the design, which spans the box: focusing it on the
+            // best design run would leave the surrogate one point to learn from.
+            let samples: &[Sample] = match st.focus.filter(|_| iteration > 1) {
                 Some(width) => {
                     focused = design::focus(obs, samples, width);
                     &focused

@@ -25,7 +25,7 @@ use crate::{Error, Result};
 /// | `stall_step` | none | with `linear_correction`: when the search's proposal promises less than 10% below the best run's loss (or repeats a run), run instead at the best point moved by this much (max norm, unit box) along the direction the runs near it covered least, so the next correction learns the model's slope there | finite, (0, 1] |
 /// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
-/// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1 | finite, > 0 |
+/// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, > 0 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Settings {

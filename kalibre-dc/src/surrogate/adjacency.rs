@@ -72,12 +72,14 @@ impl Csr {
 /// | Name | Default | Meaning | Range |
 /// |---|---|---|---|
 /// | `crac_threshold` | 0.3 | relative weight below which a CRAC-sensor edge is cut | `[0, 1]` |
-/// | `server_threshold` | 0.3 | relative weight below which a server-sensor edge is cut | `[0, 1]` |
+/// | `server_threshold` | 0.6 | relative weight below which a server-sensor edge is cut | `[0, 1]` |
 /// | `min_distance_m` | 0.5 | distance floor in the reciprocal (m) | `> 0` |
 ///
-/// With the defaults a hot-aisle sensor keeps the servers within about 3.3 times the
-/// distance of the nearest one (at least 1.7 m), typically the racks on both sides of its
-/// aisle within a couple of metres along the row.
+/// With the defaults a hot-aisle sensor keeps the servers within about 1.7 times the
+/// distance of the nearest one (at least 0.83 m), typically the servers whose exhausts face
+/// it across the aisle and their neighbours along the row. A wider cut (0.3) smears each
+/// sensor's slope over types it barely sees: the loop's error after 10 iterations on the
+/// synthetic halls rose from 0.37 to 0.45-0.50 C with it (docs/performance.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AdjacencySettings {
     /// Relative cut-off for `Wcs`.
@@ -92,7 +94,7 @@ impl Default for AdjacencySettings {
     fn default() -> Self {
         AdjacencySettings {
             crac_threshold: 0.3,
-            server_threshold: 0.3,
+            server_threshold: 0.6,
             min_distance_m: 0.5,
         }
     }

@@ -1,0 +1,152 @@
+//! Issue 4's loop on the paper-sized synthetic halls, one setting changed at a time: the
+//! best MAE within 10 iterations (14 runs per snapshot, no polish stage) over several
+//! calibration seeds, per variant and hall. This is how the loop's defaults were chosen.
+//!
+//! ```sh
+//! cargo run --release --example loop_variants [-- --seeds 8 --presets hall-a,hall-b \
+//!     --variants default,wide-adjacency,paper-prior,no-geometry-steps --out out/loop_variants.json]
+//! ```
+//!
+//! The measurements are `kalibre synth --preset P --seed 1` (3 snapshots, noise 0.2 C),
+//! per-type alpha; calibration seeds 1..=N. Prints one line per variant and hall and
+//! writes JSON.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
+use kalibre::dc::surrogate::PenaltySettings;
+use kalibre::dc::synth::{self, Preset, SynthOptions};
+use serde_json::json;
+
+/// The variants: a name, what it changes, and the change.
+const VARIANTS: &[(&str, &str)] = &[
+    (
+        "default",
+        "HallCalibrationSettings::default() without the polish stage",
+    ),
+    ("wide-adjacency", "server-sensor cut 0.3 instead of 0.6"),
+    (
+        "paper-prior",
+        "temperature-rise prior [5, 15] K instead of [5, 20] K",
+    ),
+    ("no-prior", "no temperature-rise prior"),
+    (
+        "no-geometry-steps",
+        "no geometry step when the search stalls",
+    ),
+    (
+        "trust-region-0.3",
+        "initial trust region 0.3 instead of 0.1",
+    ),
+];
+
+fn variant(name: &str) -> Option<HallCalibrationSettings> {
+    let mut s = HallCalibrationSettings::default();
+    s.core.polish_iterations = 0;
+    match name {
+        "default" => {}
+        "wide-adjacency" => s.surrogate.adjacency.server_threshold = 0.3,
+        "paper-prior" => s.penalty = PenaltySettings::paper(),
+        "no-prior" => s.penalty.weight = 0.0,
+        "no-geometry-steps" => s.core.stall_step = None,
+        "trust-region-0.3" => s.core.trust_region = Some(0.3),
+        _ => return None,
+    }
+    Some(s)
+}
+
+fn fail(message: String) -> ! {
+    eprintln!("loop_variants: {message}");
+    std::process::exit(2)
+}
+
+fn main() {
+    let mut out = PathBuf::from("out/loop_variants.json");
+    let mut presets = vec!["hall-a".to_string(), "hall-b".to_string()];
+    let mut variants: Vec<String> = VARIANTS.iter().map(|v| v.0.to_string()).collect();
+    let mut seeds = 8u64;
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    for pair in args.chunks(2) {
+        let value = pair
+            .get(1)
+            .unwrap_or_else(|| fail(format!("`{}` needs a value", pair[0])));
+        match pair[0].as_str() {
+            "--out" => out = PathBuf::from(value),
+            "--presets" => presets = value.split(',').map(str::to_owned).collect(),
+            "--variants" => variants = value.split(',').map(str::to_owned).collect(),
+            "--seeds" => {
+                seeds = value
+                    .parse()
+                    .ok()
+                    .filter(|&n| n >= 1)
+                    .unwrap_or_else(|| fail(format!("--seeds: expected a count >= 1, got `{value}`")))
+            }
+            other => fail(format!(
+                "unknown argument `{other}` (use --out FILE, --presets a,b, --variants a,b, --seeds N)"
+            )),
+        }
+    }
+    let known: Vec<&str> = VARIANTS.iter().map(|v| v.0).collect();
+    for v in &variants {
+        if variant(v).is_none() {
+            fail(format!(
+                "unknown variant `{v}` (known: {})",
+                known.join(", ")
+            ));
+        }
+    }
+    let mut results = Vec::new();
+    for name in &presets {
+        let preset: Preset = name.parse().unwrap_or_else(|e| fail(format!("{e}")));
+        let s = synth::generate(&SynthOptions::new(preset, 1))
+            .unwrap_or_else(|e| fail(format!("synth {name}: {e}")));
+        let truth = s
+            .truth
+            .reference
+            .as_ref()
+            .map_or(f64::NAN, |r| r.model_at_truth_mae_c);
+        for v in &variants {
+            let base = variant(v).expect("checked above");
+            let t = Instant::now();
+            let mut per_seed = Vec::new();
+            for seed in 1..=seeds {
+                let mut st = base.clone();
+                st.core.seed = seed;
+                let cal = calibrate_hall(&s.hall, &s.snapshots, &st, None, Vec::new())
+                    .unwrap_or_else(|e| fail(format!("{name}, {v}, seed {seed}: {e}")));
+                per_seed.push(cal.report.best.mae_c);
+            }
+            let mean = per_seed.iter().sum::<f64>() / per_seed.len() as f64;
+            let within = per_seed.iter().filter(|&&m| m <= truth + 0.1).count();
+            let wall_s = t.elapsed().as_secs_f64();
+            println!(
+                "{name:<7} {v:<18} mean {mean:.3} C over {seeds} seeds, {within}/{seeds} within \
+                 0.1 C of the model at truth ({truth:.3} C)  [{}]  {wall_s:.0} s",
+                per_seed
+                    .iter()
+                    .map(|m| format!("{m:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
+            results.push(json!({
+                "preset": name, "variant": v, "seeds": seeds, "mean_best_mae_c": mean,
+                "best_mae_c": per_seed, "model_at_truth_mae_c": truth,
+                "seeds_within_0.1_of_truth": within, "wall_s": wall_s,
+            }));
+        }
+    }
+    if let Some(dir) = out.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    let text = serde_json::to_string_pretty(&json!({
+        "experiment": "loop_variants",
+        "variants": VARIANTS.iter().map(|(n, d)| json!({"name": n, "change": d})).collect::<Vec<_>>(),
+        "results": results,
+    }))
+    .expect("json");
+    if let Err(e) = std::fs::write(&out, text) {
+        fail(format!("{}: {e}", out.display()));
+    }
+    println!("wrote {}", out.display());
+}
