@@ -346,6 +346,38 @@ fn the_first_fit_learns_the_whole_design_and_later_fits_are_focused() {
     // From the second fit on, runs far from the measurements weigh less.
     for f in &fits[1..] {
         assert!(f.iter().any(|&w| w < 0.5), "later fit not focused: {f:?}");
-        assert!(f.iter().any(|&w| w == 1.0));
+        assert!(f.contains(&1.0));
     }
+}
+
+#[test]
+fn the_report_says_which_parameters_the_measurements_pin_down() {
+    // A third parameter that neither the model nor the surrogate reads.
+    let model = Poly::new();
+    let obs = observations();
+    let space = space()
+        .with("unused", 0.0, 1.0, 0.5, kalibre_core::Scale::Linear)
+        .unwrap();
+    let report = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_seed(2)
+        .with_max_iterations(6)
+        .run()
+        .unwrap();
+    let u = &report.uncertainty;
+    assert_eq!(u.len(), 3);
+    for (p, name) in u.iter().zip(["a", "b", "unused"]) {
+        assert_eq!(p.name, name);
+        assert_eq!(p.value, report.best.params.get(name).unwrap());
+    }
+    assert!(u[0].identified && u[1].identified, "{u:?}");
+    assert!(u[0].rel_std.unwrap() < 0.01 && u[1].rel_std.unwrap() < 0.01);
+    assert!(!u[2].identified && u[2].std.is_none(), "{:?}", u[2]);
+    // The field round-trips, and reports without it still load.
+    let text = serde_json::to_string(&report).unwrap();
+    let back: Report = serde_json::from_str(&text).unwrap();
+    assert_eq!(back.uncertainty, report.uncertainty);
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value.as_object_mut().unwrap().remove("uncertainty");
+    let old: Report = serde_json::from_value(value).unwrap();
+    assert!(old.uncertainty.is_empty());
 }

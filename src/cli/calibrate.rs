@@ -559,6 +559,43 @@ fn fmt_c(v: Option<f64>) -> String {
         .map_or("-".into(), |v| format!("{v:.3} C"))
 }
 
+/// Which parameters the measurements pin down (the report's linearised uncertainty).
+fn print_uncertainty(report: &Report) {
+    let u = &report.uncertainty;
+    if u.is_empty() {
+        return;
+    }
+    let poor: Vec<String> = u
+        .iter()
+        .filter(|p| !p.identified)
+        .map(|p| match p.rel_std {
+            Some(r) => format!("{} (+/-{:.0}%)", p.name, 100.0 * r),
+            None => format!("{} (free)", p.name),
+        })
+        .collect();
+    println!(
+        "  {:<28} {} of {} (one standard deviation within {:.0}%)",
+        "parameters identified",
+        u.len() - poor.len(),
+        u.len(),
+        100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD
+    );
+    if !poor.is_empty() {
+        const SHOWN: usize = 8;
+        let more = poor.len().saturating_sub(SHOWN);
+        println!(
+            "  {:<28} {}{}",
+            "poorly identified",
+            poor[..poor.len().min(SHOWN)].join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        );
+    }
+}
+
 /// The end-of-run summary table.
 fn print_summary(report: &Report, wall_s: f64, penalty: &kalibre_dc::surrogate::PenaltyReport) {
     println!();
@@ -594,6 +631,7 @@ fn print_summary(report: &Report, wall_s: f64, penalty: &kalibre_dc::surrogate::
         "model runs", report.runs.total, report.runs.new, report.runs.cached, report.runs.failed
     );
     println!("  {:<28} {:?}", "stopped", report.stop_reason);
+    print_uncertainty(report);
     println!("  {:<28} {wall_s:.1} s", "wall time");
     if !penalty.violations.is_empty() {
         println!(

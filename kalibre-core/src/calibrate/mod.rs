@@ -12,12 +12,14 @@ mod runner;
 mod settings;
 mod state;
 mod trust;
+mod uncertainty;
 
 pub use report::{
     Best, Errors, Initial, IterationRecord, NamedValues, Report, Residual, RunCounts,
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
 };
 pub use settings::Settings;
+pub use uncertainty::{ParamUncertainty, IDENTIFIED_REL_STD, UNCERTAINTY_MAX_PARAMS};
 
 use std::time::Instant;
 
@@ -593,6 +595,13 @@ where
         }
         self.emit(Event::Stopped { reason: stop });
 
+        // Only once a fit has run: an unfitted surrogate has no slopes to speak of.
+        let uncertainty = match &state.best {
+            Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
+                uncertainty::estimate(&self.surrogate, obs, space, b)
+            }
+            _ => Vec::new(),
+        };
         let best = state.best.ok_or_else(|| {
             Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
         })?;
@@ -621,6 +630,7 @@ where
                 score: best.score,
                 params: NamedValues::new(&names, &best.params),
             },
+            uncertainty,
             initial,
             history,
             residuals,

@@ -272,6 +272,11 @@ pub struct Report {
     pub settings: Settings,
     /// The best parameters.
     pub best: Best,
+    /// How well the measurements determine each parameter at the best run (linearised;
+    /// empty when not estimated: more than [`super::UNCERTAINTY_MAX_PARAMS`] parameters, or
+    /// no fit ran). Missing in older reports: empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub uncertainty: Vec<super::ParamUncertainty>,
     /// The model at the initial values.
     pub initial: Initial,
     /// One record per four-step iteration.

@@ -201,7 +201,7 @@ impl OutputCorrection {
 
 /// Lower Cholesky factor of the symmetric positive definite `k x k` matrix `a` (row
 /// major); none when it is not positive definite.
-fn cholesky(a: &[f64], k: usize) -> Option<Vec<f64>> {
+pub(crate) fn cholesky(a: &[f64], k: usize) -> Option<Vec<f64>> {
     let mut l = vec![0.0; k * k];
     for i in 0..k {
         for j in 0..=i {
@@ -220,7 +220,7 @@ fn cholesky(a: &[f64], k: usize) -> Option<Vec<f64>> {
 }
 
 /// Solves `L L^T x = b` with the factor from [`cholesky`].
-fn cholesky_solve(l: &[f64], k: usize, b: &[f64]) -> Vec<f64> {
+pub(crate) fn cholesky_solve(l: &[f64], k: usize, b: &[f64]) -> Vec<f64> {
     let mut y = vec![0.0; k];
     for i in 0..k {
         y[i] = (b[i] - (0..i).map(|m| l[i * k + m] * y[m]).sum::<f64>()) / l[i * k + i];

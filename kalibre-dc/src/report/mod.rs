@@ -190,13 +190,25 @@ pub fn calibration_html(
         parity_svg(hall, report)
     );
     h.push_str(
-        "<h2>Parameters</h2><table><tr><th>parameter</th><th>initial</th><th>calibrated</th></tr>",
+        "<h2>Parameters</h2><table><tr><th>parameter</th><th>initial</th><th>calibrated</th>\
+         <th>one standard deviation (linearised)</th></tr>",
     );
     for (name, v) in &report.best.params.0 {
         let init = report.initial.params.get(name);
+        let spread = match report.uncertainty.iter().find(|u| u.name == *name) {
+            None => "-".to_string(),
+            Some(u) => match (u.std, u.rel_std) {
+                (None, _) => "not determined by the measurements".to_string(),
+                (Some(_), Some(r)) if !u.identified => {
+                    format!("&plusmn;{:.0}% (poorly identified)", 100.0 * r)
+                }
+                (Some(_), Some(r)) => format!("&plusmn;{:.1}%", 100.0 * r),
+                (Some(sd), None) => format!("&plusmn;{sd:.3}"),
+            },
+        };
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{v:.5}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{v:.5}</td><td>{spread}</td></tr>",
             esc(name),
             init.map_or("-".into(), |i| format!("{i:.5}"))
         );
