@@ -12,8 +12,8 @@
 //! deviation per range), a parameter's standard deviation is `sqrt((F^-1)_ii)` in the
 //! unit box, mapped to physical units by the scale's slope. A
 //! parameter the outputs do not move, or one whose effect another parameter's can
-//! replace, gets a large one. The prior (regulariser) is left out: the question is what
-//! the data say.
+//! replace, gets a large one. The search's regulariser (a domain prior such as the
+//! rise penalty) is left out: the question is what the data say.
 
 use serde::{Deserialize, Serialize};
 
