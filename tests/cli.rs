@@ -201,6 +201,17 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert!(whole.join("report.html").exists());
     let html = std::fs::read_to_string(whole.join("report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("Where the model fails"));
+    // The report says how well the measurements pin down each parameter, and so does the
+    // summary and the HTML.
+    let params = report["best"]["params"].as_object().unwrap();
+    let uncertainty = report["uncertainty"].as_array().unwrap();
+    assert_eq!(uncertainty.len(), params.len());
+    for u in uncertainty {
+        assert!(params.contains_key(u["name"].as_str().unwrap()));
+        assert!(u["identified"].is_boolean());
+    }
+    assert!(String::from_utf8_lossy(&o.stdout).contains("parameters identified"));
+    assert!(html.contains("one standard deviation (linearised)"));
 
     // Start again, kill once a few runs are journaled, then resume.
     let cut = tmp("cut");
@@ -241,6 +252,7 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
         resumed["best"], report["best"],
         "same result as the uninterrupted run"
     );
+    assert_eq!(resumed["uncertainty"], report["uncertainty"]);
     // Each (snapshot, parameters) appears once in the journal.
     let mut keys: Vec<String> = journal_lines(&journal)
         .iter()
