@@ -270,35 +270,20 @@ fn diagnose(hall: &Hall, alpha: &[f64], states: &[OperatingState], cfg: &SimConf
             .collect();
         println!("rack {} solid cells: {}", rack.id, ext.join(", "));
         // The trilinear stencil as the topology builds it.
-        let mut i0 = [0usize; 3];
-        let mut t = [0.0; 3];
-        for a in 0..3 {
-            let s = (p[a] / g.d[a] - 0.5).clamp(0.0, (g.n[a] - 1) as f64);
-            i0[a] = (s.floor() as usize).min(g.n[a] - 2);
-            t[a] = s - i0[a] as f64;
-        }
-        println!("sensor c-A01-17 at {p:?}: base cell {i0:?}, fractions {t:.3?}");
+        let corners = g.trilinear_corners(p);
+        println!("sensor c-A01-17 at {p:?}");
         let sols: Vec<_> = states
             .iter()
             .map(|st| sim.solve(st, alpha, &[]).unwrap())
             .collect();
-        for corner in 0..8usize {
-            let mut w = 1.0;
-            let mut ijk = [0usize; 3];
-            for a in 0..3 {
-                let up = (corner >> a) & 1 == 1;
-                ijk[a] = i0[a] + up as usize;
-                w *= if up { t[a] } else { 1.0 - t[a] };
-            }
-            if w > 1e-12 {
-                let c = g.idx(ijk[0], ijk[1], ijk[2]);
-                println!(
-                    "  corner {ijk:?} centre {:.3?} weight {w:.3} solid {} T(snap 3) {:.2}",
-                    g.cell_centre(c),
-                    solid[c],
-                    sols[2].temperature_c[c]
-                );
-            }
+        for (c, w) in corners.into_iter().filter(|&(_, w)| w > 1e-12) {
+            println!(
+                "  corner {:?} centre {:.3?} weight {w:.3} solid {} T(snap 3) {:.2}",
+                g.ijk(c),
+                g.cell_centre(c),
+                solid[c],
+                sols[2].temperature_c[c]
+            );
         }
         for (k, sol) in sols.iter().enumerate() {
             print!("snap {k}: sensor {:.2} C;", sol.sensor_c()[sensor]);

@@ -447,12 +447,7 @@ fn weighted_mse(
 ) -> (f64, Array2<f64>, Tape) {
     let yb = y.select(Axis(0), idx);
     let tape = net.forward_owned(x.select(Axis(0), idx));
-    let wsum: f64 = idx
-        .iter()
-        .map(|&i| w[i])
-        .sum::<f64>()
-        .max(f64::MIN_POSITIVE);
-    let denom = wsum * y.ncols() as f64;
+    let denom = loss_denominator(w, idx, y.ncols());
     let mut diff = tape.outputs() - &yb;
     let mut loss = 0.0;
     for (mut r, &i) in diff.rows_mut().into_iter().zip(idx) {
@@ -460,6 +455,13 @@ fn weighted_mse(
         r.mapv_inplace(|d| 2.0 * w[i] * d / denom);
     }
     (loss / denom, diff, tape)
+}
+
+/// The weighted MSE's denominator over the rows `idx`: their total weight times the
+/// outputs per row (kept positive so that all-zero weights give a zero loss, not NaN).
+fn loss_denominator(w: &[f64], idx: &[usize], outputs: usize) -> f64 {
+    let wsum: f64 = idx.iter().map(|&i| w[i]).sum();
+    wsum.max(f64::MIN_POSITIVE) * outputs as f64
 }
 
 /// The training loss on the rows `idx` (standardised inputs and outputs) and its
@@ -480,12 +482,7 @@ pub fn loss_and_gradients(
 /// outputs do not depend on its place in the batch.
 fn epoch_loss(net: &Network, x: &Array2<f64>, y: &Array2<f64>, w: &[f64], idx: &[usize]) -> f64 {
     let out = net.predict(x.view());
-    let wsum: f64 = idx
-        .iter()
-        .map(|&i| w[i])
-        .sum::<f64>()
-        .max(f64::MIN_POSITIVE);
-    let denom = wsum * y.ncols() as f64;
+    let denom = loss_denominator(w, idx, y.ncols());
     let mut loss = 0.0;
     for &i in idx {
         let se = out

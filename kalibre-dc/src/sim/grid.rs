@@ -75,6 +75,28 @@ impl Grid {
         [self.centre(0, i), self.centre(1, j), self.centre(2, k)]
     }
 
+    /// The eight cell centres around `p` and their trilinear weights (which sum to one);
+    /// a point outside the hull of the centres is clamped onto it.
+    pub fn trilinear_corners(&self, p: [f64; 3]) -> [(usize, f64); 8] {
+        let mut i0 = [0usize; 3];
+        let mut t = [0.0; 3];
+        for a in 0..3 {
+            let s = (p[a] / self.d[a] - 0.5).clamp(0.0, (self.n[a] - 1) as f64);
+            i0[a] = (s.floor() as usize).min(self.n[a] - 2);
+            t[a] = s - i0[a] as f64;
+        }
+        std::array::from_fn(|corner| {
+            let mut w = 1.0;
+            let mut ijk = [0usize; 3];
+            for a in 0..3 {
+                let up = (corner >> a) & 1 == 1;
+                ijk[a] = i0[a] + up as usize;
+                w *= if up { t[a] } else { 1.0 - t[a] };
+            }
+            (self.idx(ijk[0], ijk[1], ijk[2]), w)
+        })
+    }
+
     /// Face area normal to axis `a`.
     pub fn face_area(&self, a: usize) -> f64 {
         match a {

@@ -296,35 +296,17 @@ impl Topology {
     /// rest renormalised; `None` when all eight are solid.
     pub fn sensor_stencil(&self, p: [f64; 3]) -> Option<Stencil> {
         let g = &self.grid;
-        let mut i0 = [0usize; 3];
-        let mut t = [0.0; 3];
-        for a in 0..3 {
-            let s = (p[a] / g.d[a] - 0.5).clamp(0.0, (g.n[a] - 1) as f64);
-            let i = (s.floor() as usize).min(g.n[a] - 2);
-            i0[a] = i;
-            t[a] = s - i as f64;
-        }
-        let mut st = Vec::with_capacity(8);
-        for corner in 0..8usize {
-            let mut w = 1.0;
-            let mut ijk = [0usize; 3];
-            for a in 0..3 {
-                let up = (corner >> a) & 1 == 1;
-                ijk[a] = i0[a] + up as usize;
-                w *= if up { t[a] } else { 1.0 - t[a] };
-            }
-            let c = g.idx(ijk[0], ijk[1], ijk[2]);
-            if w > 1e-12 && !self.solid[c] {
-                st.push((c, w));
-            }
-        }
+        let corners = g.trilinear_corners(p);
+        let st: Vec<(usize, f64)> = corners
+            .iter()
+            .copied()
+            .filter(|&(c, w)| w > 1e-12 && !self.solid[c])
+            .collect();
         let total: f64 = st.iter().map(|(_, w)| w).sum();
         if total <= 1e-12 {
             // Point within a cell of a solid: the nearest fluid corner.
             let mut best: Option<(usize, f64)> = None;
-            for corner in 0..8usize {
-                let ijk: Vec<usize> = (0..3).map(|a| i0[a] + ((corner >> a) & 1)).collect();
-                let c = g.idx(ijk[0], ijk[1], ijk[2]);
+            for &(c, _) in &corners {
                 if !self.solid[c] {
                     let d = super::super::hall::distance(g.cell_centre(c), p);
                     if best.is_none_or(|(_, bd)| d < bd) {
