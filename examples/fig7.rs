@@ -6,14 +6,16 @@
 //! cargo run --release --example fig7 -- [--quick] [--out-dir docs/results] [--seeds 3]
 //! ```
 //!
-//! Alpha is drawn uniformly in cfm/W; `--log-box` draws it uniformly on the log scale.
+//! Alpha is drawn uniformly in cfm/W; `--log-box` draws it uniformly on the log scale;
+//! `--rise-box` draws each server type's temperature rise uniformly in the default rise
+//! prior's range (5-20 K), the plausible band the calibration searches.
 //! `--quick`: 40 runs of `demo`, 1 seed. Prints the table and writes `fig7.json`,
 //! `fig7.md` and `fig7.svg`.
 
 #[path = "experiments/mod.rs"]
 mod experiments;
 
-use experiments::fig7::{markdown, run_fig7, svg, Fig7Config, Fig7Result};
+use experiments::fig7::{markdown, run_fig7, svg, AlphaDraw, Fig7Config, Fig7Result};
 use experiments::{parse_args, write_file, write_json};
 
 fn main() {
@@ -22,8 +24,18 @@ fn main() {
     if let Some(code) = experiments::render_if_asked::<Fig7Result>(&raw, "fig7", svg, markdown) {
         std::process::exit(code);
     }
-    let log_box = raw.iter().any(|a| a == "--log-box");
-    let args = parse_args(raw.into_iter().filter(|a| a != "--log-box")).unwrap_or_else(|e| {
+    let draw = if raw.iter().any(|a| a == "--log-box") {
+        AlphaDraw::Log
+    } else if raw.iter().any(|a| a == "--rise-box") {
+        AlphaDraw::Rise
+    } else {
+        AlphaDraw::Linear
+    };
+    let args = parse_args(
+        raw.into_iter()
+            .filter(|a| a != "--log-box" && a != "--rise-box"),
+    )
+    .unwrap_or_else(|e| {
         eprintln!("{e}");
         std::process::exit(2)
     });
@@ -32,7 +44,7 @@ fn main() {
     } else {
         Fig7Config::full()
     };
-    cfg.log_box = log_box;
+    cfg.draw = draw;
     if let Some(n) = args.seeds {
         cfg.seeds = n;
     }
@@ -44,38 +56,14 @@ fn main() {
         std::process::exit(1)
     });
     let md = markdown(&r);
-    let written = write_json(
-        &args.out_dir,
-        if log_box {
-            "fig7-logbox.json"
-        } else {
-            "fig7.json"
-        },
-        &r,
-    )
-    .and_then(|_| {
-        write_file(
-            &args.out_dir,
-            if log_box { "fig7-logbox.md" } else { "fig7.md" },
-            &md,
-        )
-    })
-    .and_then(|_| {
-        write_file(
-            &args.out_dir,
-            if log_box {
-                "fig7-logbox.svg"
-            } else {
-                "fig7.svg"
-            },
-            &svg(&r),
-        )
-    });
+    let stem = draw.stem();
+    let written = write_json(&args.out_dir, &format!("{stem}.json"), &r)
+        .and_then(|_| write_file(&args.out_dir, &format!("{stem}.md"), &md))
+        .and_then(|_| write_file(&args.out_dir, &format!("{stem}.svg"), &svg(&r)));
     if let Err(e) = written {
         eprintln!("{e}");
         std::process::exit(1);
     }
     println!("{md}");
-    let stem = if log_box { "fig7-logbox" } else { "fig7" };
     println!("wrote {}/{stem}.json, .md and .svg", args.out_dir.display());
 }

@@ -39,6 +39,17 @@ const VARIANTS: &[(&str, &str)] = &[
         "trust-region-0.3",
         "initial trust region 0.3 instead of 0.1",
     ),
+    (
+        "local-recirculation",
+        "the local recirculation term added to the surrogate",
+    ),
+    ("focus-0.5", "fit focus 0.5 instead of 1"),
+    ("focus-2", "fit focus 2 instead of 1"),
+    ("geometry-step-0.03", "geometry step 0.03 instead of 0.01"),
+    (
+        "augment-sigma-0.1",
+        "design augmentation noise 0.1 instead of 0.05",
+    ),
 ];
 
 fn variant(name: &str) -> Option<HallCalibrationSettings> {
@@ -51,6 +62,11 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         "no-prior" => s.penalty.weight = 0.0,
         "no-geometry-steps" => s.core.stall_step = None,
         "trust-region-0.3" => s.core.trust_region = Some(0.3),
+        "local-recirculation" => s.local_recirculation_term = true,
+        "focus-0.5" => s.core.focus = Some(0.5),
+        "focus-2" => s.core.focus = Some(2.0),
+        "geometry-step-0.03" => s.core.stall_step = Some(0.03),
+        "augment-sigma-0.1" => s.core.augment_sigma = 0.1,
         _ => return None,
     }
     Some(s)

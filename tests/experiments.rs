@@ -145,6 +145,33 @@ fn fig7_quick_is_finite_and_some_surrogate_learns() {
 }
 
 #[test]
+fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
+    let linear = fig7::run_fig7(&fig7::Fig7Config::quick(), &quiet).unwrap();
+    let cfg = fig7::Fig7Config {
+        draw: fig7::AlphaDraw::Rise,
+        ..fig7::Fig7Config::quick()
+    };
+    let r = fig7::run_fig7(&cfg, &quiet).unwrap();
+    // Rises of 5-20 K move the sensors more than alphas spread over [0.01, 3] cfm/W,
+    // whose rises are mostly under 2 K.
+    assert!(
+        r.mean_predictor_mae_c > linear.mean_predictor_mae_c,
+        "{} vs {}",
+        r.mean_predictor_mae_c,
+        linear.mean_predictor_mae_c
+    );
+    let fixed_at_50 = r.curves[0].points[3].mae_c.mean;
+    assert!(
+        fixed_at_50 < r.mean_predictor_mae_c,
+        "{fixed_at_50} vs {}",
+        r.mean_predictor_mae_c
+    );
+    let back: fig7::Fig7Result = serde_json::from_str(&serde_json::to_string(&r).unwrap()).unwrap();
+    assert_eq!(back.config.draw, fig7::AlphaDraw::Rise);
+    assert!(fig7::markdown(&r).contains("temperature rise uniform in [5, 20] K"));
+}
+
+#[test]
 fn fig8_quick_records_every_iteration_of_both_searchers() {
     let cfg = fig8::Fig8Config::quick();
     let r = fig8::run_fig8(&cfg, &quiet).unwrap();

@@ -568,17 +568,24 @@ fn print_uncertainty(report: &Report) {
     let poor: Vec<String> = u
         .iter()
         .filter(|p| !p.identified)
-        .map(|p| match p.rel_std {
-            Some(r) => format!("{} (+/-{:.0}%)", p.name, 100.0 * r),
-            None => format!("{} (free)", p.name),
+        .map(|p| match (p.rel_std, p.rel_shift()) {
+            (Some(r), Some(d)) if !p.settled() => format!(
+                "{} (+/-{:.0}%, not settled: the data point {:+.0}% away)",
+                p.name,
+                100.0 * r,
+                100.0 * d
+            ),
+            (Some(r), _) => format!("{} (+/-{:.0}%)", p.name, 100.0 * r),
+            (None, _) => format!("{} (free)", p.name),
         })
         .collect();
     println!(
-        "  {:<28} {} of {} (one standard deviation within {:.0}%)",
+        "  {:<28} {} of {} (one standard deviation within {:.0}%, and the data point within {:.0} of them)",
         "parameters identified",
         u.len() - poor.len(),
         u.len(),
-        100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD
+        100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD,
+        kalibre_core::calibrate::CONVERGED_SHIFT_STDS
     );
     if !poor.is_empty() {
         const SHOWN: usize = 8;

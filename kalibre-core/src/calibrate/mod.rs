@@ -19,7 +19,9 @@ pub use report::{
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
 };
 pub use settings::Settings;
-pub use uncertainty::{ParamUncertainty, IDENTIFIED_REL_STD, UNCERTAINTY_MAX_PARAMS};
+pub use uncertainty::{
+    ParamUncertainty, CONVERGED_SHIFT_STDS, IDENTIFIED_REL_STD, UNCERTAINTY_MAX_PARAMS,
+};
 
 use std::time::Instant;
 

@@ -14,6 +14,12 @@
 //! parameter the outputs do not move, or one whose effect another parameter's can
 //! replace, gets a large one. The search's regulariser (a domain prior such as the
 //! rise penalty) is left out: the question is what the data say.
+//!
+//! A small spread is only half of a claim: the best run must also sit where the data
+//! point. The Gauss-Newton step from the best run, `-F^-1 J^T r / s2` (the `shift`), says
+//! how far the linearised data would move each parameter; a loop stopped before it
+//! converged leaves a shift of several standard deviations along the directions it had
+//! not finished, and such a parameter is not called identified however narrow its spread.
 
 use serde::{Deserialize, Serialize};
 
@@ -29,6 +35,9 @@ pub const UNCERTAINTY_MAX_PARAMS: usize = 256;
 /// One standard deviation (unit box) above which a parameter counts as free: the data
 /// narrow it to less than half of what the box alone allows.
 const FREE_STD_UNIT: f64 = 0.5;
+/// A parameter whose Gauss-Newton shift exceeds this many standard deviations is not at
+/// the data's optimum, so its value is not claimed.
+pub const CONVERGED_SHIFT_STDS: f64 = 2.0;
 /// Central-difference step in the unit box.
 const STEP_UNIT: f64 = 1e-3;
 
@@ -45,9 +54,33 @@ pub struct ParamUncertainty {
     pub std: Option<f64>,
     /// `std / |value|`; none when `std` is none or the value is zero.
     pub rel_std: Option<f64>,
+    /// How far the linearised measurements would move the value from the best run
+    /// (physical units, signed; the Gauss-Newton step). Missing in older reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shift: Option<f64>,
     /// `rel_std` at most [`IDENTIFIED_REL_STD`] (for a zero value: `std` at most that
-    /// fraction of the range).
+    /// fraction of the range) and the shift at most [`CONVERGED_SHIFT_STDS`] standard
+    /// deviations.
     pub identified: bool,
+}
+
+impl ParamUncertainty {
+    /// `shift / |value|`: how far, relative to the value, the data would move it; none
+    /// without a shift or for a value of zero.
+    pub fn rel_shift(&self) -> Option<f64> {
+        self.shift
+            .filter(|_| self.value != 0.0)
+            .map(|d| d / self.value.abs())
+    }
+
+    /// Whether the best run sits where the linearised data point: the shift within
+    /// [`CONVERGED_SHIFT_STDS`] standard deviations (false without a spread or a shift).
+    pub fn settled(&self) -> bool {
+        match (self.shift, self.std) {
+            (Some(d), Some(sd)) => d.abs() <= CONVERGED_SHIFT_STDS * sd,
+            _ => false,
+        }
+    }
 }
 
 /// The uncertainty of every parameter at `best`; empty when the Jacobian is not finite.
@@ -115,6 +148,12 @@ pub(crate) fn estimate<Su: Surrogate>(
     let Some(chol) = cholesky(&fisher, d) else {
         return Vec::new();
     };
+    // The Gauss-Newton step toward where the linearised data point.
+    let gradient: Vec<f64> = jac
+        .iter()
+        .map(|col| col.iter().zip(&residual).map(|(j, r)| j * r).sum::<f64>() / s2)
+        .collect();
+    let shift_unit = cholesky_solve(&chol, d, &gradient);
     let dphys = space.dphys_dunit(&best.unit);
     let names = space.names();
     (0..d)
@@ -127,18 +166,127 @@ pub(crate) fn estimate<Su: Surrogate>(
             let std = (std_unit.is_finite() && std_unit <= FREE_STD_UNIT)
                 .then(|| std_unit * dphys[i].abs());
             let rel_std = std.filter(|_| value != 0.0).map(|s| s / value.abs());
-            let identified = match (rel_std, std) {
+            let shift = -shift_unit[i] * dphys[i];
+            let narrow = match (rel_std, std) {
                 (Some(r), _) => r <= IDENTIFIED_REL_STD,
                 (None, Some(_)) => std_unit <= IDENTIFIED_REL_STD,
                 _ => false,
             };
-            ParamUncertainty {
+            let mut u = ParamUncertainty {
                 name: names[i].clone(),
                 value,
                 std,
                 rel_std,
-                identified,
-            }
+                shift: shift.is_finite().then_some(shift),
+                identified: false,
+            };
+            u.identified = narrow && u.settled();
+            u
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{FitSummary, OutputInfo, Scale, Snapshot, TrainingSet};
+
+    /// `y_k = sum_i J_ki * u_i` in the unit box: a surrogate whose slopes are the model's.
+    struct Linear {
+        jac: Vec<[f64; 2]>,
+    }
+
+    impl Surrogate for Linear {
+        type Scenario = ();
+        fn fit(&mut self, _: TrainingSet<'_, ()>, _: u64) -> crate::Result<FitSummary> {
+            unreachable!("not trained in these tests")
+        }
+        fn predict(&self, _: &(), params: &[f64]) -> Vec<f64> {
+            // The space below is the unit box, so params are unit coordinates.
+            self.jac
+                .iter()
+                .map(|j| j[0] * params[0] + j[1] * params[1])
+                .collect()
+        }
+        fn vjp(&self, _: &(), _: &[f64], _: &[f64]) -> Vec<f64> {
+            unreachable!("the estimate differentiates by central differences")
+        }
+    }
+
+    /// 40 outputs that both parameters move, measured at `truth` with +-0.01 of noise.
+    fn setup(truth: [f64; 2]) -> (Linear, Observations<()>, ParamSpace) {
+        let jac: Vec<[f64; 2]> = (0..40)
+            .map(|k| {
+                let t = k as f64 / 40.0;
+                [1.0 + t, 2.0 - 1.5 * t]
+            })
+            .collect();
+        let surrogate = Linear { jac };
+        let noise = |k: usize| if k.is_multiple_of(2) { 0.01 } else { -0.01 };
+        let measured = surrogate
+            .predict(&(), &truth)
+            .iter()
+            .enumerate()
+            .map(|(k, y)| Some(y + noise(k)))
+            .collect();
+        let outputs = (0..40)
+            .map(|k| OutputInfo {
+                name: format!("s{k}"),
+                group: "all".into(),
+            })
+            .collect();
+        let obs = Observations::new(
+            outputs,
+            vec![Snapshot {
+                label: "t0".into(),
+                scenario: (),
+                measured,
+            }],
+        )
+        .unwrap();
+        let space = ParamSpace::new()
+            .with("p", 0.0, 1.0, 0.5, Scale::Linear)
+            .unwrap()
+            .with("q", 0.0, 1.0, 0.5, Scale::Linear)
+            .unwrap();
+        (surrogate, obs, space)
+    }
+
+    fn best_at(surrogate: &Linear, unit: [f64; 2]) -> BestPoint {
+        BestPoint {
+            iteration: 1,
+            unit: unit.to_vec(),
+            params: unit.to_vec(),
+            score: 0.0,
+            validation: Default::default(),
+            outputs: vec![surrogate.predict(&(), &unit)],
+        }
+    }
+
+    #[test]
+    fn a_best_run_at_the_data_optimum_is_claimed_with_a_small_shift() {
+        let (s, obs, space) = setup([0.6, 0.4]);
+        let u = estimate(&s, &obs, &space, &best_at(&s, [0.6, 0.4]));
+        assert_eq!(u.len(), 2);
+        for p in &u {
+            let (std, shift) = (p.std.unwrap(), p.shift.unwrap());
+            assert!(p.identified, "{p:?}");
+            assert!(shift.abs() <= std, "{p:?}");
+        }
+    }
+
+    #[test]
+    fn a_best_run_short_of_the_data_optimum_is_not_claimed_and_the_shift_points_there() {
+        // Best run 0.1 short in p: the residual is no longer noise, yet the outputs still
+        // pin p down to a few percent.
+        let (s, obs, space) = setup([0.6, 0.4]);
+        let u = estimate(&s, &obs, &space, &best_at(&s, [0.5, 0.4]));
+        let p = &u[0];
+        assert!(p.rel_std.unwrap() <= IDENTIFIED_REL_STD, "{p:?}");
+        assert!(!p.identified, "{p:?}");
+        // The Gauss-Newton step of a linear model lands on the optimum (up to the weak
+        // box prior and the noise).
+        assert!((p.value + p.shift.unwrap() - 0.6).abs() < 0.01, "{p:?}");
+        assert!(p.shift.unwrap().abs() > CONVERGED_SHIFT_STDS * p.std.unwrap());
+    }
 }

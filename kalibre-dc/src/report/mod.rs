@@ -199,6 +199,11 @@ pub fn calibration_html(
             None => "-".to_string(),
             Some(u) => match (u.std, u.rel_std) {
                 (None, _) => "not determined by the measurements".to_string(),
+                (Some(_), Some(r)) if !u.settled() => format!(
+                    "&plusmn;{:.0}% (not settled: the measurements point {:+.0}% away)",
+                    100.0 * r,
+                    100.0 * u.rel_shift().unwrap_or(f64::NAN)
+                ),
                 (Some(_), Some(r)) if !u.identified => {
                     format!("&plusmn;{:.0}% (poorly identified)", 100.0 * r)
                 }
