@@ -50,6 +50,14 @@ const VARIANTS: &[(&str, &str)] = &[
         "augment-sigma-0.1",
         "design augmentation noise 0.1 instead of 0.05",
     ),
+    (
+        "prior-design",
+        "initial design within the rise prior's alphas instead of the whole bounds",
+    ),
+    (
+        "adam-ridge",
+        "the least-squares start's ridge kept in Adam's loss",
+    ),
 ];
 
 fn variant(name: &str) -> Option<HallCalibrationSettings> {
@@ -67,6 +75,8 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         "focus-2" => s.core.focus = Some(2.0),
         "geometry-step-0.03" => s.core.stall_step = Some(0.03),
         "augment-sigma-0.1" => s.core.augment_sigma = 0.1,
+        "prior-design" => s.design_within_prior = true,
+        "adam-ridge" => s.surrogate.adam_ridge = true,
         _ => return None,
     }
     Some(s)

@@ -31,10 +31,11 @@ pub const DATA_SEED: u64 = 7;
 /// Shares of the training set.
 pub const FRACTIONS: [f64; 4] = [0.05, 0.15, 0.30, 0.50];
 /// The surrogates compared.
-pub const SURROGATES: [&str; 3] = [
+pub const SURROGATES: [&str; 4] = [
     "thermal graph, fixed adjacency",
     "thermal graph, trainable adjacency",
     "vanilla MLP",
+    "thermal graph, fixed adjacency, ridge kept in Adam",
 ];
 
 /// How each run's alphas are drawn.
@@ -205,6 +206,7 @@ fn surrogate_mae(
         _ => {
             let mut st = settings.clone();
             st.surrogate.trainable_adjacency = name.contains("trainable");
+            st.surrogate.adam_ridge = name.contains("ridge");
             let mut g = kalibre_surrogate(s, &st)?;
             g.fit(data, seed)?;
             score(&|p| g.predict(state, p))
@@ -337,7 +339,7 @@ pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result>
 /// The figure: test MAE against the share of training data, mean and standard deviation
 /// over seeds.
 pub fn svg(r: &Fig7Result) -> String {
-    let colours = ["#1f77b4", "#2ca02c", "#d62728"];
+    let colours = ["#1f77b4", "#2ca02c", "#d62728", "#9467bd"];
     let chart = LineChart {
         title: format!(
             "Fig. 7 ({}, {} runs, 8:2 split; {})",

@@ -115,6 +115,10 @@ where
         .with_store(RunStore::in_memory(kalibre::core::Model::fingerprint(
             &setup.model,
         )));
+    if settings.design_within_prior {
+        let (lower, upper) = settings.penalty.plausible_bounds(layout);
+        cal = cal.with_design_bounds(lower, upper);
+    }
     if let Some(o) = observer {
         cal = cal.with_observer(move |e: &Event<'_>| o(e));
     }

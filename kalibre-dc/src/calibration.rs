@@ -28,6 +28,7 @@ use crate::{HallModel, Result};
 /// | `searcher` | [`Hybrid::default`] | DE (population 10, crossover 0.6, 100 generations), then Adam |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 /// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
+/// | `design_within_prior` | false | the initial design spans the alphas whose rises the prior accepts ([`PenaltySettings::plausible_bounds`]) instead of the whole bounds |
 /// | `polish_max_params` | 64 | the loop's polish stage (`core.polish_iterations`, 8 by default) runs only when there are at most this many parameters: each of its Jacobians costs `params + 1` model runs per snapshot (per-server alpha on a real hall would need thousands); above it the report's settings show `polish_iterations` 0 |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
@@ -47,6 +48,8 @@ pub struct HallCalibrationSettings {
     pub flow_balance_terms: bool,
     /// Add the local recirculation term (local draw against local supply per sensor).
     pub local_recirculation_term: bool,
+    /// The initial design spans the prior's plausible alphas rather than the bounds.
+    pub design_within_prior: bool,
     /// Most parameters for which the polish stage runs.
     pub polish_max_params: usize,
 }
@@ -88,6 +91,7 @@ impl Default for HallCalibrationSettings {
             searcher: Hybrid::default(),
             flow_balance_terms: true,
             local_recirculation_term: false,
+            design_within_prior: false,
             polish_max_params: 64,
         }
     }

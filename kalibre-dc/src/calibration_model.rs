@@ -126,6 +126,10 @@ where
         .with_searcher(settings.searcher.clone())
         .with_regularizer(&penalty, settings.penalty.weight)
         .with_store(store);
+    if settings.design_within_prior {
+        let (lower, upper) = settings.penalty.plausible_bounds(layout);
+        calibrator = calibrator.with_design_bounds(lower, upper);
+    }
     for o in observers {
         calibrator = calibrator.with_observer(move |e: &kalibre_core::Event<'_>| o.observe(e));
     }

@@ -98,3 +98,80 @@ fn local_recirculation_is_zero_when_supply_is_ample_and_grows_with_draw() {
     assert!(high.iter().zip(&low).all(|(h, l)| h >= l));
     assert!(high.iter().any(|v| *v > 1.0), "{high:?}");
 }
+
+/// Recirculation that no training run had, at a prediction that has it: the fitted graph
+/// must not multiply a training spread of 1e-5 K by a slope fitted to noise (Fig. 7's
+/// log-uniform draws once predicted millions of degrees this way).
+#[test]
+fn a_term_that_never_moved_in_training_does_not_blow_up_the_prediction() {
+    use kalibre_core::{Sample, Surrogate, TrainingSet};
+    use kalibre_dc::surrogate::{ThermalGraph, ThermalGraphSettings};
+    let mut hall = hall();
+    hall.calibrate.alpha = AlphaMode::PerType;
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
+    let snaps = load_snapshots(&hall, &dir.join("snapshots.csv")).unwrap();
+    let state = snaps[0].state.clone();
+    let layout = ParamLayout::new(&hall, &[]).unwrap();
+    let dim = layout.space().dim();
+    let n = hall.sensors.len();
+    // Training alphas 0.10-0.12 cfm/W, below the supply-matching 0.14: no recirculation,
+    // so its feature is a softplus tail of 1e-7 to 5e-5 K. Outputs: 22 C plus half the
+    // bypass feature plus a 0.05 C wiggle (noise for the idle feature to fit).
+    let bypass = FlowBalanceTerm::new(&hall, &layout, FlowBalance::Bypass);
+    let truth = |params: &[f64]| {
+        let mut f = vec![0.0; n];
+        bypass.features(&state, params, &mut f);
+        f.iter().map(|b| 22.0 + 0.5 * b).collect::<Vec<f64>>()
+    };
+    let samples: Vec<Sample> = (0..12)
+        .map(|i| {
+            let params: Vec<f64> = (0..dim)
+                .map(|p| 0.1 + 0.002 * ((i * 3 + p * 5) % 11) as f64)
+                .collect();
+            let outputs = truth(&params)
+                .iter()
+                .enumerate()
+                .map(|(k, y)| y + 0.05 * ((i * 7 + k * 3) as f64).sin())
+                .collect();
+            Sample {
+                snapshot: 0,
+                params,
+                outputs,
+                weight: 1.0,
+            }
+        })
+        .collect();
+    let recirculating = vec![0.3; dim];
+    let mut feature = vec![0.0; n];
+    FlowBalanceTerm::new(&hall, &layout, FlowBalance::Recirculation).features(
+        &state,
+        &recirculating,
+        &mut feature,
+    );
+    assert!(feature[0] > 1.0, "recirculation feature {}", feature[0]);
+    let expected = truth(&recirculating);
+    let worst = |settings: ThermalGraphSettings| {
+        let mut g = ThermalGraph::new(&hall, layout.clone(), settings).unwrap();
+        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
+            g = g.with_term(Box::new(FlowBalanceTerm::new(&hall, &layout, kind)));
+        }
+        let data = TrainingSet {
+            scenarios: std::slice::from_ref(&state),
+            samples: &samples,
+        };
+        g.fit(data, 1).unwrap();
+        g.predict(&state, &recirculating)
+            .iter()
+            .zip(&expected)
+            .map(|(y, e)| (y - e).abs())
+            .fold(0.0, f64::max)
+    };
+    // Default: the term's scale is floored at 0.1 K, so the idle slope is bounded (without
+    // the floor: 9e4 C off); Adam's normalised steps still fit the noise with it.
+    let default = worst(ThermalGraphSettings::default());
+    assert!(default < 200.0, "default: {default} C off");
+    // With the ridge kept in Adam's loss the idle slope stays near zero.
+    let ridged = worst(ThermalGraphSettings::default().with_adam_ridge(true));
+    assert!(ridged < 1.0, "adam_ridge: {ridged} C off");
+}

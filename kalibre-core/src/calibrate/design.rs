@@ -5,7 +5,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use crate::{ParamSpace, Result, Sample};
+use crate::{Error, ParamSpace, Result, Sample};
 
 /// Random streams derived from the calibration seed.
 #[derive(Debug, Clone, Copy)]
@@ -42,10 +42,24 @@ fn reflect(u: f64) -> f64 {
 
 /// Lower bounds, upper bounds, midpoint (unit box), then the initial values unless they
 /// coincide with one of those. Returns the points (unit box) and the index of the initial one.
-pub(crate) fn initial_design(space: &ParamSpace) -> Result<(Vec<Vec<f64>>, usize)> {
+/// With `bounds` (physical lower and upper values within the space), the first three
+/// points span that box instead of the whole space: a domain's plausible range, where
+/// the surrogate's first fit matters, rather than its hard limits.
+pub(crate) fn initial_design(
+    space: &ParamSpace,
+    bounds: Option<&(Vec<f64>, Vec<f64>)>,
+) -> Result<(Vec<Vec<f64>>, usize)> {
     let d = space.dim();
     let initial = space.to_unit(&space.initial())?;
-    let mut points = vec![vec![0.0; d], vec![1.0; d], vec![0.5; d]];
+    let mut points = match bounds {
+        None => vec![vec![0.0; d], vec![1.0; d], vec![0.5; d]],
+        Some((lower, upper)) => {
+            check_bounds(space, lower, upper)?;
+            let (lo, hi) = (space.to_unit(lower)?, space.to_unit(upper)?);
+            let mid = lo.iter().zip(&hi).map(|(a, b)| 0.5 * (a + b)).collect();
+            vec![lo, hi, mid]
+        }
+    };
     let phys: Vec<Vec<f64>> = points
         .iter()
         .map(|u| space.from_unit(u))
@@ -59,6 +73,33 @@ pub(crate) fn initial_design(space: &ParamSpace) -> Result<(Vec<Vec<f64>>, usize
         }
     };
     Ok((points, idx))
+}
+
+/// Design bounds must be finite, inside the space's bounds and increasing, per parameter.
+fn check_bounds(space: &ParamSpace, lower: &[f64], upper: &[f64]) -> Result<()> {
+    let bad = |reason: String| {
+        Err(Error::InvalidSetting {
+            name: "design_bounds".into(),
+            reason,
+        })
+    };
+    if lower.len() != space.dim() || upper.len() != space.dim() {
+        return bad(format!(
+            "{} lower and {} upper values for {} parameters",
+            lower.len(),
+            upper.len(),
+            space.dim()
+        ));
+    }
+    for ((p, &lo), &hi) in space.params().iter().zip(lower).zip(upper) {
+        if !(lo.is_finite() && hi.is_finite() && lo < hi && lo >= p.lower && hi <= p.upper) {
+            return bad(format!(
+                "`{}`: [{lo}, {hi}] is not an increasing range within its bounds [{}, {}]",
+                p.name, p.lower, p.upper
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The first fit's training set: per run, the run itself plus `copies - 1` copies with
@@ -200,14 +241,46 @@ mod tests {
         let s = ParamSpace::new()
             .with("a", 0.0, 2.0, 1.0, Scale::Linear)
             .unwrap();
-        let (pts, idx) = initial_design(&s).unwrap();
+        let (pts, idx) = initial_design(&s, None).unwrap();
         assert_eq!(pts.len(), 3);
         assert_eq!(idx, 2);
         let s = ParamSpace::new()
             .with("a", 0.0, 2.0, 0.3, Scale::Linear)
             .unwrap();
-        let (pts, idx) = initial_design(&s).unwrap();
+        let (pts, idx) = initial_design(&s, None).unwrap();
         assert_eq!((pts.len(), idx), (4, 3));
+    }
+
+    #[test]
+    fn design_bounds_set_the_span_and_bad_ones_name_the_parameter() {
+        use crate::Scale;
+        let s = ParamSpace::new()
+            .with("alpha", 0.01, 3.0, 0.2, Scale::Log)
+            .unwrap()
+            .with("offset", -1.0, 1.0, 0.0, Scale::Linear)
+            .unwrap();
+        let bounds = (vec![0.1, -1.0], vec![0.4, 1.0]);
+        let (pts, idx) = initial_design(&s, Some(&bounds)).unwrap();
+        assert_eq!((pts.len(), idx), (4, 3));
+        let phys: Vec<Vec<f64>> = pts.iter().map(|u| s.from_unit(u).unwrap()).collect();
+        for (got, want) in phys[..2].iter().zip([&bounds.0, &bounds.1]) {
+            assert!(got.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-12));
+        }
+        // The midpoint is the unit-box (here: geometric) middle of the box.
+        assert!((phys[2][0] - (0.1f64 * 0.4).sqrt()).abs() < 1e-12);
+        assert!(phys[2][1].abs() < 1e-12);
+        for bad in [
+            (vec![0.4, -1.0], vec![0.1, 1.0]),      // inverted
+            (vec![0.001, -1.0], vec![0.4, 1.0]),    // below the bound
+            (vec![f64::NAN, -1.0], vec![0.4, 1.0]), // not a number
+        ] {
+            let e = initial_design(&s, Some(&bad)).unwrap_err().to_string();
+            assert!(e.contains("design_bounds") && e.contains("`alpha`"), "{e}");
+        }
+        let e = initial_design(&s, Some(&(vec![0.1], vec![0.4])))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("2 parameters"), "{e}");
     }
 
     #[test]

@@ -53,6 +53,7 @@ pub struct Calibrator<'a, M: Model, Su, V = ErrorMetrics> {
     store: Option<RunStore>,
     observers: Vec<Box<dyn Observe + 'a>>,
     settings: Settings,
+    design_bounds: Option<(Vec<f64>, Vec<f64>)>,
 }
 
 impl<'a, M, Su> Calibrator<'a, M, Su, ErrorMetrics>
@@ -80,6 +81,7 @@ where
             store: None,
             observers: Vec::new(),
             settings: Settings::default(),
+            design_bounds: None,
         }
     }
 }
@@ -166,7 +168,15 @@ where
             store: self.store,
             observers: self.observers,
             settings: self.settings,
+            design_bounds: self.design_bounds,
         }
+    }
+
+    /// The initial design spans this box (physical lower and upper values per parameter,
+    /// within the space's bounds) instead of the whole space; checked when the loop starts.
+    pub fn with_design_bounds(mut self, lower: Vec<f64>, upper: Vec<f64>) -> Self {
+        self.design_bounds = Some((lower, upper));
+        self
     }
 
     /// The run journal (its fingerprint must be the model's).
@@ -242,7 +252,8 @@ where
         let names = space.names();
         let output_names = obs.output_names();
         let n_snap = obs.snapshots().len();
-        let (design_units, initial_idx) = design::initial_design(space)?;
+        let (design_units, initial_idx) =
+            design::initial_design(space, self.design_bounds.as_ref())?;
         let design_runs = design_units.len() * n_snap;
         if let Some(budget) = st.max_model_runs {
             if budget < design_runs {

@@ -21,6 +21,9 @@ use crate::hall::Hall;
 use crate::snapshots::OperatingState;
 use crate::ParamLayout;
 
+/// The smallest spread (K) by which the fit scales this term's feature.
+const MIN_SCALE_K: f64 = 0.1;
+
 /// Which side of the mass balance a [`FlowBalanceTerm`] describes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FlowBalance {
@@ -111,6 +114,12 @@ impl SurrogateTerm for FlowBalanceTerm {
             FlowBalance::Recirculation => "recirculation",
             FlowBalance::Bypass => "bypass",
         }
+    }
+
+    /// The feature is a temperature (K); one that moved less than 0.1 K over the
+    /// training runs (e.g. recirculation in none of them) is treated as constant.
+    fn min_scale(&self) -> f64 {
+        MIN_SCALE_K
     }
 
     fn features(&self, scenario: &OperatingState, params: &[f64], out: &mut [f64]) {

@@ -37,6 +37,7 @@ use crate::{Error, ParamLayout, Result};
 /// | `decay_every_epochs` | 10 | epochs per decay period (staircase: `lr * decay^(epoch / 10)`, 0.0035 at epoch 150) | `>= 1` |
 /// | `trainable_adjacency` | false | also train every stored `Wcs`/`Wss` edge | |
 /// | `ridge` | 1e-3 | ridge weight of the least-squares start, per sample, in standardised units | `>= 0` |
+/// | `adam_ridge` | false | Adam minimises the loss plus the same ridge, so it stays at the start's optimum for a fixed adjacency instead of fitting noise with the slopes of features that hardly varied (measured in docs/experiments.md, Fig. 7: it stops the log-uniform extrapolation blow-up; in the loop, equal means over 8 seeds) | |
 /// | `adjacency` | see [`AdjacencySettings`] | how the edges are built | |
 ///
 /// The paper gives lr 0.1 and decay 0.8 but not the decay period; a per-epoch decay would
@@ -55,6 +56,8 @@ pub struct ThermalGraphSettings {
     pub trainable_adjacency: bool,
     /// Ridge weight of the least-squares initialisation.
     pub ridge: f64,
+    /// Keep the ridge in Adam's loss too.
+    pub adam_ridge: bool,
     /// Adjacency construction.
     pub adjacency: AdjacencySettings,
 }
@@ -68,6 +71,7 @@ impl Default for ThermalGraphSettings {
             decay_every_epochs: 10,
             trainable_adjacency: false,
             ridge: 1e-3,
+            adam_ridge: false,
             adjacency: AdjacencySettings::default(),
         }
     }
@@ -98,6 +102,11 @@ impl ThermalGraphSettings {
     /// Sets the ridge weight of the least-squares start.
     pub fn with_ridge(mut self, ridge: f64) -> Self {
         self.ridge = ridge;
+        self
+    }
+    /// Keeps the ridge in Adam's loss (or not).
+    pub fn with_adam_ridge(mut self, on: bool) -> Self {
+        self.adam_ridge = on;
         self
     }
     /// Sets the adjacency construction.

@@ -121,6 +121,41 @@ impl PenaltySettings {
     pub fn rise_coefficient(&self) -> f64 {
         1.0 / (M3_S_PER_CFM * self.air_density_kg_m3 * self.air_heat_capacity_j_kg_k)
     }
+
+    /// The plausible box of `layout`'s parameters: each alpha between `K / upper_c` and
+    /// `K / lower_c` (the rises this prior accepts), clipped to its bounds; every other
+    /// parameter, and an alpha whose bounds miss that range, over its whole bounds.
+    /// For [`kalibre_core::Calibrator::with_design_bounds`].
+    pub fn plausible_bounds(&self, layout: &ParamLayout) -> (Vec<f64>, Vec<f64>) {
+        let space = layout.space();
+        let k = self.rise_coefficient();
+        let mut is_alpha = vec![false; space.dim()];
+        for p in layout.alpha_index().iter().flatten() {
+            is_alpha[*p] = true;
+        }
+        space
+            .params()
+            .iter()
+            .zip(is_alpha)
+            .map(|(p, alpha)| {
+                let (lo, hi) = if alpha {
+                    let hi = if self.lower_c > 0.0 {
+                        k / self.lower_c
+                    } else {
+                        p.upper
+                    };
+                    ((k / self.upper_c).max(p.lower), hi.min(p.upper))
+                } else {
+                    (p.lower, p.upper)
+                };
+                if lo < hi {
+                    (lo, hi)
+                } else {
+                    (p.lower, p.upper)
+                }
+            })
+            .unzip()
+    }
 }
 
 /// Which end of the range a server's rise violates.

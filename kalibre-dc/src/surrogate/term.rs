@@ -28,4 +28,13 @@ pub trait SurrogateTerm: Send + Sync + Debug {
         cotangent: &[f64],
         grad: &mut [f64],
     );
+
+    /// The smallest scale the fit divides this feature by (the feature's units). A
+    /// feature that moved less than this over the training samples counts as not having
+    /// moved: its weight is then left to the ridge instead of being fitted to a spread
+    /// of, say, 1e-9, which a prediction where the feature does move would multiply by
+    /// millions. Default 0: the fit's own floor only.
+    fn min_scale(&self) -> f64 {
+        0.0
+    }
 }

@@ -6,7 +6,9 @@
 //!    features) for every sample once; with a fixed adjacency they never change during
 //!    training (alpha is frozen at each sample's value), so every epoch costs
 //!    `O(samples x sensors)` whatever the number of servers;
-//! 2. standardises them per sensor over the samples (see [`super::graph`]);
+//! 2. standardises them per sensor over the samples (see [`super::graph`]); a term's
+//!    scale is at least its [`super::SurrogateTerm::min_scale`], so a feature that hardly
+//!    moved in training is not blown up where it does move;
 //! 3. starts from ridge-regularised least squares per sensor: with a fixed adjacency the
 //!    model is linear in `a, c, e` given the hidden variables, so this is close to the
 //!    optimum already. The ridge pulls toward the physical prior `T_cold = X_cold + b`
@@ -14,6 +16,7 @@
 //!    data cannot (e.g. `a` when every sample shares one operating state);
 //! 4. runs Adam (lr 0.1, staircase decay 0.8 every 10 epochs, 150 epochs), and keeps the
 //!    weights with the lowest loss seen, so training never ends worse than it started.
+//!    With `adam_ridge` that loss includes the start's ridge.
 //!
 //! The flat weight vector is `[a, b, c, d, e, omega_cs, omega_ss]` (the last two only with
 //! a trainable adjacency). Trainable edges are `W = W_geometric * omega` with `omega`
@@ -386,9 +389,10 @@ impl ThermalGraph {
             if self.hot[k] {
                 (w.hot_mean[k], w.hot_scale[k]) = mean_scale(cache.iter().map(|c| c.1[k]), wt);
             }
-            for t in 0..nt {
+            for (t, term) in self.terms.iter().enumerate() {
                 let i = t * n + k;
-                (w.term_mean[i], w.term_scale[i]) = mean_scale(prep.f.iter().map(|f| f[i]), wt);
+                let (mean, scale) = mean_scale(prep.f.iter().map(|f| f[i]), wt);
+                (w.term_mean[i], w.term_scale[i]) = (mean, scale.max(term.min_scale()));
             }
         }
 
@@ -471,13 +475,19 @@ impl ThermalGraph {
         let mut m2 = vec![0.0; theta.len()];
         let mut grad = vec![0.0; theta.len()];
         let scaling = self.w.clone();
-        let mut best = (f64::INFINITY, theta.clone());
+        // (loss Adam minimises, training MSE, weights) of the best epoch.
+        let mut best = (f64::INFINITY, f64::INFINITY, theta.clone());
         let omega_start = n * (4 + nt);
         let fixed = (!st.trainable_adjacency).then(|| self.standardise(&prep, &cache, &scaling));
         for epoch in 0..=st.epochs {
-            let loss = match &fixed {
+            let mse = match &fixed {
                 Some(f) => self.loss_and_grad_fixed(f, &prep.y, &prep.wt, &theta, &mut grad),
                 None => self.loss_and_grad(&prep, &scaling, &theta, &mut grad),
+            };
+            let loss = if st.adam_ridge {
+                mse + ridge_and_grad(&scaling.cold_scale, nt, st.ridge, &theta, &mut grad)
+            } else {
+                mse
             };
             if !loss.is_finite() {
                 return Err(Error::Core(kalibre_core::Error::Fit(format!(
@@ -485,7 +495,7 @@ impl ThermalGraph {
                 ))));
             }
             if loss < best.0 {
-                best = (loss, theta.clone());
+                best = (loss, mse, theta.clone());
             }
             if epoch == st.epochs {
                 break;
@@ -504,13 +514,41 @@ impl ThermalGraph {
                     .for_each(|o| *o = o.max(0.0));
             }
         }
-        self.set_weights_vector(&best.1)?;
+        self.set_weights_vector(&best.2)?;
         self.fitted = true;
         Ok(FitSummary {
-            train_mse: best.0,
+            train_mse: best.1,
             epochs: st.epochs,
         })
     }
+}
+
+/// The least-squares start's ridge in the units of the training loss (a mean over samples
+/// and sensors): `(ridge / n) * sum (theta - prior)^2` over the slopes `a` (prior: the
+/// physical slope, `cold_scale`), `c` and `e` (prior 0); adds its gradient to `grad`.
+/// Adam then minimises what the start minimised: without it, Adam's normalised steps
+/// move a weight whose feature hardly varied as far as any other, fitting noise with a
+/// slope that a prediction where the feature does vary multiplies.
+fn ridge_and_grad(
+    cold_scale: &[f64],
+    nt: usize,
+    ridge: f64,
+    theta: &[f64],
+    grad: &mut [f64],
+) -> f64 {
+    let n = cold_scale.len();
+    let scale = ridge / n as f64;
+    let mut penalty = 0.0;
+    let slopes = (0..n)
+        .map(|k| (k, cold_scale[k]))
+        .chain((2 * n..3 * n).map(|i| (i, 0.0)))
+        .chain((4 * n..(4 + nt) * n).map(|i| (i, 0.0)));
+    for (i, prior) in slopes {
+        let diff = theta[i] - prior;
+        penalty += scale * diff * diff;
+        grad[i] += 2.0 * scale * diff;
+    }
+    penalty
 }
 
 /// Weighted mean and standard deviation over samples (weights average 1); a feature that
