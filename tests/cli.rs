@@ -209,6 +209,11 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     for u in uncertainty {
         assert!(params.contains_key(u["name"].as_str().unwrap()));
         assert!(u["identified"].is_boolean());
+        // Where the measurements point from the best run; identified implies settled.
+        let shift = u["shift"].as_f64().expect("a finite shift");
+        if u["identified"] == true {
+            assert!(shift.abs() <= 2.0 * u["std"].as_f64().unwrap(), "{u}");
+        }
     }
     assert!(String::from_utf8_lossy(&o.stdout).contains("parameters identified"));
     assert!(html.contains("one standard deviation (linearised)"));
