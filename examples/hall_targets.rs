@@ -98,7 +98,7 @@ fn main() {
                 "polished": polished, "polished_error_pct": 100.0 * (polished - truth) / truth,
                 "identified": u.is_some_and(|u| u.identified),
                 "rel_std_pct": u.and_then(|u| u.rel_std).map(|r| 100.0 * r),
-                "shift_pct": u.and_then(|u| u.shift).map(|d| 100.0 * d / polished),
+                "shift_pct": u.and_then(|u| u.rel_shift()).map(|r| 100.0 * r),
             }));
         }
         let runs_per_snapshot = r.runs.total / s.snapshots.len();

@@ -16,13 +16,10 @@
 //! `softplus_w(x) = w ln(1 + e^(x/w))` with `w` = 2% of the supply keeps the kink smooth.
 
 use super::penalty::M3_S_PER_CFM;
-use super::term::SurrogateTerm;
+use super::term::{SurrogateTerm, TEMPERATURE_MIN_SCALE_K};
 use crate::hall::Hall;
 use crate::snapshots::OperatingState;
 use crate::ParamLayout;
-
-/// The smallest spread (K) by which the fit scales this term's feature.
-const MIN_SCALE_K: f64 = 0.1;
 
 /// Which side of the mass balance a [`FlowBalanceTerm`] describes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -116,10 +113,8 @@ impl SurrogateTerm for FlowBalanceTerm {
         }
     }
 
-    /// The feature is a temperature (K); one that moved less than 0.1 K over the
-    /// training runs (e.g. recirculation in none of them) is treated as constant.
     fn min_scale(&self) -> f64 {
-        MIN_SCALE_K
+        TEMPERATURE_MIN_SCALE_K
     }
 
     fn features(&self, scenario: &OperatingState, params: &[f64], out: &mut [f64]) {

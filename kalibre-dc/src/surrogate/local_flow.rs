@@ -10,13 +10,10 @@
 //! the mean exhaust rise `dT = sum P / (rho cp Q_srv)`.
 
 use super::penalty::M3_S_PER_CFM;
-use super::term::SurrogateTerm;
+use super::term::{SurrogateTerm, TEMPERATURE_MIN_SCALE_K};
 use crate::hall::{distance, Hall, SupplyKind};
 use crate::snapshots::OperatingState;
 use crate::ParamLayout;
-
-/// The smallest spread (K) by which the fit scales this term's feature.
-const MIN_SCALE_K: f64 = 0.1;
 
 /// Servers and supply openings farther than this from a sensor do not count locally.
 pub const LOCAL_RADIUS_M: f64 = 3.0;
@@ -158,10 +155,8 @@ impl SurrogateTerm for LocalRecirculationTerm {
         "local_recirculation"
     }
 
-    /// The feature is a temperature (K); one that moved less than 0.1 K over the
-    /// training runs (e.g. recirculation in none of them) is treated as constant.
     fn min_scale(&self) -> f64 {
-        MIN_SCALE_K
+        TEMPERATURE_MIN_SCALE_K
     }
 
     fn features(&self, scenario: &OperatingState, params: &[f64], out: &mut [f64]) {

@@ -11,6 +11,11 @@ use std::fmt::Debug;
 
 use crate::snapshots::OperatingState;
 
+/// The [`SurrogateTerm::min_scale`] of terms whose feature is a temperature (K): one that
+/// moved less than 0.1 K over the training runs (e.g. recirculation in none of them) is
+/// treated as constant.
+pub(crate) const TEMPERATURE_MIN_SCALE_K: f64 = 0.1;
+
 /// One additional linear term of the [`super::ThermalGraph`].
 pub trait SurrogateTerm: Send + Sync + Debug {
     /// A short name (the effect kind), for reports.
