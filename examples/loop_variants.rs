@@ -43,6 +43,14 @@ const VARIANTS: &[(&str, &str)] = &[
         "local-recirculation",
         "the local recirculation term added to the surrogate",
     ),
+    (
+        "trainable-adjacency",
+        "every server-sensor and CRAC-sensor edge trained with the rest",
+    ),
+    (
+        "zero-order-correction",
+        "the output correction's constant term only (no linear term, no geometry steps)",
+    ),
     ("focus-0.5", "fit focus 0.5 instead of 1"),
     ("focus-2", "fit focus 2 instead of 1"),
     ("geometry-step-0.03", "geometry step 0.03 instead of 0.01"),
@@ -55,8 +63,24 @@ const VARIANTS: &[(&str, &str)] = &[
         "initial design within the rise prior's alphas instead of the whole bounds",
     ),
     (
-        "adam-ridge",
-        "the least-squares start's ridge kept in Adam's loss",
+        "no-adam-ridge",
+        "Adam without the least-squares start's ridges in its loss",
+    ),
+    (
+        "hall-wide-ridge-0.01",
+        "ridge on the mass-balance terms' weights 0.01 instead of 0.03",
+    ),
+    (
+        "hall-wide-ridge-0.1",
+        "ridge on the mass-balance terms' weights 0.1 instead of 0.03",
+    ),
+    (
+        "hall-wide-ridge-0.3",
+        "ridge on the mass-balance terms' weights 0.3 instead of 0.03",
+    ),
+    (
+        "unregularised-surrogate",
+        "the surrogate's training before session 6: no ridge in Adam, the mass-balance terms' weights ridged like the rest (0.001)",
     ),
 ];
 
@@ -76,7 +100,19 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         "geometry-step-0.03" => s.core.stall_step = Some(0.03),
         "augment-sigma-0.1" => s.core.augment_sigma = 0.1,
         "prior-design" => s.design_within_prior = true,
-        "adam-ridge" => s.surrogate.adam_ridge = true,
+        "trainable-adjacency" => s.surrogate.trainable_adjacency = true,
+        "no-adam-ridge" => s.surrogate.adam_ridge = false,
+        "hall-wide-ridge-0.01" => s.surrogate.hall_wide_ridge = 0.01,
+        "hall-wide-ridge-0.1" => s.surrogate.hall_wide_ridge = 0.1,
+        "hall-wide-ridge-0.3" => s.surrogate.hall_wide_ridge = 0.3,
+        "unregularised-surrogate" => {
+            s.surrogate.adam_ridge = false;
+            s.surrogate.hall_wide_ridge = s.surrogate.ridge;
+        }
+        "zero-order-correction" => {
+            s.core.linear_correction = false;
+            s.core.stall_step = None;
+        }
         _ => return None,
     }
     Some(s)

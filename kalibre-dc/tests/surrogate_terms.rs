@@ -167,11 +167,20 @@ fn a_term_that_never_moved_in_training_does_not_blow_up_the_prediction() {
             .map(|(y, e)| (y - e).abs())
             .fold(0.0, f64::max)
     };
-    // Default: the term's scale is floored at 0.1 K, so the idle slope is bounded (without
-    // the floor: 9e4 C off); Adam's normalised steps still fit the noise with it.
-    let default = worst(ThermalGraphSettings::default());
-    assert!(default < 200.0, "default: {default} C off");
+    // Without the ridge in Adam's loss (and the hall-wide terms ridged like the rest): the
+    // term's scale is floored at 0.1 K, so the idle slope is bounded (without the floor:
+    // 9e4 C off); Adam's normalised steps still fit the noise with it.
+    let plain = ThermalGraphSettings::default()
+        .with_adam_ridge(false)
+        .with_hall_wide_ridge(1e-3);
+    let unridged = worst(plain);
+    assert!(unridged < 200.0, "no ridge in Adam: {unridged} C off");
     // With the ridge kept in Adam's loss the idle slope stays near zero.
-    let ridged = worst(ThermalGraphSettings::default().with_adam_ridge(true));
-    assert!(ridged < 1.0, "adam_ridge: {ridged} C off");
+    let ridged = worst(plain.with_adam_ridge(true));
+    assert!(ridged < 1.0, "ridge in Adam: {ridged} C off");
+    // The default also ridges the hall-wide terms' weights harder, so part of this
+    // (purely hall-wide) truth's slope goes to the local heating block, which extrapolates
+    // to the recirculating point: measured 1.47 C off, still no blow-up.
+    let default = worst(ThermalGraphSettings::default());
+    assert!(default < 2.0, "default: {default} C off");
 }

@@ -117,6 +117,10 @@ impl SurrogateTerm for FlowBalanceTerm {
         TEMPERATURE_MIN_SCALE_K
     }
 
+    fn hall_wide(&self) -> bool {
+        true
+    }
+
     fn features(&self, scenario: &OperatingState, params: &[f64], out: &mut [f64]) {
         let (f, _) = self.feature(scenario, self.server_flow(scenario, params));
         out.fill(f);

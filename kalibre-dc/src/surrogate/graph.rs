@@ -27,6 +27,11 @@ use crate::hall::{Aisle, Hall};
 use crate::snapshots::OperatingState;
 use crate::{Error, ParamLayout, Result};
 
+/// Default [`ThermalGraphSettings::hall_wide_ridge`]: thirty times the default `ridge`.
+/// Chosen in the loop over 16 seeds per hall against 0.01, 0.1, 0.3 and 1
+/// (`examples/loop_variants.rs`; `docs/performance.md`).
+pub const HALL_WIDE_RIDGE: f64 = 0.03;
+
 /// Training settings of the [`ThermalGraph`] (unchecked; [`Self::check`] validates).
 ///
 /// | Name | Default | Meaning | Range |
@@ -37,7 +42,8 @@ use crate::{Error, ParamLayout, Result};
 /// | `decay_every_epochs` | 10 | epochs per decay period (staircase: `lr * decay^(epoch / 10)`, 0.0035 at epoch 150) | `>= 1` |
 /// | `trainable_adjacency` | false | also train every stored `Wcs`/`Wss` edge | |
 /// | `ridge` | 1e-3 | ridge weight of the least-squares start, per sample, in standardised units | `>= 0` |
-/// | `adam_ridge` | false | Adam minimises the loss plus the same ridge, so it stays at the start's optimum for a fixed adjacency instead of fitting noise with the slopes of features that hardly varied (measured in docs/experiments.md, Fig. 7: it stops the log-uniform extrapolation blow-up; in the loop, equal means over 8 seeds) | |
+/// | `adam_ridge` | true | Adam minimises the loss plus the same ridges, so it stays at the start's optimum for a fixed adjacency instead of fitting noise with the slopes of features that hardly varied (docs/experiments.md, Fig. 7: it stops the log-uniform extrapolation blow-up), and the hall-wide terms stay held (docs/performance.md) | |
+/// | `hall_wide_ridge` | 0.03 ([`HALL_WIDE_RIDGE`]) | the ridge on the weights of [hall-wide terms](SurrogateTerm::hall_wide) (the mass-balance terms), in the start and, with `adam_ridge`, in Adam: they explain only what the local blocks cannot (see `docs/performance.md`) | `>= 0` |
 /// | `adjacency` | see [`AdjacencySettings`] | how the edges are built | |
 ///
 /// The paper gives lr 0.1 and decay 0.8 but not the decay period; a per-epoch decay would
@@ -58,6 +64,8 @@ pub struct ThermalGraphSettings {
     pub ridge: f64,
     /// Keep the ridge in Adam's loss too.
     pub adam_ridge: bool,
+    /// Ridge weight on the weights of hall-wide terms (instead of `ridge`).
+    pub hall_wide_ridge: f64,
     /// Adjacency construction.
     pub adjacency: AdjacencySettings,
 }
@@ -71,7 +79,8 @@ impl Default for ThermalGraphSettings {
             decay_every_epochs: 10,
             trainable_adjacency: false,
             ridge: 1e-3,
-            adam_ridge: false,
+            adam_ridge: true,
+            hall_wide_ridge: HALL_WIDE_RIDGE,
             adjacency: AdjacencySettings::default(),
         }
     }
@@ -109,6 +118,11 @@ impl ThermalGraphSettings {
         self.adam_ridge = on;
         self
     }
+    /// Sets the ridge on the weights of hall-wide terms.
+    pub fn with_hall_wide_ridge(mut self, ridge: f64) -> Self {
+        self.hall_wide_ridge = ridge;
+        self
+    }
     /// Sets the adjacency construction.
     pub fn with_adjacency(mut self, adjacency: AdjacencySettings) -> Self {
         self.adjacency = adjacency;
@@ -136,6 +150,12 @@ impl ThermalGraphSettings {
             return Err(setting(
                 "ridge",
                 format!("must be >= 0, got {}", self.ridge),
+            ));
+        }
+        if !(self.hall_wide_ridge.is_finite() && self.hall_wide_ridge >= 0.0) {
+            return Err(setting(
+                "hall_wide_ridge",
+                format!("must be >= 0, got {}", self.hall_wide_ridge),
             ));
         }
         self.adjacency.check()?;

@@ -18,13 +18,14 @@ mod graph;
 mod local_flow;
 mod objective;
 mod penalty;
+mod ridge;
 mod term;
 mod train;
 
 pub use adjacency::{Adjacency, AdjacencySettings, Csr};
 pub use effect_linear::EffectLinearTerm;
 pub use flow_balance::{FlowBalance, FlowBalanceTerm};
-pub use graph::{ThermalGraph, ThermalGraphSettings};
+pub use graph::{ThermalGraph, ThermalGraphSettings, HALL_WIDE_RIDGE};
 pub use local_flow::{LocalRecirculationTerm, LOCAL_RADIUS_M};
 pub use objective::ThermalGraphObjective;
 pub use penalty::{

@@ -42,4 +42,16 @@ pub trait SurrogateTerm: Send + Sync + Debug {
     fn min_scale(&self) -> f64 {
         0.0
     }
+
+    /// Whether the feature is one value for the whole hall (per snapshot), moving with
+    /// every server's alpha at once. Such a feature is nearly collinear with the local
+    /// heating features over a few runs (the initial design moves every alpha together),
+    /// so a free weight per sensor would take variance that belongs to the servers next
+    /// to the sensor and give each sensor a response to every type's alpha, in proportion
+    /// to the type's total power. The fit holds these weights at zero with
+    /// [`super::ThermalGraphSettings::hall_wide_ridge`] instead of `ridge`, so they only
+    /// explain what the local blocks cannot. Default false.
+    fn hall_wide(&self) -> bool {
+        false
+    }
 }

@@ -16,7 +16,8 @@
 //!    data cannot (e.g. `a` when every sample shares one operating state);
 //! 4. runs Adam (lr 0.1, staircase decay 0.8 every 10 epochs, 150 epochs), and keeps the
 //!    weights with the lowest loss seen, so training never ends worse than it started.
-//!    With `adam_ridge` that loss includes the start's ridge.
+//!    With `adam_ridge` (the default) that loss includes the start's ridges, among them
+//!    the stronger one on hall-wide terms' weights (`hall_wide_ridge`).
 //!
 //! The flat weight vector is `[a, b, c, d, e, omega_cs, omega_ss]` (the last two only with
 //! a trainable adjacency). Trainable edges are `W = W_geometric * omega` with `omega`
@@ -26,6 +27,7 @@
 use kalibre_core::{FitSummary, TrainingSet};
 
 use super::graph::{ThermalGraph, Weights};
+use super::ridge::{mean_scale, ridge_and_grad, solve_spd, wdot};
 use crate::snapshots::OperatingState;
 use crate::{Error, Result};
 
@@ -52,6 +54,21 @@ struct Standardised {
 }
 
 impl ThermalGraph {
+    /// The ridge on each term's weights: `hall_wide_ridge` for hall-wide terms, `ridge`
+    /// for the others.
+    fn term_ridges(&self) -> Vec<f64> {
+        self.terms
+            .iter()
+            .map(|t| {
+                if t.hall_wide() {
+                    self.settings.hall_wide_ridge
+                } else {
+                    self.settings.ridge
+                }
+            })
+            .collect()
+    }
+
     fn standardise(
         &self,
         prep: &Prepared,
@@ -396,8 +413,14 @@ impl ThermalGraph {
             }
         }
 
-        // Ridge least squares per sensor, toward the prior (a = physical slope one).
+        // Ridge least squares per sensor, toward the prior (a = physical slope one); the
+        // weights of hall-wide terms with their own, stronger ridge.
         let lambda = self.settings.ridge.max(1e-12) * samples as f64;
+        let term_ridge = self.term_ridges();
+        let term_lambda: Vec<f64> = term_ridge
+            .iter()
+            .map(|r| r.max(1e-12) * samples as f64)
+            .collect();
         for k in 0..n {
             let mut cols: Vec<(Vec<f64>, f64, usize)> = Vec::new(); // feature, prior, theta slot
             cols.push((
@@ -439,8 +462,14 @@ impl ThermalGraph {
             let mut rhs = vec![0.0; m];
             for p in 0..m {
                 for q in 0..m {
-                    g[p * m + q] =
-                        wdot(&cols[p].0, &cols[q].0, &prep.wt) + if p == q { lambda } else { 0.0 };
+                    g[p * m + q] = wdot(&cols[p].0, &cols[q].0, &prep.wt)
+                        + if p != q {
+                            0.0
+                        } else if cols[p].2 >= 4 {
+                            term_lambda[cols[p].2 - 4]
+                        } else {
+                            lambda
+                        };
                 }
                 let xy: f64 = cols[p]
                     .0
@@ -485,7 +514,13 @@ impl ThermalGraph {
                 None => self.loss_and_grad(&prep, &scaling, &theta, &mut grad),
             };
             let loss = if st.adam_ridge {
-                mse + ridge_and_grad(&scaling.cold_scale, nt, st.ridge, &theta, &mut grad)
+                mse + ridge_and_grad(
+                    &scaling.cold_scale,
+                    st.ridge,
+                    &term_ridge,
+                    &theta,
+                    &mut grad,
+                )
             } else {
                 mse
             };
@@ -520,109 +555,5 @@ impl ThermalGraph {
             train_mse: best.1,
             epochs: st.epochs,
         })
-    }
-}
-
-/// The least-squares start's ridge in the units of the training loss (a mean over samples
-/// and sensors): `(ridge / n) * sum (theta - prior)^2` over the slopes `a` (prior: the
-/// physical slope, `cold_scale`), `c` and `e` (prior 0); adds its gradient to `grad`.
-/// Adam then minimises what the start minimised: without it, Adam's normalised steps
-/// move a weight whose feature hardly varied as far as any other, fitting noise with a
-/// slope that a prediction where the feature does vary multiplies.
-fn ridge_and_grad(
-    cold_scale: &[f64],
-    nt: usize,
-    ridge: f64,
-    theta: &[f64],
-    grad: &mut [f64],
-) -> f64 {
-    let n = cold_scale.len();
-    let scale = ridge / n as f64;
-    let mut penalty = 0.0;
-    let slopes = (0..n)
-        .map(|k| (k, cold_scale[k]))
-        .chain((2 * n..3 * n).map(|i| (i, 0.0)))
-        .chain((4 * n..(4 + nt) * n).map(|i| (i, 0.0)));
-    for (i, prior) in slopes {
-        let diff = theta[i] - prior;
-        penalty += scale * diff * diff;
-        grad[i] += 2.0 * scale * diff;
-    }
-    penalty
-}
-
-/// Weighted mean and standard deviation over samples (weights average 1); a feature that
-/// does not vary is scaled by its magnitude instead, so a later change is measured
-/// relative to its training value.
-fn mean_scale(v: impl Iterator<Item = f64> + Clone, wt: &[f64]) -> (f64, f64) {
-    let n = v.clone().count().max(1) as f64;
-    let mean = v.clone().zip(wt).map(|(x, w)| w * x).sum::<f64>() / n;
-    let var = v
-        .zip(wt)
-        .map(|(x, w)| w * (x - mean) * (x - mean))
-        .sum::<f64>()
-        / n;
-    let sd = var.sqrt();
-    let mag = mean.abs().max(1.0);
-    (mean, if sd > 1e-9 * mag { sd } else { mag })
-}
-
-fn wdot(a: &[f64], b: &[f64], w: &[f64]) -> f64 {
-    a.iter().zip(b).zip(w).map(|((x, y), w)| w * x * y).sum()
-}
-
-/// Solves a small symmetric positive definite system by Gaussian elimination with
-/// partial pivoting (the ridge keeps it non-singular).
-fn solve_spd(a: &mut [f64], b: &mut [f64], m: usize) -> Vec<f64> {
-    for col in 0..m {
-        let piv = (col..m)
-            .max_by(|&i, &j| a[i * m + col].abs().total_cmp(&a[j * m + col].abs()))
-            .unwrap_or(col);
-        if piv != col {
-            for q in 0..m {
-                a.swap(col * m + q, piv * m + q);
-            }
-            b.swap(col, piv);
-        }
-        let p = a[col * m + col];
-        for r in col + 1..m {
-            let f = a[r * m + col] / p;
-            for q in col..m {
-                a[r * m + q] -= f * a[col * m + q];
-            }
-            b[r] -= f * b[col];
-        }
-    }
-    let mut x = vec![0.0; m];
-    for r in (0..m).rev() {
-        let s: f64 = (r + 1..m).map(|q| a[r * m + q] * x[q]).sum();
-        x[r] = (b[r] - s) / a[r * m + r];
-    }
-    x
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn small_solver_matches_known_solution() {
-        let mut a = vec![4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0];
-        let x = [1.0, -2.0, 0.5];
-        let mut b: Vec<f64> = (0..3)
-            .map(|r| (0..3).map(|q| a[r * 3 + q] * x[q]).sum())
-            .collect();
-        let sol = solve_spd(&mut a, &mut b, 3);
-        for (s, t) in sol.iter().zip(x) {
-            assert!((s - t).abs() < 1e-12);
-        }
-    }
-
-    #[test]
-    fn constant_feature_is_scaled_by_magnitude() {
-        let (m, s) = mean_scale([250.0, 250.0, 250.0].into_iter(), &[1.0; 3]);
-        assert_eq!((m, s), (250.0, 250.0));
-        let (m, s) = mean_scale([1.0, 3.0].into_iter(), &[1.0; 2]);
-        assert_eq!((m, s), (2.0, 1.0));
     }
 }
