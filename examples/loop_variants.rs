@@ -53,7 +53,7 @@ const VARIANTS: &[(&str, &str)] = &[
     ),
     ("focus-0.5", "fit focus 0.5 instead of 1"),
     ("focus-2", "fit focus 2 instead of 1"),
-    ("geometry-step-0.03", "geometry step 0.03 instead of 0.01"),
+    ("geometry-step-0.01", "geometry step 0.01 instead of 0.03"),
     (
         "augment-sigma-0.1",
         "design augmentation noise 0.1 instead of 0.05",
@@ -97,7 +97,7 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         "local-recirculation" => s.local_recirculation_term = true,
         "focus-0.5" => s.core.focus = Some(0.5),
         "focus-2" => s.core.focus = Some(2.0),
-        "geometry-step-0.03" => s.core.stall_step = Some(0.03),
+        "geometry-step-0.01" => s.core.stall_step = Some(0.01),
         "augment-sigma-0.1" => s.core.augment_sigma = 0.1,
         "prior-design" => s.design_within_prior = true,
         "trainable-adjacency" => s.surrogate.trainable_adjacency = true,

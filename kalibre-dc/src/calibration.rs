@@ -60,7 +60,7 @@ impl HallCalibrationSettings {
     /// 9% in alpha) rather than ending the loop, and the surrogate corrected to the model
     /// at the best run, with a linear term fitted to the runs near it, and searched within
     /// a trust region of 0.1; when the corrected surrogate promises too little, a geometry
-    /// step of 0.01 along the least explored direction instead (all beyond the paper; the
+    /// step of 0.03 along the least explored direction instead (all beyond the paper; the
     /// variants are measured in docs/performance.md); then up to 8 Levenberg-Marquardt
     /// steps on the model itself (the built-in simulator is cheap; the surrogate alone
     /// stalls a few tenths of a degree above what the model can reach).
@@ -72,7 +72,7 @@ impl HallCalibrationSettings {
             explore_on_repeat: Some(0.015),
             output_correction: true,
             linear_correction: true,
-            stall_step: Some(0.01),
+            stall_step: Some(0.03),
             trust_region: Some(0.1),
             polish_iterations: 8,
             ..Settings::default()
