@@ -26,7 +26,6 @@ mod experiments;
 
 use kalibre::core::{Model, Sample, Surrogate, TrainingSet};
 use kalibre::dc::calibration::HallCalibrationSettings;
-use kalibre::dc::hall::Aisle;
 use kalibre::dc::surrogate::{
     Adjacency, AdjacencySettings, FlowBalance, FlowBalanceTerm, LocalRecirculationTerm,
     PenaltySettings, SurrogateTerm,
@@ -142,12 +141,7 @@ fn main() {
         .map(|a| s.model.evaluate(&state, a).expect("a run").values)
         .collect();
     let n_out = s.hall.sensors.len();
-    let hot: Vec<bool> = s
-        .hall
-        .sensors
-        .iter()
-        .map(|x| x.aisle == Aisle::Hot)
-        .collect();
+    let hot = s.hot_sensors();
     let adj = Adjacency::from_hall(&s.hall, &AdjacencySettings::default()).expect("adjacency");
     let terms = [FlowBalance::Recirculation, FlowBalance::Bypass]
         .map(|k| FlowBalanceTerm::new(&s.hall, &layout, k));

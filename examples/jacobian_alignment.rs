@@ -20,8 +20,7 @@ mod experiments;
 
 use kalibre::core::{Model, Sample, Surrogate, TrainingSet};
 use kalibre::dc::calibration::HallCalibrationSettings;
-use kalibre::dc::hall::Aisle;
-use kalibre::dc::synth::{self, Preset, SynthOptions};
+use kalibre::dc::synth::Preset;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
@@ -80,16 +79,13 @@ fn main() {
         });
     let out = value("--out").map(std::path::PathBuf::from);
     let s = experiments::setup(preset, false).expect("synthetic hall");
-    let truth = synth::generate(&SynthOptions::new(preset, 1))
-        .expect("truth")
-        .truth;
     let layout = s.model.layout().clone();
     let space = layout.space();
     let dim = space.dim();
     let names: Vec<String> = space.params().iter().map(|p| p.name.clone()).collect();
     let truth_params: Vec<f64> = names
         .iter()
-        .map(|n| truth.alpha_type_cfm_per_w[n.trim_start_matches("alpha/")])
+        .map(|n| s.true_alpha_type[n.trim_start_matches("alpha/")])
         .collect();
     let truth_unit = space.to_unit(&truth_params).expect("truth in bounds");
     let to_physical = |u: &[f64]| space.from_unit(u).expect("unit box");
@@ -138,12 +134,7 @@ fn main() {
         states.len(),
         &to_physical,
     );
-    let hot: Vec<bool> = s
-        .hall
-        .sensors
-        .iter()
-        .map(|x| x.aisle == Aisle::Hot)
-        .collect();
+    let hot = s.hot_sensors();
 
     let mut results = Vec::new();
     for variant in ["default", "before session 6"] {

@@ -53,6 +53,19 @@ pub struct Setup {
     pub noise_only_mae_c: Option<f64>,
     /// Wall time of the synthesis, seconds.
     pub synth_s: f64,
+    /// The true alpha per server type (cfm/W), as `truth.json` has it.
+    pub true_alpha_type: std::collections::BTreeMap<String, f64>,
+}
+
+impl Setup {
+    /// Per sensor, whether it is in a hot aisle.
+    pub fn hot_sensors(&self) -> Vec<bool> {
+        self.hall
+            .sensors
+            .iter()
+            .map(|x| x.aisle == kalibre::dc::hall::Aisle::Hot)
+            .collect()
+    }
 }
 
 /// Synthesises `preset` (seed 1, 3 snapshots, noise 0.2 C) and builds its model.
@@ -77,6 +90,7 @@ pub fn setup(preset: Preset, reference: bool) -> Result<Setup> {
         obs,
         model,
         synth_s,
+        true_alpha_type: s.truth.alpha_type_cfm_per_w,
     })
 }
 
