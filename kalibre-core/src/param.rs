@@ -91,20 +91,38 @@ impl Param {
 
     /// Unit coordinate to physical value (the coordinate is clamped into `[0, 1]` first).
     pub fn from_unit(&self, u: f64) -> f64 {
+        self.physical_at(u, self.log_span())
+    }
+
+    /// `d x / d u` at unit coordinate `u`: the chain-rule factor from physical to unit gradients.
+    pub fn dphys_dunit(&self, u: f64) -> f64 {
+        self.dphys_dunit_at(u, self.log_span())
+    }
+
+    /// `ln(upper / lower)` on a log scale (0 on a linear one).
+    fn log_span(&self) -> f64 {
+        match self.scale {
+            Scale::Linear => 0.0,
+            Scale::Log => (self.upper / self.lower).ln(),
+        }
+    }
+
+    /// [`Self::from_unit`] with [`Self::log_span`] given (a [`ParamSpace`] keeps them, so
+    /// that mapping thousands of parameters does not take a logarithm for each).
+    fn physical_at(&self, u: f64, log_span: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
         let x = match self.scale {
             Scale::Linear => self.lower + u * (self.upper - self.lower),
-            Scale::Log => self.lower * (u * (self.upper / self.lower).ln()).exp(),
+            Scale::Log => self.lower * (u * log_span).exp(),
         };
         // Rounding must never step outside the box.
         x.clamp(self.lower, self.upper)
     }
 
-    /// `d x / d u` at unit coordinate `u`: the chain-rule factor from physical to unit gradients.
-    pub fn dphys_dunit(&self, u: f64) -> f64 {
+    fn dphys_dunit_at(&self, u: f64, log_span: f64) -> f64 {
         match self.scale {
             Scale::Linear => self.upper - self.lower,
-            Scale::Log => self.from_unit(u) * (self.upper / self.lower).ln(),
+            Scale::Log => self.physical_at(u, log_span) * log_span,
         }
     }
 }
@@ -121,8 +139,36 @@ impl Param {
 /// assert!((x[0] - 50.0).abs() < 1e-9 && (x[1] - 10.0).abs() < 1e-9);
 /// ```
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "ParamList", into = "ParamList")]
 pub struct ParamSpace {
     params: Vec<Param>,
+    /// `ln(upper / lower)` per parameter (0 on a linear scale), kept with the parameters.
+    log_span: Vec<f64>,
+}
+
+/// The serialised form of a [`ParamSpace`]: its parameters, checked again on reading.
+#[derive(Serialize, Deserialize)]
+struct ParamList {
+    params: Vec<Param>,
+}
+
+impl TryFrom<ParamList> for ParamSpace {
+    type Error = Error;
+    fn try_from(list: ParamList) -> Result<Self> {
+        let mut space = ParamSpace::new();
+        for p in list.params {
+            space.push(p)?;
+        }
+        Ok(space)
+    }
+}
+
+impl From<ParamSpace> for ParamList {
+    fn from(space: ParamSpace) -> Self {
+        ParamList {
+            params: space.params,
+        }
+    }
 }
 
 impl ParamSpace {
@@ -160,6 +206,7 @@ impl ParamSpace {
                 reason: "duplicate parameter name".into(),
             });
         }
+        self.log_span.push(param.log_span());
         self.params.push(param);
         Ok(())
     }
@@ -226,28 +273,47 @@ impl ParamSpace {
     /// Unit coordinates to physical values. Rejects NaN and wrong lengths.
     pub fn from_unit(&self, unit: &[f64]) -> Result<Vec<f64>> {
         self.check_len(unit.len())?;
-        self.params
+        // One branch-free scan first: searchers call this for every candidate.
+        let all_finite = unit.iter().fold(true, |ok, u| ok & u.is_finite());
+        if let Some((p, u)) = (!all_finite)
+            .then(|| self.params.iter().zip(unit).find(|(_, u)| !u.is_finite()))
+            .flatten()
+        {
+            return Err(Error::InvalidParam {
+                name: p.name.clone(),
+                reason: format!("unit coordinate {u} is not finite"),
+            });
+        }
+        Ok(self
+            .params
             .iter()
+            .zip(&self.log_span)
             .zip(unit)
-            .map(|(p, &u)| {
-                if u.is_finite() {
-                    Ok(p.from_unit(u))
-                } else {
-                    Err(Error::InvalidParam {
-                        name: p.name.clone(),
-                        reason: format!("unit coordinate {u} is not finite"),
-                    })
-                }
-            })
-            .collect()
+            .map(|((p, &span), &u)| p.physical_at(u, span))
+            .collect())
     }
 
     /// `d physical / d unit` per coordinate (the Jacobian of [`Self::from_unit`] is diagonal).
     pub fn dphys_dunit(&self, unit: &[f64]) -> Vec<f64> {
         self.params
             .iter()
+            .zip(&self.log_span)
             .zip(unit)
-            .map(|(p, &u)| p.dphys_dunit(u))
+            .map(|((p, &span), &u)| p.dphys_dunit_at(u, span))
+            .collect()
+    }
+
+    /// [`Self::dphys_dunit`] from the physical values `from_unit` gave for those unit
+    /// coordinates, without taking the exponentials again (bit-identical to it).
+    pub fn dphys_dunit_at_physical(&self, physical: &[f64]) -> Vec<f64> {
+        self.params
+            .iter()
+            .zip(&self.log_span)
+            .zip(physical)
+            .map(|((p, &span), &x)| match p.scale {
+                Scale::Linear => p.upper - p.lower,
+                Scale::Log => x * span,
+            })
             .collect()
     }
 
@@ -263,5 +329,64 @@ impl ParamSpace {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn space() -> ParamSpace {
+        ParamSpace::new()
+            .with("alpha", 0.01, 3.0, 0.1, Scale::Log)
+            .unwrap()
+            .with("h", -2.0, 5.0, 1.0, Scale::Linear)
+            .unwrap()
+    }
+
+    #[test]
+    fn the_space_maps_as_each_parameter_does_bit_for_bit() {
+        let s = space();
+        for i in 0..=64 {
+            let u = [i as f64 / 64.0, 1.0 - i as f64 / 64.0];
+            let x = s.from_unit(&u).unwrap();
+            let d = s.dphys_dunit(&u);
+            let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&d), bits(&s.dphys_dunit_at_physical(&x)));
+            for k in 0..2 {
+                let p = &s.params()[k];
+                assert_eq!(x[k].to_bits(), p.from_unit(u[k]).to_bits());
+                assert_eq!(d[k].to_bits(), p.dphys_dunit(u[k]).to_bits());
+            }
+        }
+    }
+
+    #[test]
+    fn a_space_read_from_json_is_checked_and_keeps_its_spans() {
+        let s = space();
+        let json = serde_json::to_string(&s).unwrap();
+        assert!(json.starts_with(r#"{"params":[{"name":"alpha""#), "{json}");
+        let back: ParamSpace = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, s);
+        assert_eq!(
+            back.from_unit(&[0.3, 0.3]).unwrap(),
+            s.from_unit(&[0.3, 0.3]).unwrap()
+        );
+
+        let inverted = json.replace(r#""lower":0.01,"upper":3.0"#, r#""lower":3.0,"upper":0.01"#);
+        assert_ne!(inverted, json);
+        let err = serde_json::from_str::<ParamSpace>(&inverted)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("alpha") && err.contains("inverted bounds"),
+            "{err}"
+        );
+
+        let duplicate = json.replace(r#""name":"h""#, r#""name":"alpha""#);
+        let err = serde_json::from_str::<ParamSpace>(&duplicate)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("duplicate parameter name"), "{err}");
     }
 }

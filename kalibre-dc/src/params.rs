@@ -113,13 +113,28 @@ impl ParamLayout {
         self.mode
     }
 
+    /// The indices of the alpha parameters: they come first, before the effects'.
+    pub fn alpha_params(&self) -> std::ops::Range<usize> {
+        0..self
+            .effect_ranges
+            .first()
+            .map_or(self.space.dim(), |r| r.start)
+    }
+
     /// Alpha (cfm/W) of every server, in hall order.
     pub fn alpha_per_server(&self, params: &[f64]) -> Vec<f64> {
+        self.alpha_per_server_iter(params).collect()
+    }
+
+    /// [`Self::alpha_per_server`] without the vector, for loops that read it once.
+    pub fn alpha_per_server_iter<'a>(
+        &'a self,
+        params: &'a [f64],
+    ) -> impl Iterator<Item = f64> + 'a {
         self.alpha_index
             .iter()
             .zip(&self.alpha_fixed)
-            .map(|(i, fixed)| i.map_or(*fixed, |i| params[i]))
-            .collect()
+            .map(move |(i, fixed)| i.map_or(*fixed, |i| params[i]))
     }
 
     /// Index of each server's alpha in the parameter vector (`None` when fixed).

@@ -388,6 +388,28 @@ fn bad_training_data_is_a_clear_error() {
         .with_decay(0.0, 10)
         .check()
         .is_err());
+
+    // Bad inputs to a prediction: the error names them, and `predict` gives NaN.
+    let mut p = g.layout().space().initial();
+    let last_alpha = g.layout().alpha_params().end - 1;
+    assert_eq!(g.layout().alpha_params(), 0..p.len());
+    p[last_alpha] = -0.1;
+    let err = g.hidden(&scen[0], &p).unwrap_err().to_string();
+    assert!(err.contains("alpha must be positive, got -0.1"), "{err}");
+    assert!(g.predict(&scen[0], &p).iter().all(|t| t.is_nan()));
+    p[last_alpha] = f64::NAN;
+    let err = g.hidden(&scen[0], &p).unwrap_err().to_string();
+    assert!(
+        err.contains(&format!("parameter {last_alpha} is not finite")),
+        "{err}"
+    );
+    let mut hot = scen[0].clone();
+    hot.power_w[3] = f64::INFINITY;
+    let err = g
+        .hidden(&hot, &g.layout().space().initial())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("non-finite input value"), "{err}");
 }
 
 fn fd_check(
@@ -501,8 +523,10 @@ proptest! {
             let r = pen.rise_c(*a);
             prop_assume!((r - 5.0).abs() > 1e-3 && (r - 15.0).abs() > 1e-3);
         }
-        let (_, grad) = pen.value_and_gradient(&p);
+        let (value, grad) = pen.value_and_gradient(&p);
         fd_check(|x| pen.value_and_gradient(x).0, &p, &grad, 1e-5)?;
+        // The value-only path the searchers take is the same sum, bit for bit.
+        prop_assert_eq!(pen.value(&p).to_bits(), value.to_bits());
     }
 
     #[test]

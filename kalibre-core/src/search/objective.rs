@@ -9,6 +9,12 @@ use super::{Objective, OutputCorrection};
 pub trait Regularizer: Sync {
     /// Value and gradient with respect to physical parameters.
     fn value_and_gradient(&self, params: &[f64]) -> (f64, Vec<f64>);
+
+    /// The value alone, equal to `value_and_gradient(params).0`; override it when the
+    /// gradient costs much more (searchers ask for values far more often).
+    fn value(&self, params: &[f64]) -> f64 {
+        self.value_and_gradient(params).0
+    }
 }
 
 /// Mean squared error of the surrogate against every measured value of every snapshot,
@@ -115,7 +121,7 @@ where
         };
         let mut cost = self.data_mse_at(&params, &self.projections(x_unit));
         if let Some((reg, w)) = self.regularizer {
-            cost += w * reg.value_and_gradient(&params).0;
+            cost += w * reg.value(&params);
         }
         cost
     }
@@ -160,7 +166,7 @@ where
                 *acc += w * gi;
             }
         }
-        let scale = self.space.dphys_dunit(x_unit);
+        let scale = self.space.dphys_dunit_at_physical(&params);
         let grad_unit = grad_phys
             .iter()
             .zip(scale)

@@ -309,27 +309,29 @@ impl ThermalGraph {
                 self.layout.space().dim()
             )));
         }
-        let bad = |v: &f64| !v.is_finite();
-        if scenario
-            .setpoint_c
-            .iter()
-            .chain(&scenario.fan_speed)
-            .chain(&scenario.power_w)
-            .any(bad)
+        // Branch-free scans (they vectorise): this runs on every prediction.
+        let all_finite = |v: &[f64]| v.iter().fold(true, |ok, x| ok & x.is_finite());
+        if !(all_finite(&scenario.setpoint_c)
+            && all_finite(&scenario.fan_speed)
+            && all_finite(&scenario.power_w))
         {
             return Err(Error::Mismatch(format!(
                 "snapshot `{label}`: a non-finite input value"
             )));
         }
-        if let Some(i) = params.iter().position(|v| !v.is_finite()) {
+        if !all_finite(params) {
+            let i = params.iter().position(|v| !v.is_finite()).unwrap_or(0);
             return Err(Error::Mismatch(format!("parameter {i} is not finite")));
         }
-        if let Some(a) = self
-            .layout
-            .alpha_per_server(params)
-            .iter()
-            .find(|a| **a <= 0.0)
-        {
+        // Fixed alphas are positive by construction (log-scale bounds); the parameters
+        // may come from anywhere.
+        let alphas = &params[self.layout.alpha_params()];
+        if !alphas.iter().fold(true, |ok, a| ok & (*a > 0.0)) {
+            let a = alphas
+                .iter()
+                .find(|a| **a <= 0.0)
+                .copied()
+                .unwrap_or(f64::NAN);
             return Err(Error::Mismatch(format!("alpha must be positive, got {a}")));
         }
         Ok(())
@@ -398,8 +400,11 @@ impl ThermalGraph {
 
     /// `P_j / alpha_j` per server.
     pub(crate) fn heat_inputs(&self, s: &OperatingState, params: &[f64]) -> Vec<f64> {
-        let alpha = self.layout.alpha_per_server(params);
-        s.power_w.iter().zip(&alpha).map(|(p, a)| p / a).collect()
+        s.power_w
+            .iter()
+            .zip(self.layout.alpha_per_server_iter(params))
+            .map(|(p, a)| p / a)
+            .collect()
     }
 
     /// Raw term features, term-major.

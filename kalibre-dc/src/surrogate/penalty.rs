@@ -370,4 +370,17 @@ impl Regularizer for TemperatureRisePenalty {
         self.layout.accumulate_alpha_gradient(&g_alpha, &mut grad);
         (value, grad)
     }
+
+    /// The same sum as [`Self::value_and_gradient`], in the same order (bit-identical).
+    fn value(&self, params: &[f64]) -> f64 {
+        let mut value = 0.0;
+        for (a, &w) in self
+            .layout
+            .alpha_per_server_iter(params)
+            .zip(&self.server_weight)
+        {
+            value += w * self.violation(self.k / a).0;
+        }
+        value
+    }
 }
