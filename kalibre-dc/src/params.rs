@@ -44,6 +44,13 @@ impl ParamLayout {
                 ))
             })?;
             let bounds = hall.server_types[t].alpha_cfm_per_w;
+            // Predictions check only the calibrated alphas; the fixed ones are checked here.
+            if !(bounds.initial > 0.0 && bounds.initial.is_finite()) {
+                return Err(Error::Mismatch(format!(
+                    "server type `{}`: alpha_cfm_per_w.initial must be positive, got {}",
+                    hall.server_types[t].id, bounds.initial
+                )));
+            }
             alpha_fixed.push(bounds.initial);
             alpha_index.push(match mode {
                 AlphaMode::Fixed => None,

@@ -410,6 +410,20 @@ fn bad_training_data_is_a_clear_error() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("non-finite input value"), "{err}");
+    // A fixed alpha is checked when the layout is built (predictions check only the
+    // calibrated ones).
+    let mut unchecked = h.clone();
+    unchecked.server_types[0].alpha_cfm_per_w.initial = 0.0;
+    let err = ParamLayout::with_mode(&unchecked, AlphaMode::Fixed, &[])
+        .unwrap_err()
+        .to_string();
+    let id = &unchecked.server_types[0].id;
+    assert!(
+        err.contains(&format!(
+            "server type `{id}`: alpha_cfm_per_w.initial must be positive"
+        )),
+        "{err}"
+    );
 }
 
 fn fd_check(

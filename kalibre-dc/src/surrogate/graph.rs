@@ -323,8 +323,7 @@ impl ThermalGraph {
             let i = params.iter().position(|v| !v.is_finite()).unwrap_or(0);
             return Err(Error::Mismatch(format!("parameter {i} is not finite")));
         }
-        // Fixed alphas are positive by construction (log-scale bounds); the parameters
-        // may come from anywhere.
+        // The layout checked the fixed alphas; the parameters may come from anywhere.
         let alphas = &params[self.layout.alpha_params()];
         if !alphas.iter().fold(true, |ok, a| ok & (*a > 0.0)) {
             let a = alphas
