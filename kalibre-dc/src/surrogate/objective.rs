@@ -20,7 +20,7 @@ use kalibre_core::search::Objective;
 use kalibre_core::Observations;
 
 use super::graph::ThermalGraph;
-use super::penalty::TemperatureRisePenalty;
+use super::penalty::{relu_outside, TemperatureRisePenalty};
 use crate::snapshots::OperatingState;
 use crate::{Error, Result};
 
@@ -353,12 +353,9 @@ impl<'a> ThermalGraphObjective<'a> {
             let with_grad = grad.is_some();
             for (sl, &iv) in inv.iter().enumerate() {
                 // Branch-free ReLUs so the loop vectorises.
-                let rise = pen.k * iv;
-                let below = (pen.lower - rise).max(0.0);
-                let above = (rise - pen.upper).max(0.0);
-                value += pen.slot_weight[sl] * (below + above);
+                let (v, dv) = relu_outside(pen.lower, pen.upper, pen.k * iv);
+                value += pen.slot_weight[sl] * v;
                 if with_grad {
-                    let dv = f64::from(u8::from(above > 0.0)) - f64::from(u8::from(below > 0.0));
                     g_inv[sl] += pen.weight * pen.slot_weight[sl] * dv * pen.k;
                 }
             }

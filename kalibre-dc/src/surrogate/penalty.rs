@@ -278,14 +278,7 @@ impl TemperatureRisePenalty {
 
     /// ReLU violation and its derivative with respect to the rise.
     pub(crate) fn violation(&self, rise: f64) -> (f64, f64) {
-        let (lo, hi) = (self.settings.lower_c, self.settings.upper_c);
-        if rise < lo {
-            (lo - rise, -1.0)
-        } else if rise > hi {
-            (rise - hi, 1.0)
-        } else {
-            (0.0, 0.0)
-        }
+        relu_outside(self.settings.lower_c, self.settings.upper_c, rise)
     }
 
     /// `K` in `dT = K / alpha`.
@@ -354,6 +347,18 @@ impl TemperatureRisePenalty {
     }
 }
 
+/// `(lo - x)+ + (x - hi)+` and its slope in `x`, for `lo < hi`.
+///
+/// Branch-free, since searchers' alphas land on both sides of the range at random: at most
+/// one ReLU is non-zero and adding `+0.0` to it is exact, so this equals the `if` / `else`
+/// form bit for bit (a NaN gives 0).
+pub(super) fn relu_outside(lo: f64, hi: f64, x: f64) -> (f64, f64) {
+    let below = (lo - x).max(0.0);
+    let above = (x - hi).max(0.0);
+    let slope = f64::from(u8::from(above > 0.0)) - f64::from(u8::from(below > 0.0));
+    (below + above, slope)
+}
+
 impl Regularizer for TemperatureRisePenalty {
     /// The unweighted penalty and its gradient with respect to the parameters:
     /// `dR/dalpha_j = w_j * relu'(...) * (-K / alpha_j^2)`.
@@ -382,5 +387,48 @@ impl Regularizer for TemperatureRisePenalty {
             value += w * self.violation(self.k / a).0;
         }
         value
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::relu_outside;
+
+    /// The branching form it replaced.
+    fn reference(lo: f64, hi: f64, x: f64) -> (f64, f64) {
+        if x < lo {
+            (lo - x, -1.0)
+        } else if x > hi {
+            (x - hi, 1.0)
+        } else {
+            (0.0, 0.0)
+        }
+    }
+
+    #[test]
+    fn the_branch_free_relus_equal_the_branching_form_bit_for_bit() {
+        let (lo, hi) = (5.0, 20.0);
+        let mut xs = vec![
+            lo,
+            hi,
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+            lo - 1e-15,
+            hi + 1e-14,
+        ];
+        xs.extend((0..2000).map(|i| 1.757 / (0.01 + 0.0015 * i as f64)));
+        for x in xs {
+            let (v, d) = relu_outside(lo, hi, x);
+            let (rv, rd) = reference(lo, hi, x);
+            assert_eq!(
+                (v.to_bits(), d.to_bits()),
+                (rv.to_bits(), rd.to_bits()),
+                "x = {x}"
+            );
+        }
     }
 }
