@@ -383,8 +383,10 @@ impl<'a> ThermalGraphObjective<'a> {
                         term.features_vjp(&snap.scenario, &phys, &ct, &mut g_phys);
                     }
                 }
-                for (i, gp) in g_phys.iter().enumerate() {
-                    g[i] += gp * space.params()[i].dphys_dunit(u[i]);
+                // From the mapped values: no logarithm or exponential per parameter again.
+                let dphys = space.dphys_dunit_at_physical(&phys);
+                for ((gi, gp), d) in g.iter_mut().zip(&g_phys).zip(&dphys) {
+                    *gi += gp * d;
                 }
             }
         }
