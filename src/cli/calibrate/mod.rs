@@ -1,28 +1,30 @@
 //! `kalibre calibrate`: the four-step loop on a hall, with the built-in simulator,
 //! OpenFOAM or any external command as the model.
 
-use std::io::IsTerminal;
+mod hall_command;
+mod progress;
+mod summary;
+
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kalibre_core::calibrate::Report;
-use kalibre_core::external::{CommandModelConfig, ExternalCommand, NamedScenario};
+use kalibre_core::external::CommandModelConfig;
 use kalibre_core::search::{Adam, DifferentialEvolution, Hybrid};
-use kalibre_core::{Event, Model, ModelError, Observe, Outputs};
+use kalibre_core::Observe;
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
-use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::openfoam::{OpenFoamError, OpenFoamModel, OpenFoamSettings};
-use kalibre_dc::snapshots::{self, HallSnapshot, OperatingState};
+use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
-use kalibre_dc::ParamLayout;
 
 use super::simulate::sim_config;
 use super::{io_err, with_threads, CliError, CliResult};
+use hall_command::HallCommand;
+use progress::Progress;
+use summary::print_summary;
 
 /// How alpha is calibrated (overrides `calibrate.alpha` in hall.json).
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -256,55 +258,6 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
     Ok(s)
 }
 
-/// Progress bars driven by calibration events; hidden when stderr is not a terminal.
-struct Progress {
-    runs: ProgressBar,
-    best_mae: Mutex<Option<f64>>,
-}
-
-impl Progress {
-    fn new(total_runs: u64, quiet: bool) -> Self {
-        let target = if quiet || !std::io::stderr().is_terminal() {
-            ProgressDrawTarget::hidden()
-        } else {
-            ProgressDrawTarget::stderr()
-        };
-        let runs = ProgressBar::with_draw_target(Some(total_runs), target);
-        runs.set_style(
-            ProgressStyle::with_template(
-                "{spinner} model runs {pos}/{len} [{bar:30}] {elapsed_precise} {msg}",
-            )
-            .expect("static template")
-            .progress_chars("=> "),
-        );
-        Progress {
-            runs,
-            best_mae: Mutex::new(None),
-        }
-    }
-}
-
-impl Observe for Progress {
-    fn observe(&self, event: &Event<'_>) {
-        match event {
-            Event::RunFinished { .. } => self.runs.inc(1),
-            Event::IterationDone { record } => {
-                let mut best = self.best_mae.lock().unwrap_or_else(|p| p.into_inner());
-                if let Some(m) = record.mae_c.filter(|m| m.is_finite()) {
-                    *best = Some(best.map_or(m, |b: f64| b.min(m)));
-                }
-                self.runs.set_message(format!(
-                    "iteration {} | best MAE {}",
-                    record.iteration,
-                    best.map_or("-".into(), |b| format!("{b:.3} C"))
-                ));
-            }
-            Event::Stopped { .. } => self.runs.finish_and_clear(),
-            _ => {}
-        }
-    }
-}
-
 /// Refuses model options that do not belong to the chosen model.
 fn check_model_flags(args: &CalibrateArgs) -> CliResult {
     let of_flags = [
@@ -427,77 +380,6 @@ fn calibrate_with_model<'o>(
     }
 }
 
-/// An external command as a hall's model: each snapshot becomes the template variables
-/// `setpoint_c/<crac>`, `fan_speed/<crac>` and `power_w/<server>`.
-struct HallCommand {
-    command: ExternalCommand<NamedScenario>,
-    layout: ParamLayout,
-    crac_ids: Vec<String>,
-    server_ids: Vec<String>,
-}
-
-impl HallCommand {
-    fn new(hall: &Hall, config: CommandModelConfig, path: &Path) -> CliResult<Self> {
-        let bad = |what: String| CliError::Input(format!("{}: {what}", path.display()));
-        let effects = EffectRegistry::builtin().build_all(hall)?;
-        let layout = ParamLayout::new(hall, &effects)?;
-        let want = layout.space().names();
-        let got = config.space.names();
-        if want != got {
-            return Err(bad(format!(
-                "params must be the hall's calibrated parameters in order: [{}], got [{}]",
-                want.join(", "),
-                got.join(", ")
-            )));
-        }
-        let sensors: Vec<String> = hall.sensors.iter().map(|s| s.id.clone()).collect();
-        if config.command.output_names() != sensors.as_slice() {
-            return Err(bad(format!(
-                "output.names must be the hall's sensors in order: [{}]",
-                sensors.join(", ")
-            )));
-        }
-        if !config.scenarios.is_empty() {
-            return Err(bad(
-                "[[scenarios]] are not used with a hall: the snapshots come from --snapshots"
-                    .into(),
-            ));
-        }
-        let model = HallCommand {
-            command: config.command,
-            layout,
-            crac_ids: hall.cracs.iter().map(|c| c.id.clone()).collect(),
-            server_ids: hall.servers().map(|s| s.server.id.clone()).collect(),
-        };
-        Ok(model)
-    }
-
-    fn scenario(&self, state: &OperatingState) -> NamedScenario {
-        let mut s = NamedScenario::new(state.label.clone());
-        for (i, id) in self.crac_ids.iter().enumerate() {
-            s = s
-                .with(format!("setpoint_c/{id}"), state.setpoint_c[i])
-                .with(format!("fan_speed/{id}"), state.fan_speed[i]);
-        }
-        for (id, p) in self.server_ids.iter().zip(&state.power_w) {
-            s = s.with(format!("power_w/{id}"), *p);
-        }
-        s
-    }
-}
-
-impl Model for HallCommand {
-    type Scenario = OperatingState;
-
-    fn fingerprint(&self) -> String {
-        self.command.fingerprint()
-    }
-
-    fn evaluate(&self, state: &OperatingState, params: &[f64]) -> Result<Outputs, ModelError> {
-        self.command.evaluate(&self.scenario(state), params)
-    }
-}
-
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     let settings = settings(&args)?;
@@ -552,103 +434,4 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         html_path.display()
     );
     Ok(())
-}
-
-fn fmt_c(v: Option<f64>) -> String {
-    v.filter(|v| v.is_finite())
-        .map_or("-".into(), |v| format!("{v:.3} C"))
-}
-
-/// Which parameters the measurements pin down (the report's linearised uncertainty).
-fn print_uncertainty(report: &Report) {
-    let u = &report.uncertainty;
-    if u.is_empty() {
-        return;
-    }
-    let poor: Vec<String> = u
-        .iter()
-        .filter(|p| !p.identified)
-        .map(|p| match (p.rel_std, p.rel_shift()) {
-            (Some(r), Some(d)) if !p.settled() => format!(
-                "{} (+/-{:.0}%, not settled: the data point {:+.0}% away)",
-                p.name,
-                100.0 * r,
-                100.0 * d
-            ),
-            (Some(r), _) => format!("{} (+/-{:.0}%)", p.name, 100.0 * r),
-            (None, _) => format!("{} (free)", p.name),
-        })
-        .collect();
-    println!(
-        "  {:<28} {} of {} (one standard deviation within {:.0}%, and the data point within {:.0} of them)",
-        "parameters identified",
-        u.len() - poor.len(),
-        u.len(),
-        100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD,
-        kalibre_core::calibrate::CONVERGED_SHIFT_STDS
-    );
-    if !poor.is_empty() {
-        const SHOWN: usize = 8;
-        let more = poor.len().saturating_sub(SHOWN);
-        println!(
-            "  {:<28} {}{}",
-            "poorly identified",
-            poor[..poor.len().min(SHOWN)].join(", "),
-            if more > 0 {
-                format!(" and {more} more")
-            } else {
-                String::new()
-            }
-        );
-    }
-}
-
-/// The end-of-run summary table.
-fn print_summary(report: &Report, wall_s: f64, penalty: &kalibre_dc::surrogate::PenaltyReport) {
-    println!();
-    println!("calibration summary");
-    println!("  {:<28} {}", "initial MAE", fmt_c(report.initial.mae_c));
-    println!(
-        "  {:<28} {} (iteration {})",
-        "best MAE",
-        fmt_c(Some(report.best.mae_c)),
-        report.best.iteration
-    );
-    println!("  {:<28} {}", "best RMSE", fmt_c(Some(report.best.rmse_c)));
-    println!(
-        "  {:<28} {}",
-        "best max abs error",
-        fmt_c(Some(report.best.max_abs_c))
-    );
-    if let Some(rec) = report
-        .history
-        .iter()
-        .find(|h| h.iteration == report.best.iteration)
-    {
-        for (group, e) in &rec.per_group {
-            println!(
-                "  {:<28} {}",
-                format!("best MAE, {group} aisle"),
-                fmt_c(Some(e.mae_c))
-            );
-        }
-    }
-    println!(
-        "  {:<28} {} ({} new, {} from the journal, {} failed)",
-        "model runs", report.runs.total, report.runs.new, report.runs.cached, report.runs.failed
-    );
-    println!("  {:<28} {:?}", "stopped", report.stop_reason);
-    print_uncertainty(report);
-    println!("  {:<28} {wall_s:.1} s", "wall time");
-    if !penalty.violations.is_empty() {
-        println!(
-            "  note: the temperature-rise prior binds at the best parameters for {} server(s): \
-             a prior-data conflict; check --rise-range",
-            penalty.violations.len()
-        );
-    }
-    println!("  best parameters:");
-    for (name, value) in &report.best.params.0 {
-        println!("    {name:<30} {value:.5}");
-    }
 }

@@ -1,0 +1,107 @@
+//! The end-of-run summary of `kalibre calibrate`: errors, runs, stop reason, which
+//! parameters the data identify, and the best parameters.
+
+use kalibre_core::calibrate::Report;
+
+fn fmt_c(v: Option<f64>) -> String {
+    v.filter(|v| v.is_finite())
+        .map_or("-".into(), |v| format!("{v:.3} C"))
+}
+
+/// Which parameters the measurements pin down (the report's linearised uncertainty).
+fn print_uncertainty(report: &Report) {
+    let u = &report.uncertainty;
+    if u.is_empty() {
+        return;
+    }
+    let poor: Vec<String> = u
+        .iter()
+        .filter(|p| !p.identified)
+        .map(|p| match (p.rel_std, p.rel_shift()) {
+            (Some(r), Some(d)) if !p.settled() => format!(
+                "{} (+/-{:.0}%, not settled: the data point {:+.0}% away)",
+                p.name,
+                100.0 * r,
+                100.0 * d
+            ),
+            (Some(r), _) => format!("{} (+/-{:.0}%)", p.name, 100.0 * r),
+            (None, _) => format!("{} (free)", p.name),
+        })
+        .collect();
+    println!(
+        "  {:<28} {} of {} (one standard deviation within {:.0}%, and the data point within {:.0} of them)",
+        "parameters identified",
+        u.len() - poor.len(),
+        u.len(),
+        100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD,
+        kalibre_core::calibrate::CONVERGED_SHIFT_STDS
+    );
+    if !poor.is_empty() {
+        const SHOWN: usize = 8;
+        let more = poor.len().saturating_sub(SHOWN);
+        println!(
+            "  {:<28} {}{}",
+            "poorly identified",
+            poor[..poor.len().min(SHOWN)].join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        );
+    }
+}
+
+/// The end-of-run summary table.
+pub(super) fn print_summary(
+    report: &Report,
+    wall_s: f64,
+    penalty: &kalibre_dc::surrogate::PenaltyReport,
+) {
+    println!();
+    println!("calibration summary");
+    println!("  {:<28} {}", "initial MAE", fmt_c(report.initial.mae_c));
+    println!(
+        "  {:<28} {} (iteration {})",
+        "best MAE",
+        fmt_c(Some(report.best.mae_c)),
+        report.best.iteration
+    );
+    println!("  {:<28} {}", "best RMSE", fmt_c(Some(report.best.rmse_c)));
+    println!(
+        "  {:<28} {}",
+        "best max abs error",
+        fmt_c(Some(report.best.max_abs_c))
+    );
+    if let Some(rec) = report
+        .history
+        .iter()
+        .find(|h| h.iteration == report.best.iteration)
+    {
+        for (group, e) in &rec.per_group {
+            println!(
+                "  {:<28} {}",
+                format!("best MAE, {group} aisle"),
+                fmt_c(Some(e.mae_c))
+            );
+        }
+    }
+    println!(
+        "  {:<28} {} ({} new, {} from the journal, {} failed)",
+        "model runs", report.runs.total, report.runs.new, report.runs.cached, report.runs.failed
+    );
+    println!("  {:<28} {:?}", "stopped", report.stop_reason);
+    print_uncertainty(report);
+    println!("  {:<28} {wall_s:.1} s", "wall time");
+    if !penalty.violations.is_empty() {
+        println!(
+            "  note: the temperature-rise prior binds at the best parameters for {} server(s): \
+             a prior-data conflict; check --rise-range",
+            penalty.violations.len()
+        );
+    }
+    println!("  best parameters:");
+    for (name, value) in &report.best.params.0 {
+        println!("    {name:<30} {value:.5}");
+    }
+}
