@@ -8,8 +8,9 @@
 //! ```
 //!
 //! The measurements are `kalibre synth --preset P --seed 1` (3 snapshots, noise 0.2 C),
-//! per-type alpha; calibration seeds 1..=N. Prints one line per variant and hall and
-//! writes JSON.
+//! per-type alpha; calibration seeds 1..=N. Prints, per variant and hall, the MAE line
+//! and how many server types' alphas are within 10% of the truth (per seed, and per type
+//! the seeds that have it within 10%), and writes JSON.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -172,13 +173,27 @@ fn main() {
             let base = variant(v).expect("checked above");
             let t = Instant::now();
             let mut per_seed = Vec::new();
+            // Per seed: the server types whose alpha is within 10% of the truth.
+            let mut alpha_within = Vec::new();
+            let mut type_hits = vec![0usize; s.truth.alpha_type_cfm_per_w.len()];
             for seed in 1..=seeds {
                 let mut st = base.clone();
                 st.core.seed = seed;
                 let cal = calibrate_hall(&s.hall, &s.snapshots, &st, None, Vec::new())
                     .unwrap_or_else(|e| fail(format!("{name}, {v}, seed {seed}: {e}")));
                 per_seed.push(cal.report.best.mae_c);
+                let mut within = 0;
+                for ((ty, truth), hits) in s.truth.alpha_type_cfm_per_w.iter().zip(&mut type_hits) {
+                    let found = cal.report.best.params.get(&format!("alpha/{ty}"));
+                    if found.is_some_and(|a| ((a - truth) / truth).abs() <= 0.1) {
+                        within += 1;
+                        *hits += 1;
+                    }
+                }
+                alpha_within.push(within);
             }
+            let n_types = type_hits.len();
+            let alpha_mean = alpha_within.iter().sum::<usize>() as f64 / alpha_within.len() as f64;
             let mean = per_seed.iter().sum::<f64>() / per_seed.len() as f64;
             let within = per_seed.iter().filter(|&&m| m <= truth + 0.1).count();
             let wall_s = t.elapsed().as_secs_f64();
@@ -191,10 +206,34 @@ fn main() {
                     .collect::<Vec<_>>()
                     .join(" ")
             );
+            println!(
+                "        alpha within 10%: mean {alpha_mean:.1}/{n_types} [{}]; seeds per type: {}",
+                alpha_within
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join(" "),
+                s.truth
+                    .alpha_type_cfm_per_w
+                    .keys()
+                    .zip(&type_hits)
+                    .map(|(ty, h)| format!("{ty} {h}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            let per_type: serde_json::Map<String, serde_json::Value> = s
+                .truth
+                .alpha_type_cfm_per_w
+                .keys()
+                .zip(&type_hits)
+                .map(|(ty, h)| (ty.clone(), json!(h)))
+                .collect();
             results.push(json!({
                 "preset": name, "variant": v, "seeds": seeds, "mean_best_mae_c": mean,
                 "best_mae_c": per_seed, "model_at_truth_mae_c": truth,
                 "seeds_within_0.1_of_truth": within, "wall_s": wall_s,
+                "alpha_types_within_10pct": alpha_within, "mean_alpha_types_within_10pct": alpha_mean,
+                "seeds_within_10pct_per_type": per_type,
             }));
         }
     }
