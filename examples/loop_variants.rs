@@ -56,10 +56,6 @@ const VARIANTS: &[(&str, &str)] = &[
     ("focus-2", "fit focus 2 instead of 1"),
     ("geometry-step-0.01", "geometry step 0.01 instead of 0.03"),
     (
-        "geometry-toward-data",
-        "geometry steps along the direction the measurements pull hardest instead of the least explored one",
-    ),
-    (
         "augment-sigma-0.1",
         "design augmentation noise 0.1 instead of 0.05",
     ),
@@ -103,7 +99,6 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         "focus-0.5" => s.core.focus = Some(0.5),
         "focus-2" => s.core.focus = Some(2.0),
         "geometry-step-0.01" => s.core.stall_step = Some(0.01),
-        "geometry-toward-data" => s.core.stall_toward_data = true,
         "augment-sigma-0.1" => s.core.augment_sigma = 0.1,
         "prior-design" => s.design_within_prior = true,
         "trainable-adjacency" => s.surrogate.trainable_adjacency = true,

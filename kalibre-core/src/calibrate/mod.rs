@@ -495,33 +495,13 @@ where
                 let stalled = outcome.best_cost > anchor_cost - STALL_GAIN * anchor_cost.abs()
                     || near(&state.ok_units, &unit);
                 if stalled {
-                    let seed = derive_seed(st.seed, iteration, Stream::Geometry);
-                    let near_rms = 3.0 * crate::search::CORRECTION_LENGTH_UNIT;
-                    let toward_data = st
-                        .stall_toward_data
-                        .then(|| {
-                            let basis =
-                                geometry::explored_basis(&best.unit, &state.ok_units, near_rms);
-                            geometry::toward_data_step(
-                                &best.unit,
-                                &uncertainty::best_residual(obs, best),
-                                |u| {
-                                    uncertainty::measured_predictions(
-                                        &self.surrogate,
-                                        obs,
-                                        space,
-                                        u,
-                                    )
-                                },
-                                |e| geometry::uncovered_part(&basis, e),
-                                h,
-                                seed,
-                            )
-                        })
-                        .flatten();
-                    let moved = toward_data.unwrap_or_else(|| {
-                        geometry::least_covered_step(&best.unit, &state.ok_units, near_rms, h, seed)
-                    });
+                    let moved = geometry::least_covered_step(
+                        &best.unit,
+                        &state.ok_units,
+                        3.0 * crate::search::CORRECTION_LENGTH_UNIT,
+                        h,
+                        derive_seed(st.seed, iteration, Stream::Geometry),
+                    );
                     self.move_proposal(iteration, &mut unit, moved);
                     perturbed = true;
                     geometry_step = true;

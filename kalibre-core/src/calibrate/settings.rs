@@ -23,7 +23,6 @@ use crate::{Error, Result};
 /// | `output_correction` | false | search the surrogate plus, per snapshot and output, the model's outputs minus the surrogate's at the best run (the corrected surrogate matches the model there) | bool |
 /// | `linear_correction` | false | with `output_correction`: add a linear term in the unit box fitted to the model-minus-surrogate discrepancy at the other runs (weighted by distance, minimum norm), so the search also follows the model's slopes along explored directions | bool |
 /// | `stall_step` | none | with `linear_correction`: when the search's proposal promises less than 10% below the best run's loss (or repeats a run), run instead at the best point moved by this much (max norm, unit box) along the direction the runs near it covered least, so the next correction learns the model's slope there | finite, (0, 1] |
-/// | `stall_toward_data` | false | with `stall_step`: take the step along the direction (an axis, or for more than 256 parameters one of 32 seeded random directions) where the fitted surrogate's slopes at the best run say the measurements pull hardest (the largest linearised drop in squared error), the way that lowers it; the least explored direction when no direction lowers it | bool |
 /// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, > 0 |
@@ -66,11 +65,6 @@ pub struct Settings {
     /// Missing in older reports: none.
     #[serde(default)]
     pub stall_step: Option<f64>,
-    /// With `stall_step`: step along the direction where the fitted surrogate's slopes say
-    /// the measurements pull hardest, instead of the least explored one. Missing in older
-    /// reports: false.
-    #[serde(default)]
-    pub stall_toward_data: bool,
     /// Initial trust-region radius (unit box); none searches the whole box.
     pub trust_region: Option<f64>,
     /// Levenberg-Marquardt steps on the model after the loop (0: none). Missing in older
@@ -98,7 +92,6 @@ impl Default for Settings {
             output_correction: false,
             linear_correction: false,
             stall_step: None,
-            stall_toward_data: false,
             trust_region: None,
             polish_iterations: 0,
         }
@@ -160,12 +153,6 @@ impl Settings {
                     "needs linear_correction (the step feeds the linear term)".into(),
                 ));
             }
-        }
-        if self.stall_toward_data && self.stall_step.is_none() {
-            return Err(bad(
-                "stall_toward_data",
-                "needs stall_step (it chooses that step's direction)".into(),
-            ));
         }
         if self.augment_copies == 0 {
             return Err(bad(

@@ -83,41 +83,6 @@ impl ParamUncertainty {
     }
 }
 
-/// The surrogate's predictions at `unit` of every measured output of every snapshot, in
-/// the order of [`best_residual`]; none when the point does not map or an output is
-/// missing.
-pub(crate) fn measured_predictions<Su: Surrogate>(
-    surrogate: &Su,
-    obs: &Observations<Su::Scenario>,
-    space: &ParamSpace,
-    unit: &[f64],
-) -> Option<Vec<f64>> {
-    let params = space.from_unit(unit).ok()?;
-    let mut out = Vec::new();
-    for snap in obs.snapshots() {
-        let pred = surrogate.predict(&snap.scenario, &params);
-        for (o, m) in snap.measured.iter().enumerate() {
-            if m.is_some() {
-                out.push(*pred.get(o)?);
-            }
-        }
-    }
-    Some(out)
-}
-
-/// Model minus measurement at the best run, over every measured output of every snapshot.
-pub(crate) fn best_residual<Sc>(obs: &Observations<Sc>, best: &BestPoint) -> Vec<f64> {
-    let mut residual = Vec::new();
-    for (snap, outputs) in obs.snapshots().iter().zip(&best.outputs) {
-        for (m, y) in snap.measured.iter().zip(outputs) {
-            if let Some(m) = m {
-                residual.push(y - m);
-            }
-        }
-    }
-    residual
-}
-
 /// The uncertainty of every parameter at `best`; empty when the Jacobian is not finite.
 pub(crate) fn estimate<Su: Surrogate>(
     surrogate: &Su,
@@ -126,8 +91,27 @@ pub(crate) fn estimate<Su: Surrogate>(
     best: &BestPoint,
 ) -> Vec<ParamUncertainty> {
     let d = space.dim();
-    let predict = |unit: &[f64]| measured_predictions(surrogate, obs, space, unit);
-    let residual = best_residual(obs, best);
+    let predict = |unit: &[f64]| -> Option<Vec<f64>> {
+        let params = space.from_unit(unit).ok()?;
+        let mut out = Vec::new();
+        for snap in obs.snapshots() {
+            let pred = surrogate.predict(&snap.scenario, &params);
+            for (o, m) in snap.measured.iter().enumerate() {
+                if m.is_some() {
+                    out.push(*pred.get(o)?);
+                }
+            }
+        }
+        Some(out)
+    };
+    let mut residual = Vec::new();
+    for (snap, outputs) in obs.snapshots().iter().zip(&best.outputs) {
+        for (m, y) in snap.measured.iter().zip(outputs) {
+            if let Some(m) = m {
+                residual.push(y - m);
+            }
+        }
+    }
     let m = residual.len();
     // Columns of J, one per parameter.
     let mut jac: Vec<Vec<f64>> = Vec::with_capacity(d);
