@@ -1,0 +1,159 @@
+//! The [`Calibrator`]'s builder: the constructor, the `with_*` setters and the accessors.
+
+use super::{Calibrator, Settings};
+use crate::observe::Observe;
+use crate::{
+    ErrorMetrics, Model, Observations, ParamSpace, Regularizer, RunStore, Searcher, Surrogate,
+    Validator,
+};
+
+impl<'a, M, Su> Calibrator<'a, M, Su, ErrorMetrics>
+where
+    M: Model,
+    M::Scenario: Clone,
+    Su: Surrogate<Scenario = M::Scenario> + Sync,
+{
+    /// A calibrator with default settings, the paper's hybrid searcher
+    /// (differential evolution, then Adam), [`ErrorMetrics`] and an in-memory journal.
+    pub fn new(
+        model: &'a M,
+        surrogate: Su,
+        observations: &'a Observations<M::Scenario>,
+        space: &'a ParamSpace,
+    ) -> Self {
+        Calibrator {
+            model,
+            surrogate,
+            observations,
+            space,
+            searcher: Box::new(crate::search::Hybrid::default()),
+            validator: ErrorMetrics,
+            regularizer: None,
+            store: None,
+            observers: Vec::new(),
+            settings: Settings::default(),
+            design_bounds: None,
+        }
+    }
+}
+
+impl<'a, M, Su, V> Calibrator<'a, M, Su, V>
+where
+    M: Model,
+    M::Scenario: Clone,
+    Su: Surrogate<Scenario = M::Scenario> + Sync,
+    V: Validator,
+{
+    /// Replaces every setting at once.
+    pub fn with_settings(mut self, settings: Settings) -> Self {
+        self.settings = settings;
+        self
+    }
+
+    /// The calibration seed.
+    pub fn with_seed(mut self, seed: u64) -> Self {
+        self.settings.seed = seed;
+        self
+    }
+
+    /// Four-step iterations after the initial design.
+    pub fn with_max_iterations(mut self, n: usize) -> Self {
+        self.settings.max_iterations = n;
+        self
+    }
+
+    /// Stop once the best score (by default the MAE) is at most `target`.
+    pub fn with_target_score(mut self, target: f64) -> Self {
+        self.settings.target_score = Some(target);
+        self
+    }
+
+    /// Budget of model runs, initial design included.
+    pub fn with_max_model_runs(mut self, n: usize) -> Self {
+        self.settings.max_model_runs = Some(n);
+        self
+    }
+
+    /// Budget of wall-clock time, seconds.
+    pub fn with_max_wall_s(mut self, seconds: f64) -> Self {
+        self.settings.max_wall_s = Some(seconds);
+        self
+    }
+
+    /// At most this many model runs at once (a dedicated rayon pool).
+    pub fn with_max_parallel_runs(mut self, n: usize) -> Self {
+        self.settings.max_parallel_runs = Some(n);
+        self
+    }
+
+    /// First-fit augmentation: samples per design run and noise sigma (unit box).
+    pub fn with_augmentation(mut self, copies: usize, sigma: f64) -> Self {
+        self.settings.augment_copies = copies;
+        self.settings.augment_sigma = sigma;
+        self
+    }
+
+    /// Adds `weight * regularizer` to the search loss.
+    pub fn with_regularizer(mut self, regularizer: &'a dyn Regularizer, weight: f64) -> Self {
+        self.regularizer = Some(regularizer);
+        self.settings.regularizer_weight = weight;
+        self
+    }
+
+    /// The searcher of step 2.
+    pub fn with_searcher(mut self, searcher: impl Searcher + 'a) -> Self {
+        self.searcher = Box::new(searcher);
+        self
+    }
+
+    /// The validator of step 4.
+    pub fn with_validator<V2: Validator>(self, validator: V2) -> Calibrator<'a, M, Su, V2> {
+        Calibrator {
+            model: self.model,
+            surrogate: self.surrogate,
+            observations: self.observations,
+            space: self.space,
+            searcher: self.searcher,
+            validator,
+            regularizer: self.regularizer,
+            store: self.store,
+            observers: self.observers,
+            settings: self.settings,
+            design_bounds: self.design_bounds,
+        }
+    }
+
+    /// The initial design spans this box (physical lower and upper values per parameter,
+    /// within the space's bounds) instead of the whole space; checked when the loop starts.
+    pub fn with_design_bounds(mut self, lower: Vec<f64>, upper: Vec<f64>) -> Self {
+        self.design_bounds = Some((lower, upper));
+        self
+    }
+
+    /// The run journal (its fingerprint must be the model's).
+    pub fn with_store(mut self, store: RunStore) -> Self {
+        self.store = Some(store);
+        self
+    }
+
+    /// Adds an observer.
+    pub fn with_observer(mut self, observer: impl Observe + 'a) -> Self {
+        self.observers.push(Box::new(observer));
+        self
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The surrogate (fitted, after [`Self::run`]).
+    pub fn surrogate(&self) -> &Su {
+        &self.surrogate
+    }
+
+    /// The run journal (after [`Self::run`], always present).
+    pub fn store(&self) -> Option<&RunStore> {
+        self.store.as_ref()
+    }
+}
