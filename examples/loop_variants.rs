@@ -12,6 +12,7 @@
 //! and how many server types' alphas are within 10% of the truth (per seed, and per type
 //! the seeds that have it within 10%), and writes JSON.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -175,7 +176,12 @@ fn main() {
             let mut per_seed = Vec::new();
             // Per seed: the server types whose alpha is within 10% of the truth.
             let mut alpha_within = Vec::new();
-            let mut type_hits = vec![0usize; s.truth.alpha_type_cfm_per_w.len()];
+            let mut type_hits: BTreeMap<&str, usize> = s
+                .truth
+                .alpha_type_cfm_per_w
+                .keys()
+                .map(|ty| (ty.as_str(), 0))
+                .collect();
             for seed in 1..=seeds {
                 let mut st = base.clone();
                 st.core.seed = seed;
@@ -183,11 +189,11 @@ fn main() {
                     .unwrap_or_else(|e| fail(format!("{name}, {v}, seed {seed}: {e}")));
                 per_seed.push(cal.report.best.mae_c);
                 let mut within = 0;
-                for ((ty, truth), hits) in s.truth.alpha_type_cfm_per_w.iter().zip(&mut type_hits) {
+                for (ty, truth) in &s.truth.alpha_type_cfm_per_w {
                     let found = cal.report.best.params.get(&format!("alpha/{ty}"));
                     if found.is_some_and(|a| ((a - truth) / truth).abs() <= 0.1) {
                         within += 1;
-                        *hits += 1;
+                        *type_hits.entry(ty.as_str()).or_default() += 1;
                     }
                 }
                 alpha_within.push(within);
@@ -213,27 +219,18 @@ fn main() {
                     .map(|n| n.to_string())
                     .collect::<Vec<_>>()
                     .join(" "),
-                s.truth
-                    .alpha_type_cfm_per_w
-                    .keys()
-                    .zip(&type_hits)
+                type_hits
+                    .iter()
                     .map(|(ty, h)| format!("{ty} {h}"))
                     .collect::<Vec<_>>()
                     .join(", ")
             );
-            let per_type: serde_json::Map<String, serde_json::Value> = s
-                .truth
-                .alpha_type_cfm_per_w
-                .keys()
-                .zip(&type_hits)
-                .map(|(ty, h)| (ty.clone(), json!(h)))
-                .collect();
             results.push(json!({
                 "preset": name, "variant": v, "seeds": seeds, "mean_best_mae_c": mean,
                 "best_mae_c": per_seed, "model_at_truth_mae_c": truth,
                 "seeds_within_0.1_of_truth": within, "wall_s": wall_s,
                 "alpha_types_within_10pct": alpha_within, "mean_alpha_types_within_10pct": alpha_mean,
-                "seeds_within_10pct_per_type": per_type,
+                "seeds_within_10pct_per_type": type_hits,
             }));
         }
     }
