@@ -320,4 +320,13 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "runs of another model");
+    // A Student-t with no degrees of freedom is no likelihood.
+    let o = run(kalibre()
+        .args(["diagnose", "--nu", "0", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "--nu: must be finite and > 0, got 0");
 }

@@ -81,6 +81,7 @@ impl HallDiagnosis {
                     "identifiable": h.identifiable,
                     "delta_bic": h.delta_bic,
                     "held_out_improvement": h.held_out_improvement,
+                    "single_output_delta_bic": h.single_output_delta_bic,
                     "suggestion": s,
                 })
             })

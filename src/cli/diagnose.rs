@@ -35,9 +35,30 @@ pub struct DiagnoseArgs {
     /// calibration's.
     #[arg(long = "grid-m")]
     grid_m: Option<f64>,
+    /// How residuals are weighed: `student-t` (robust: a few sensors the model misses
+    /// for reasons no candidate names, e.g. its own physics or a faulty sensor, count
+    /// less) or `gaussian` (least squares: every residual counts by its square).
+    #[arg(long, value_enum, default_value_t = Likelihood::StudentT)]
+    likelihood: Likelihood,
+    /// Degrees of freedom of the Student-t likelihood (smaller: more robust).
+    #[arg(long, default_value_t = 4.0)]
+    nu: f64,
+    /// Skip the single-output check (by default a hypothesis must stay significant with
+    /// any one sensor left out, so that one sensor the model misses cannot carry it).
+    #[arg(long)]
+    no_single_output_check: bool,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+}
+
+/// The likelihood of `kalibre diagnose`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Likelihood {
+    /// Student-t with `--nu` degrees of freedom.
+    StudentT,
+    /// Gaussian.
+    Gaussian,
 }
 
 /// Runs `kalibre diagnose`.
@@ -91,9 +112,20 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
     }
     let params = report.best.params.values();
-    let settings = HallDiagnosisSettings {
+    if !(args.nu.is_finite() && args.nu > 0.0) {
+        return Err(CliError::Input(format!(
+            "--nu: must be finite and > 0, got {}",
+            args.nu
+        )));
+    }
+    let mut settings = HallDiagnosisSettings {
         sim,
         ..HallDiagnosisSettings::default()
+    };
+    settings.diagnose.single_output_check = !args.no_single_output_check;
+    settings.diagnose.robust_nu = match args.likelihood {
+        Likelihood::StudentT => Some(args.nu),
+        Likelihood::Gaussian => None,
     };
     let d = with_threads(args.threads, || {
         diagnose_hall(

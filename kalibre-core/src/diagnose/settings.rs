@@ -14,6 +14,8 @@ use crate::{Error, Result};
 /// | `inert_snr` | 1 | inert when no parameter, moved from 0 to the far end of its range, changes the outputs by this many noise sigmas (2-norm over all rows) | finite, >= 0 |
 /// | `min_independence` | 0.05 | identifiable when the hypothesis's unit columns, with the current parameters' span removed, keep a smallest singular value of at least this (1: orthogonal, 0: dependent), and no other hypothesis spans the same residual directions | (0, 1) |
 /// | `prior_weight` | 0 | ridge on the hypothesis's parameters: adds `prior_weight * (dq_j / s_j)^2` in noise-sigma units, `s_j` the larger magnitude of its bounds (a Gaussian prior of that scale); 0: plain least squares | finite, >= 0 |
+/// | `robust_nu` | 4 | degrees of freedom of the Student-t likelihood every fit, BIC and held-out check uses, so that a few outputs the model misses for reasons no hypothesis names (its own physics, a faulty sensor) do not decide the ranking; none: Gaussian (least squares) | finite, > 0 |
+/// | `single_output_check` | true | a significant hypothesis must still be preferred (BIC change below 0) with any one output (all its snapshots) left out, so that a model error at one sensor (or a faulty sensor) cannot carry it alone | |
 /// | `output_folds` | 5 | folds of the held-out check over outputs when there is one snapshot (with two or more: leave one snapshot out) | >= 2 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnoseSettings {
@@ -31,6 +33,20 @@ pub struct DiagnoseSettings {
     pub prior_weight: f64,
     /// Number of output folds when there is a single snapshot.
     pub output_folds: usize,
+    /// Whether the single-output check applies.
+    #[serde(default = "default_true")]
+    pub single_output_check: bool,
+    /// Student-t degrees of freedom; `None`: Gaussian.
+    #[serde(default = "default_robust_nu")]
+    pub robust_nu: Option<f64>,
+}
+
+fn default_true() -> bool {
+    true
+}
+
+fn default_robust_nu() -> Option<f64> {
+    Some(4.0)
 }
 
 impl Default for DiagnoseSettings {
@@ -43,6 +59,8 @@ impl Default for DiagnoseSettings {
             min_independence: 0.05,
             prior_weight: 0.0,
             output_folds: 5,
+            single_output_check: true,
+            robust_nu: default_robust_nu(),
         }
     }
 }
@@ -98,6 +116,18 @@ impl DiagnoseSettings {
         self
     }
 
+    /// Turns the single-output check on or off.
+    pub fn with_single_output_check(mut self, on: bool) -> Self {
+        self.single_output_check = on;
+        self
+    }
+
+    /// Sets the likelihood: Student-t with `nu` degrees of freedom, or (`None`) Gaussian.
+    pub fn with_robust_nu(mut self, nu: Option<f64>) -> Self {
+        self.robust_nu = nu;
+        self
+    }
+
     /// Sets the weight of the prior on hypothesis parameters.
     pub fn with_prior_weight(mut self, w: f64) -> Self {
         self.prior_weight = w;
@@ -137,6 +167,14 @@ impl DiagnoseSettings {
             ));
         }
         non_negative("prior_weight", self.prior_weight)?;
+        if let Some(nu) = self.robust_nu {
+            if !(nu.is_finite() && nu > 0.0) {
+                return Err(bad(
+                    "robust_nu",
+                    format!("must be finite and > 0, got {nu}"),
+                ));
+            }
+        }
         if self.output_folds < 2 {
             return Err(bad(
                 "output_folds",
