@@ -1,9 +1,9 @@
-//! The held-out check: refit on all rows but one fold, predict the fold.
+//! The held-out check's folds: refit on all rows but one fold, predict the fold (the
+//! refit and its score are the likelihood's, `robust.rs`).
 
 use serde::{Deserialize, Serialize};
 
 use super::input::RowInfo;
-use super::linalg::lstsq;
 use crate::{Error, Result};
 
 /// How rows were held out.
@@ -61,34 +61,4 @@ pub(crate) fn folds(
         })
         .collect();
     Ok((HeldOutScheme::Outputs, f))
-}
-
-/// Sum of squared held-out residuals over all folds when `cols` are refit (with `ridge`)
-/// on the other rows: `sum_fold ||r_f + A_f x_(-f)||^2`.
-pub(crate) fn held_out_sse(
-    cols: &[Vec<f64>],
-    ridge: &[f64],
-    r: &[f64],
-    folds: &[Vec<usize>],
-) -> f64 {
-    let n = r.len();
-    let mut sse = 0.0;
-    let mut held = vec![false; n];
-    for fold in folds {
-        held.iter_mut().for_each(|h| *h = false);
-        fold.iter().for_each(|&i| held[i] = true);
-        let train: Vec<usize> = (0..n).filter(|&i| !held[i]).collect();
-        let sub: Vec<Vec<f64>> = cols
-            .iter()
-            .map(|c| train.iter().map(|&i| c[i]).collect())
-            .collect();
-        let refs: Vec<&[f64]> = sub.iter().map(Vec::as_slice).collect();
-        let b: Vec<f64> = train.iter().map(|&i| -r[i]).collect();
-        let x = lstsq(&refs, &b, ridge).x;
-        for &i in fold {
-            let e = r[i] + cols.iter().zip(&x).map(|(c, xj)| c[i] * xj).sum::<f64>();
-            sse += e * e;
-        }
-    }
-    sse
 }

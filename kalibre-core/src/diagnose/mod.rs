@@ -253,13 +253,10 @@ pub fn diagnose(
     };
     let refit_mae = mean_abs(&unweigh(e0));
     let (scheme, folds) = heldout::folds(res.rows(), settings.output_folds)?;
-    let held_out = |cols: &[Vec<f64>], ridge: &[f64]| -> f64 {
-        if lik.is_robust() {
-            lik.held_out(cols, ridge, r, &folds, scale)
-        } else {
-            heldout::held_out_sse(cols, ridge, r, &folds)
-        }
-    };
+    // Under a Gaussian the held-out deviance at scale 1 is the held-out sum of squares.
+    let held_scale = if lik.is_robust() { scale } else { 1.0 };
+    let held_out =
+        |cols: &[Vec<f64>], ridge: &[f64]| lik.held_out(cols, ridge, r, &folds, held_scale);
     let held0 = held_out(&jcols, &vec![0.0; p]);
     let output_names: Vec<&str> = res.rows().iter().map(|r| r.output.as_str()).collect();
     let by_output = jackknife::rows_by_output(&output_names);
@@ -410,13 +407,9 @@ pub fn diagnose(
         noise_sigma_estimated: estimated,
         held_out: scheme,
         held_out_folds: folds.len(),
-        held_out_rmse: if lik.is_robust() {
-            // Deviance per row back on the residuals' scale (small residuals count as
-            // under a Gaussian of that scale).
-            scale * (held0 / n as f64).sqrt()
-        } else {
-            (held0 / n as f64).sqrt()
-        },
+        // Deviance per row back on the residuals' scale (under a Student-t, small
+        // residuals count as under a Gaussian of that scale).
+        held_out_rmse: held_scale * (held0 / n as f64).sqrt(),
         hypotheses: results,
     })
 }

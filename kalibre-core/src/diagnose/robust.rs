@@ -392,7 +392,27 @@ mod tests {
         let (cols, r) = line_data();
         let folds: Vec<Vec<usize>> = (0..3).map(|f| (f * 10..f * 10 + 10).collect()).collect();
         let g = Likelihood::new(None).held_out(&cols, &[0.0; 2], &r, &folds, 2.0);
-        let sse = super::super::heldout::held_out_sse(&cols, &[0.0; 2], &r, &folds);
+        // Reference: a straight line through the other rows by the normal equations.
+        let t = &cols[1];
+        let mut sse = 0.0;
+        for fold in &folds {
+            let train: Vec<usize> = (0..30).filter(|i| !fold.contains(i)).collect();
+            let m = train.len() as f64;
+            let mean_t = train.iter().map(|&i| t[i]).sum::<f64>() / m;
+            let mean_r = train.iter().map(|&i| r[i]).sum::<f64>() / m;
+            let cov: f64 = train
+                .iter()
+                .map(|&i| (t[i] - mean_t) * (r[i] - mean_r))
+                .sum();
+            let var: f64 = train.iter().map(|&i| (t[i] - mean_t).powi(2)).sum();
+            // r + a + b t = 0 in the least-squares sense.
+            let b = -cov / var;
+            let a = -mean_r - b * mean_t;
+            sse += fold
+                .iter()
+                .map(|&i| (r[i] + a + b * t[i]).powi(2))
+                .sum::<f64>();
+        }
         assert!((g * 4.0 - sse).abs() < 1e-9 * sse, "{g} {sse}");
     }
 }
