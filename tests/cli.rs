@@ -298,6 +298,7 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
     assert!(d["mae_c"].as_f64().is_some_and(|m| m > 0.0));
     let hyps = d["hypotheses"].as_array().unwrap();
     assert!(!hyps.is_empty());
+    assert!(d["unexplained_sensors"].is_array(), "{d}");
     for h in hyps {
         for key in [
             "effect",

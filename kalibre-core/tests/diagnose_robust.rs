@@ -3,7 +3,7 @@
 //! off in every snapshot). The Student-t likelihood must still name a missing effect
 //! that moves many outputs a little; least squares does not; and the single-output
 //! check must keep a hypothesis that only explains one of those outputs from being
-//! named.
+//! named. The outputs no hypothesis explains are reported as such.
 
 use kalibre_core::diagnose::{
     diagnose, DiagnoseSettings, Hypothesis, HypothesisParam, Residuals, RowInfo,
@@ -101,6 +101,18 @@ impl Case {
     }
 }
 
+fn outlier_names() -> Vec<String> {
+    let mut v: Vec<String> = OUTLIERS.iter().map(|o| format!("s{o:02}")).collect();
+    v.sort();
+    v
+}
+
+fn unexplained(d: &kalibre_core::diagnose::Diagnosis) -> Vec<String> {
+    let mut v: Vec<String> = d.unexplained.iter().map(|u| u.output.clone()).collect();
+    v.sort();
+    v
+}
+
 fn gaussian() -> DiagnoseSettings {
     DiagnoseSettings::new()
         .with_robust_nu(None)
@@ -118,6 +130,8 @@ fn student_t_names_a_small_wide_effect_that_outliers_hide_from_least_squares() {
         assert!(top.significant, "seed {seed}: {top:?}");
         let q = top.fitted.get("offset/q").unwrap();
         assert!((q + 1.0).abs() < 0.1, "seed {seed}: fitted {q}");
+        // What the offset leaves: the four outputs the model misses, and nothing else.
+        assert_eq!(unexplained(&robust), outlier_names(), "seed {seed}");
         // Least squares: the outliers set sigma and the offset's gain drowns.
         let ls = diagnose(&res, &case.hypotheses(), &gaussian()).unwrap();
         assert_eq!(ls.significant().count(), 0, "seed {seed}: {ls:#?}");
@@ -131,6 +145,10 @@ fn outliers_alone_are_no_missing_effect() {
         let res = case.residuals(0.0);
         let d = diagnose(&res, &case.hypotheses(), &DiagnoseSettings::new()).unwrap();
         assert_eq!(d.significant().count(), 0, "seed {seed}: {d:#?}");
+        assert_eq!(unexplained(&d), outlier_names(), "seed {seed}");
+        for u in &d.unexplained {
+            assert!((u.mean_residual - OUTLIER_C).abs() < 0.5, "{u:?}");
+        }
         // The robust noise estimate stays near the noise; least squares takes the
         // outliers for noise. (Not all the way down: in the scale's EM update each gross
         // outlier still adds (nu + 1) s^2 / n, so with a sixth of the outputs off the

@@ -86,7 +86,24 @@ impl HallDiagnosis {
                 })
             })
             .collect();
-        json!({ "schema": "kalibre.diagnosis/1", "mae_c": self.diagnosis.mae, "hypotheses": hyps })
+        let unexplained: Vec<Value> = self
+            .diagnosis
+            .unexplained
+            .iter()
+            .map(|u| {
+                json!({
+                    "sensor": u.output,
+                    "mean_residual_c": u.mean_residual,
+                    "rms_scales": u.rms_scales,
+                })
+            })
+            .collect();
+        json!({
+            "schema": "kalibre.diagnosis/1",
+            "mae_c": self.diagnosis.mae,
+            "hypotheses": hyps,
+            "unexplained_sensors": unexplained,
+        })
     }
 }
 

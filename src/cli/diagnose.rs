@@ -167,7 +167,25 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             println!("    add to hall.json \"effects\": {entry}");
         }
     }
+    print_unexplained(&d.diagnosis);
     Ok(())
+}
+
+/// The sensors no candidate explains: the model's own error there, or a faulty sensor.
+pub(super) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
+    if d.unexplained.is_empty() {
+        return;
+    }
+    println!(
+        "\nsensors no candidate explains (the model's own physics there, or a faulty or misplaced sensor; \
+         the ranking above counts them little):"
+    );
+    for u in &d.unexplained {
+        println!(
+            "  {:<12} model minus measurement {:+.2} C on average, {:.1} noise scales",
+            u.output, u.mean_residual, u.rms_scales
+        );
+    }
 }
 
 /// Mean residual (model minus measurement, C) per sensor over the snapshots, largest

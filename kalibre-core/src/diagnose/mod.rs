@@ -89,6 +89,12 @@ use robust::Likelihood;
 /// strong evidence should prefer the bigger change.
 const MODESTY_WINDOW_BIC: f64 = 6.0;
 
+/// An output is reported as unexplained when its residuals, after the best explanation,
+/// are this many scales of the likelihood off (RMS over its rows). A Student-t with 4
+/// degrees of freedom puts a residual there about once in 25 rows, so an output that
+/// far off in every snapshot is no noise; such rows weigh 0.38 against 1.25 at none.
+pub const UNEXPLAINED_SCALES: f64 = 3.0;
+
 /// Schema tag of a serialised [`Diagnosis`].
 pub const DIAGNOSIS_SCHEMA: &str = "kalibre.core.diagnosis/1";
 
@@ -114,6 +120,24 @@ pub struct Diagnosis {
     pub held_out_rmse: f64,
     /// One result per hypothesis, best first.
     pub hypotheses: Vec<HypothesisResult>,
+    /// Outputs still off by more than [`UNEXPLAINED_SCALES`] scales of the likelihood
+    /// (RMS over their rows) after the best significant hypothesis (or, with none, the
+    /// current parameters' refit), worst first: what the model misses for a reason no
+    /// candidate names (its own physics there, or a faulty or misplaced sensor).
+    #[serde(default)]
+    pub unexplained: Vec<UnexplainedOutput>,
+}
+
+/// An output no hypothesis explains, see [`Diagnosis::unexplained`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UnexplainedOutput {
+    /// Output name (sensor id).
+    pub output: String,
+    /// Mean residual over its rows (model minus measurement, output units).
+    pub mean_residual: f64,
+    /// Root mean square of its residuals in scales of the likelihood (under a Gaussian,
+    /// noise sigmas).
+    pub rms_scales: f64,
 }
 
 impl Diagnosis {
@@ -287,6 +311,8 @@ pub fn diagnose(
     }
 
     let mut results = Vec::with_capacity(hypotheses.len());
+    // Each fit's residuals and likelihood scale, for what the best one leaves unexplained.
+    let mut fits_left: Vec<(Vec<f64>, f64)> = Vec::with_capacity(hypotheses.len());
 
     let mut modesty: Vec<f64> = Vec::new();
     for (i, h) in hypotheses.iter().enumerate() {
@@ -368,6 +394,7 @@ pub fn diagnose(
             current_change: NamedValues::new(res.params(), &sol.x[..p]),
             single_output_delta_bic,
         });
+        fits_left.push((sol.e, sol.scale));
     }
     // Among alternatives the data cannot tell apart (collinear, BIC within 6 of the
     // group's best), only the most modest one (smallest fitted change relative to its
@@ -393,6 +420,17 @@ pub fn diagnose(
     for (r, k) in results.iter_mut().zip(keep) {
         r.significant &= k;
     }
+    // What the best significant hypothesis (else the current parameters) leaves.
+    let best = (0..results.len())
+        .filter(|&i| results[i].significant)
+        .min_by(|&a, &b| results[a].delta_bic.total_cmp(&results[b].delta_bic));
+    // Its own scale when estimated: the current parameters' includes what it explains.
+    let (left, left_scale) = match best {
+        Some(i) if estimated => (fits_left[i].0.as_slice(), fits_left[i].1),
+        Some(i) => (fits_left[i].0.as_slice(), scale),
+        None => (e0.as_slice(), scale),
+    };
+    let unexplained = unexplained_outputs(&by_output, &output_names, left, &weights, left_scale);
     results.sort_by(|a, b| {
         b.significant
             .cmp(&a.significant)
@@ -411,5 +449,36 @@ pub fn diagnose(
         // residuals count as under a Gaussian of that scale).
         held_out_rmse: held_scale * (held0 / n as f64).sqrt(),
         hypotheses: results,
+        unexplained,
     })
+}
+
+/// Outputs whose weighted residuals `e` are more than [`UNEXPLAINED_SCALES`] times
+/// `scale` off (RMS over their rows), worst first, with their mean unweighted residual.
+fn unexplained_outputs(
+    by_output: &[Vec<usize>],
+    names: &[&str],
+    e: &[f64],
+    weights: &[f64],
+    scale: f64,
+) -> Vec<UnexplainedOutput> {
+    let mut out: Vec<UnexplainedOutput> = by_output
+        .iter()
+        .map(|rows| {
+            let m = rows.len() as f64;
+            let ms = rows.iter().map(|&i| (e[i] / scale).powi(2)).sum::<f64>() / m;
+            UnexplainedOutput {
+                output: names[rows[0]].to_string(),
+                mean_residual: rows.iter().map(|&i| e[i] / weights[i]).sum::<f64>() / m,
+                rms_scales: ms.sqrt(),
+            }
+        })
+        .filter(|u| u.rms_scales > UNEXPLAINED_SCALES)
+        .collect();
+    out.sort_by(|a, b| {
+        b.rms_scales
+            .total_cmp(&a.rms_scales)
+            .then_with(|| a.output.cmp(&b.output))
+    });
+    out
 }
