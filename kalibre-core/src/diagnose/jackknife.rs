@@ -13,22 +13,6 @@
 
 use super::robust::Likelihood;
 
-/// Rows of each output, in order of first appearance.
-pub(crate) fn rows_by_output(outputs: &[&str]) -> Vec<Vec<usize>> {
-    let mut names: Vec<&str> = Vec::new();
-    let mut rows: Vec<Vec<usize>> = Vec::new();
-    for (i, o) in outputs.iter().enumerate() {
-        match names.iter().position(|n| n == o) {
-            Some(k) => rows[k].push(i),
-            None => {
-                names.push(o);
-                rows.push(vec![i]);
-            }
-        }
-    }
-    rows
-}
-
 /// The problem without some rows.
 fn without(cols: &[Vec<f64>], r: &[f64], out: &[usize]) -> (Vec<Vec<f64>>, Vec<f64>) {
     let keep: Vec<usize> = (0..r.len()).filter(|i| !out.contains(i)).collect();
@@ -73,13 +57,8 @@ pub(crate) fn worst_delta_bic(
 
 #[cfg(test)]
 mod tests {
+    use super::super::heldout::group_rows;
     use super::*;
-
-    #[test]
-    fn rows_are_grouped_by_output() {
-        let g = rows_by_output(&["a", "b", "a", "c", "b"]);
-        assert_eq!(g, vec![vec![0, 2], vec![1, 4], vec![3]]);
-    }
 
     #[test]
     fn a_hypothesis_carried_by_one_output_fails_and_a_shared_one_passes() {
@@ -98,7 +77,7 @@ mod tests {
             .collect();
         let names: Vec<String> = (0..n).map(|i| format!("s{}", output(i))).collect();
         let refs: Vec<&str> = names.iter().map(String::as_str).collect();
-        let by = rows_by_output(&refs);
+        let by = group_rows(refs);
         let lik = Likelihood::new(Some(4.0));
         let worst =
             |h: &[f64]| worst_delta_bic(&lik, &[], &[h.to_vec()], &[0.0], &r, &by, Some(0.05), 0.0);

@@ -283,7 +283,7 @@ pub fn diagnose(
         |cols: &[Vec<f64>], ridge: &[f64]| lik.held_out(cols, ridge, r, &folds, held_scale);
     let held0 = held_out(&jcols, &vec![0.0; p]);
     let output_names: Vec<&str> = res.rows().iter().map(|r| r.output.as_str()).collect();
-    let by_output = jackknife::rows_by_output(&output_names);
+    let by_output = heldout::group_rows(output_names.iter().copied());
 
     let qj = orthonormal_basis(&jcols, 1e-8);
     let hcols: Vec<Vec<Vec<f64>>> = hypotheses
