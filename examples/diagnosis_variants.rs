@@ -37,21 +37,12 @@ use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
 use kalibre::dc::effects::EffectRegistry;
 use kalibre::dc::hall::Hall;
-use kalibre::dc::snapshots::{self, HallSnapshot};
-use rand::{Rng, SeedableRng};
-use rand_xoshiro::Xoshiro256PlusPlus;
+use kalibre::dc::snapshots::HallSnapshot;
 use serde_json::{json, Value};
 
-/// Datasets and the name of the hypothesis the diagnosis should put on top.
-const DATASETS: [(&str, Option<&str>); 4] = [
-    ("of-dev-clean", None),
-    ("of-dev-crac-offset", Some("crac_supply_offset")),
-    ("of-dev-blanking", Some("rack_recirculation(rack=B4)")),
-    ("of-dev-bypass", Some("bypass(behind_rack=B3)")),
-];
-/// The noise of the stored data (README), so that a variant is another draw of the same.
-const NOISE_C: f64 = 0.15;
-const REMOVED_SENSORS: usize = 4;
+#[path = "openfoam_cases/mod.rs"]
+mod openfoam_cases;
+use openfoam_cases::{cases, CaseData, Dataset, DATASETS, NOISE_C, REMOVED_SENSORS};
 
 /// A diagnosis setting: `(robust_nu, single_output_check)` over the library's
 /// `DiagnoseSettings::default()`, or none to keep the defaults as they are.
@@ -84,102 +75,6 @@ const SETTINGS: [Setting; 5] = [
     setting("student-t 2", Some((Some(2.0), true)), false),
     setting("student-t 8", Some((Some(8.0), true)), false),
 ];
-
-/// Which data a case diagnoses.
-#[derive(Clone, Copy)]
-enum Case {
-    Original,
-    Noise(usize),
-    NoiseRemoved(usize),
-}
-
-impl Case {
-    fn label(self) -> String {
-        match self {
-            Case::Original => "original".into(),
-            Case::Noise(k) => format!("noise {k}"),
-            Case::NoiseRemoved(k) => format!("noise {k}, {REMOVED_SENSORS} sensors removed"),
-        }
-    }
-    /// The case's directory under `--work`, e.g. `noise-3-4-sensors-removed`.
-    fn slug(self) -> String {
-        self.label().replace(", ", "-").replace(' ', "-")
-    }
-}
-
-/// The seed of one random choice, from (dataset index, k, variant: 0 noise, 1 removal):
-/// distinct small integers suffice, `seed_from_u64` scrambles them (SplitMix64).
-fn seed(dataset: usize, k: usize, variant: u64) -> u64 {
-    (1 << 40) | ((dataset as u64) << 24) | ((k as u64) << 8) | variant
-}
-
-/// A standard normal draw (Box-Muller; the root package does not depend on `rand_distr`).
-fn gauss(rng: &mut Xoshiro256PlusPlus) -> f64 {
-    let u1 = 1.0 - rng.random::<f64>(); // (0, 1]: ln stays finite
-    let u2 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
-
-/// The snapshots with every reading replaced by noise-free + N(0, NOISE_C).
-fn noisy(
-    hall: &Hall,
-    snaps: &[HallSnapshot],
-    truth: &Value,
-    file: &Path,
-    seed: u64,
-) -> Result<Vec<HallSnapshot>, String> {
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let mut out = snaps.to_vec();
-    for s in &mut out {
-        let free = &truth["snapshots"][&s.state.label]["sensor_c_noise_free"];
-        for (reading, sensor) in s.sensor_c.iter_mut().zip(&hall.sensors) {
-            let clean = free[&sensor.id].as_f64().ok_or_else(|| {
-                format!(
-                    "{}: no snapshots.{}.sensor_c_noise_free.{}",
-                    file.display(),
-                    s.state.label,
-                    sensor.id
-                )
-            })?;
-            // Drawn for every sensor so that the draws do not depend on missing readings.
-            let z = gauss(&mut rng);
-            if reading.is_some() {
-                *reading = Some(clean + NOISE_C * z);
-            }
-        }
-    }
-    Ok(out)
-}
-
-/// The hall without `REMOVED_SENSORS` seeded random sensors, and the snapshots without
-/// their readings; returns the removed ids too.
-fn remove_sensors(
-    hall: &Hall,
-    snaps: &[HallSnapshot],
-    seed: u64,
-) -> Result<(Hall, Vec<HallSnapshot>, Vec<String>), String> {
-    let n = hall.sensors.len();
-    if n <= REMOVED_SENSORS {
-        return Err(format!("hall `{}` has only {n} sensors", hall.name));
-    }
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let mut drop = rand::seq::index::sample(&mut rng, n, REMOVED_SENSORS).into_vec();
-    drop.sort_unstable();
-    let mut hall = hall.clone();
-    let removed = drop.iter().map(|&i| hall.sensors[i].id.clone()).collect();
-    hall.sensors = keep(&hall.sensors, &drop);
-    let mut snaps = snaps.to_vec();
-    for s in &mut snaps {
-        s.sensor_c = keep(&s.sensor_c, &drop);
-    }
-    Ok((hall, snaps, removed))
-}
-
-/// The items of `v` whose index is not in `drop`.
-fn keep<T: Clone>(v: &[T], drop: &[usize]) -> Vec<T> {
-    let kept = v.iter().enumerate().filter(|(i, _)| !drop.contains(i));
-    kept.map(|(_, x)| x.clone()).collect()
-}
 
 /// Calibrates one case as `kalibre calibrate` does by default, journal and report in
 /// `dir`, and diagnoses it under each setting; returns the case's JSON record.
@@ -314,44 +209,22 @@ fn parse_args() -> Options {
 fn run(o: &Options) -> Result<(), String> {
     let started = Instant::now();
     let settings: Vec<&Setting> = SETTINGS.iter().filter(|s| s.quick || !o.quick).collect();
-    let mut cases = vec![Case::Original];
-    for k in 1..=o.variants {
-        cases.push(Case::Noise(k));
-        cases.push(Case::NoiseRemoved(k));
-    }
+    let cases = cases(o.variants);
     let total = DATASETS.len() * cases.len();
     let mut records = Vec::new();
     // By (setting, dataset): the table's rows in order.
     let mut summary: BTreeMap<(usize, usize), Tally> = BTreeMap::new();
     for (di, (dataset, expected)) in DATASETS.iter().enumerate() {
-        let dir = o.data.join(dataset);
-        let hall_path = dir.join("hall.json");
-        let hall = Hall::load(&hall_path).map_err(|e| e.to_string())?;
-        EffectRegistry::builtin()
-            .check_hall(&hall, &hall_path.display().to_string())
-            .map_err(|e| e.to_string())?;
-        let snaps = snapshots::load_snapshots(&hall, &dir.join("snapshots.csv"))
-            .map_err(|e| e.to_string())?;
-        let truth_path = dir.join("truth.json");
-        let truth: Value = std::fs::read_to_string(&truth_path)
-            .map_err(|e| e.to_string())
-            .and_then(|t| serde_json::from_str(&t).map_err(|e| e.to_string()))
-            .map_err(|e| format!("{}: {e}", truth_path.display()))?;
+        let data = Dataset::load(&o.data.join(dataset))?;
         for &case in &cases {
             let t = Instant::now();
-            let (noise_seed, removal_seed) = match case {
-                Case::Original => (None, None),
-                Case::Noise(k) => (Some(seed(di, k, 0)), None),
-                Case::NoiseRemoved(k) => (Some(seed(di, k, 0)), Some(seed(di, k, 1))),
-            };
-            let case_snaps = match noise_seed {
-                Some(s) => noisy(&hall, &snaps, &truth, &truth_path, s)?,
-                None => snaps.clone(),
-            };
-            let (case_hall, case_snaps, removed) = match removal_seed {
-                Some(s) => remove_sensors(&hall, &case_snaps, s)?,
-                None => (hall.clone(), case_snaps, Vec::new()),
-            };
+            let CaseData {
+                hall: case_hall,
+                snaps: case_snaps,
+                noise_seed,
+                removal_seed,
+                removed,
+            } = data.case(di, case)?;
             let work = o.work.join(dataset).join(case.slug());
             let mut record = run_case(&case_hall, &case_snaps, *expected, &work, &settings)
                 .map_err(|e| format!("{dataset}, {}: {e}", case.label()))?;

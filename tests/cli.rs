@@ -133,6 +133,22 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
         .arg("--out")
         .arg(dir.join("cal")));
     assert_input_error(&o, "--grid-m");
+    // A Student-t likelihood with no degrees of freedom.
+    let o = run(kalibre()
+        .args([
+            "calibrate",
+            "--likelihood",
+            "student-t",
+            "--nu",
+            "0",
+            "--hall",
+        ])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "--nu: must be finite and > 0, got 0");
     // Snapshots of another hall: an unknown id.
     let bad_snaps = dir.join("snaps.csv");
     std::fs::write(

@@ -10,7 +10,7 @@
 
 use std::path::{Path, PathBuf};
 
-use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
+use kalibre::dc::calibration::{calibrate_hall, HallCalibration, HallCalibrationSettings};
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosis, HallDiagnosisSettings};
 use kalibre::dc::effects::EffectRegistry;
 use kalibre::dc::hall::Hall;
@@ -134,5 +134,63 @@ fn least_squares_misses_what_the_robust_diagnosis_names() {
         None,
         "{:#?}",
         &d.diagnosis.hypotheses[..3]
+    );
+}
+
+/// Calibrates `hall` against `snaps` with the default settings and the given likelihood
+/// (`robust_nu`).
+fn calibrate_with(
+    hall: &Hall,
+    snaps: &[snapshots::HallSnapshot],
+    robust_nu: Option<f64>,
+) -> HallCalibration {
+    let mut settings = HallCalibrationSettings::default();
+    settings.core.robust_nu = robust_nu;
+    calibrate_hall(hall, snaps, &settings, None, Vec::new()).unwrap()
+}
+
+#[test]
+fn the_suggested_offset_recalibrated_under_student_t_keeps_its_size() {
+    // The user's next step: add the suggested effect and calibrate again. Under least
+    // squares the row-end inlets the model misses (3-4 C too cold) pull the offset toward
+    // warming them; under the Student-t likelihood they count little, and the offset
+    // keeps about its true size (-1.0 C) and the error falls as the diagnosis predicted.
+    let dataset = "of-dev-crac-offset";
+    let hall = Hall::load(&data(&format!("{dataset}/hall.json"))).unwrap();
+    let snaps =
+        snapshots::load_snapshots(&hall, &data(&format!("{dataset}/snapshots.csv"))).unwrap();
+    let cal = calibrate_with(&hall, &snaps, None);
+    let registry = EffectRegistry::builtin();
+    let d = diagnose_hall(
+        &hall,
+        &snaps,
+        &cal.report.best.params.values(),
+        &registry,
+        &HallDiagnosisSettings::default(),
+    )
+    .unwrap();
+    let (name, _) = top_significant(&d).expect("something significant");
+    assert_eq!(name, "crac_supply_offset");
+    // As a user does: the suggested entry pasted into hall.json's effects.
+    let mut next = hall.clone();
+    next.effects.push(d.suggestions[0].clone());
+    let offset_of = |c: &HallCalibration| {
+        c.report
+            .best
+            .params
+            .get("crac_supply_offset/offset_c")
+            .unwrap()
+    };
+    let least_squares = calibrate_with(&next, &snaps, None);
+    let student_t = calibrate_with(&next, &snaps, Some(4.0));
+    let (ls, t) = (offset_of(&least_squares), offset_of(&student_t));
+    assert!((t + 1.0).abs() < 0.2, "student-t offset {t}");
+    assert!(ls > t + 0.2, "least squares {ls} against student-t {t}");
+    let predicted = d.diagnosis.hypotheses[0].predicted_mae;
+    let (mae_ls, mae_t) = (least_squares.report.best.mae_c, student_t.report.best.mae_c);
+    assert!(
+        mae_t < mae_ls && mae_t < cal.report.best.mae_c && mae_t < predicted + 0.05,
+        "MAE {} before, {mae_ls} least squares, {mae_t} student-t, {predicted} predicted",
+        cal.report.best.mae_c
     );
 }

@@ -186,6 +186,10 @@ pub(super) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
             u.output, u.mean_residual, u.rms_scales
         );
     }
+    println!(
+        "  to calibrate again (with a suggested effect) counting them as little, add \
+         `--likelihood student-t` to `kalibre calibrate`"
+    );
 }
 
 /// Mean residual (model minus measurement, C) per sensor over the snapshots, largest

@@ -9,6 +9,7 @@ mod design;
 mod geometry;
 mod polish;
 mod report;
+mod robust;
 mod runner;
 mod settings;
 mod state;
@@ -469,7 +470,7 @@ where
         // Only once a fit has run: an unfitted surrogate has no slopes to speak of.
         let uncertainty = match &state.best {
             Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
-                uncertainty::estimate(&self.surrogate, obs, space, b)
+                uncertainty::estimate(&self.surrogate, obs, space, b, st.robust_nu)
             }
             _ => Vec::new(),
         };

@@ -11,6 +11,7 @@
 use std::time::Instant;
 
 use super::report::{Errors, IterationRecord, NamedValues, SnapshotErrors, Timings};
+use super::robust::{residuals, RobustFit};
 use super::runner::{RunResult, Runner};
 use super::state::{PointEval, State};
 use super::Settings;
@@ -81,20 +82,6 @@ pub(crate) fn record(
         params: NamedValues::new(names, params),
         wall_s: info.wall_s,
     }
-}
-
-/// Residuals `measured - predicted` over every measured output of every snapshot.
-fn residuals<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f64> {
-    obs.snapshots()
-        .iter()
-        .zip(outputs)
-        .flat_map(|(snap, pred)| {
-            snap.measured
-                .iter()
-                .zip(pred)
-                .filter_map(|(m, p)| m.map(|m| m - p))
-        })
-        .collect()
 }
 
 /// The model linearised at a point: the point (unit box), its residuals and the
@@ -211,7 +198,22 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 break;
             }
             let t = Instant::now();
-            let step = self.damped_step(u0, r0, cols, lambda);
+            // Under a Student-t, IRLS: the step weighs each row by its residual's weight
+            // at the linearisation point.
+            let robust = self
+                .settings
+                .robust_nu
+                .and_then(|nu| RobustFit::new(nu, r0));
+            let step = match &robust {
+                None => self.damped_step(u0, r0, cols, lambda),
+                Some(f) => {
+                    let sw: Vec<f64> = r0.iter().map(|r| f.weight(*r).sqrt()).collect();
+                    let weigh =
+                        |v: &[f64]| -> Vec<f64> { v.iter().zip(&sw).map(|(a, w)| a * w).collect() };
+                    let cols_w: Vec<Vec<f64>> = cols.iter().map(|c| weigh(c)).collect();
+                    self.damped_step(u0, &weigh(r0), &cols_w, lambda)
+                }
+            };
             let search_s = t.elapsed().as_secs_f64();
             if step.iter().map(|d| d.abs()).fold(0.0, f64::max) < MIN_STEP {
                 break;
@@ -245,7 +247,10 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 for (c, d) in cols.iter().zip(&step) {
                     r.iter_mut().zip(c).for_each(|(ri, ci)| *ri -= ci * d);
                 }
-                r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64
+                r.iter()
+                    .map(|v| robust.as_ref().map_or(v * v, |f| f.loss(*v)))
+                    .sum::<f64>()
+                    / r.len().max(1) as f64
             };
             let rec = record(
                 iteration,

@@ -25,6 +25,7 @@ use crate::{Error, Result};
 /// | `stall_step` | none | with `linear_correction`: when the search's proposal promises less than 10% below the best run's loss (or repeats a run), run instead at the best point moved by this much (max norm, unit box) along the direction the runs near it covered least, so the next correction learns the model's slope there | finite, (0, 1] |
 /// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
+/// | `robust_nu` | none | the data term's likelihood: none is the paper's mean squared error; `nu` a Student-t with `nu` degrees of freedom (4 is the usual robust choice), its scale fitted to the residuals, in the polish (reweighted Levenberg-Marquardt) and the uncertainty, so that a few outputs the model cannot match do not set the parameters; the iterations' search keeps the squared error (it finds the basin) | finite, > 0 |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, > 0 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -71,6 +72,12 @@ pub struct Settings {
     /// reports: 0.
     #[serde(default)]
     pub polish_iterations: usize,
+    /// The data term's likelihood: none for the paper's mean squared error, or the
+    /// degrees of freedom of a Student-t whose scale is fitted to the residuals (the
+    /// polish and the uncertainty then weigh outliers down; the iterations' search keeps
+    /// the squared error). Missing in older reports: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robust_nu: Option<f64>,
 }
 
 impl Default for Settings {
@@ -94,6 +101,7 @@ impl Default for Settings {
             stall_step: None,
             trust_region: None,
             polish_iterations: 0,
+            robust_nu: None,
         }
     }
 }
@@ -179,6 +187,14 @@ impl Settings {
         if let Some(f) = self.focus {
             if !(f.is_finite() && f > 0.0) {
                 return Err(bad("focus", format!("must be finite and > 0, got {f}")));
+            }
+        }
+        if let Some(nu) = self.robust_nu {
+            if !(nu.is_finite() && nu > 0.0) {
+                return Err(bad(
+                    "robust_nu",
+                    format!("must be finite and > 0, got {nu}"),
+                ));
             }
         }
         if !(self.perturb_sigma.is_finite() && self.perturb_sigma > 0.0) {

@@ -20,9 +20,15 @@
 //! how far the linearised data would move each parameter; a loop stopped before it
 //! converged leaves a shift of several standard deviations along the directions it had
 //! not finished, and such a parameter is not called identified however narrow its spread.
+//!
+//! Under a Student-t likelihood (`Settings::robust_nu`) the scale is the t's, fitted to
+//! the best run's residuals, `F = k J^T J / s^2 + I` with `k = (nu + 1) / (nu + 3)` (the
+//! t's Fisher information about a location), and each residual pulls the shift with its
+//! IRLS weight, `J^T (w r) / s^2`.
 
 use serde::{Deserialize, Serialize};
 
+use super::robust::RobustFit;
 use super::state::BestPoint;
 use crate::search::{cholesky, cholesky_solve};
 use crate::{Observations, ParamSpace, Surrogate};
@@ -89,6 +95,7 @@ pub(crate) fn estimate<Su: Surrogate>(
     obs: &Observations<Su::Scenario>,
     space: &ParamSpace,
     best: &BestPoint,
+    robust_nu: Option<f64>,
 ) -> Vec<ParamUncertainty> {
     let d = space.dim();
     let predict = |unit: &[f64]| -> Option<Vec<f64>> {
@@ -129,8 +136,23 @@ pub(crate) fn estimate<Su: Surrogate>(
         }
         jac.push(col);
     }
-    let s2 = (residual.iter().map(|r| r * r).sum::<f64>() / m.saturating_sub(d).max(1) as f64)
-        .max(1e-24); // a perfect fit: every parameter the outputs move is pinned down
+    // Under a Student-t: the information per row is `(nu + 1) / (nu + 3)` over its scale
+    // squared, and each residual pulls with its IRLS weight.
+    let robust = robust_nu.and_then(|nu| RobustFit::new(nu, &residual));
+    let (s2, pull): (f64, Vec<f64>) = match &robust {
+        None => (
+            (residual.iter().map(|r| r * r).sum::<f64>() / m.saturating_sub(d).max(1) as f64)
+                .max(1e-24), // a perfect fit: every parameter the outputs move is pinned down
+            residual.clone(),
+        ),
+        Some(f) => (
+            f.scale * f.scale / f.information_factor(),
+            residual
+                .iter()
+                .map(|r| f.weight(*r) * r / f.information_factor())
+                .collect(),
+        ),
+    };
     let mut fisher = vec![0.0; d * d];
     for i in 0..d {
         for j in 0..=i {
@@ -151,7 +173,7 @@ pub(crate) fn estimate<Su: Surrogate>(
     // The Gauss-Newton step toward where the linearised data point.
     let gradient: Vec<f64> = jac
         .iter()
-        .map(|col| col.iter().zip(&residual).map(|(j, r)| j * r).sum::<f64>() / s2)
+        .map(|col| col.iter().zip(&pull).map(|(j, r)| j * r).sum::<f64>() / s2)
         .collect();
     let shift_unit = cholesky_solve(&chol, d, &gradient);
     let dphys = space.dphys_dunit(&best.unit);
@@ -266,7 +288,7 @@ mod tests {
     #[test]
     fn a_best_run_at_the_data_optimum_is_claimed_with_a_small_shift() {
         let (s, obs, space) = setup([0.6, 0.4]);
-        let u = estimate(&s, &obs, &space, &best_at(&s, [0.6, 0.4]));
+        let u = estimate(&s, &obs, &space, &best_at(&s, [0.6, 0.4]), None);
         assert_eq!(u.len(), 2);
         for p in &u {
             let (std, shift) = (p.std.unwrap(), p.shift.unwrap());
@@ -280,7 +302,7 @@ mod tests {
         // Best run 0.1 short in p: the residual is no longer noise, yet the outputs still
         // pin p down to a few percent.
         let (s, obs, space) = setup([0.6, 0.4]);
-        let u = estimate(&s, &obs, &space, &best_at(&s, [0.5, 0.4]));
+        let u = estimate(&s, &obs, &space, &best_at(&s, [0.5, 0.4]), None);
         let p = &u[0];
         assert!(p.rel_std.unwrap() <= IDENTIFIED_REL_STD, "{p:?}");
         assert!(!p.identified, "{p:?}");

@@ -67,7 +67,7 @@ mod identify;
 mod input;
 mod jackknife;
 pub(crate) mod linalg;
-mod robust;
+pub(crate) mod robust;
 mod settings;
 mod weights;
 

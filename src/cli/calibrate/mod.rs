@@ -20,6 +20,7 @@ use kalibre_dc::openfoam::{OpenFoamError, OpenFoamModel, OpenFoamSettings};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
 
+use super::diagnose::Likelihood;
 use super::simulate::sim_config;
 use super::{io_err, with_threads, CliError, CliResult};
 use hall_command::HallCommand;
@@ -137,6 +138,17 @@ pub struct CalibrateArgs {
     /// Skipped when more than 64 parameters are calibrated.
     #[arg(long)]
     polish: Option<usize>,
+    /// How residuals are weighed: `gaussian` (the paper's mean squared error) or
+    /// `student-t` (robust: a few sensors the model cannot match, through its own physics
+    /// or a faulty sensor, count less, so they do not set the parameters). The iterations'
+    /// search keeps least squares to find the basin; the polish steps (--polish) and the
+    /// reported uncertainty weigh each residual by the t likelihood, its scale fitted to
+    /// the residuals. `kalibre diagnose` weighs residuals this way by default.
+    #[arg(long, value_enum, default_value_t = Likelihood::Gaussian)]
+    likelihood: Likelihood,
+    /// Degrees of freedom of the Student-t likelihood (smaller: more robust).
+    #[arg(long, default_value_t = 4.0)]
+    nu: f64,
     /// Leave out the surrogate's mass-balance terms (recirculation and bypass), as in the paper.
     #[arg(long = "paper-surrogate")]
     paper_surrogate: bool,
@@ -180,6 +192,7 @@ fn flag_of(setting: &str) -> &str {
         "max_parallel_runs" => "parallel-runs",
         "explore_on_repeat" => "explore",
         "trust_region" => "trust-region",
+        "robust_nu" => "nu",
         other => other,
     }
 }
@@ -212,6 +225,13 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         .with_steps(args.adam_steps)
         .build()
         .map_err(|e| CliError::Input(format!("--adam-steps: {e}")))?;
+    // Checked whatever the likelihood, as `kalibre diagnose` does.
+    if !(args.nu.is_finite() && args.nu > 0.0) {
+        return Err(CliError::Input(format!(
+            "--nu: must be finite and > 0, got {}",
+            args.nu
+        )));
+    }
     let core = kalibre_core::Settings {
         seed: args.seed,
         max_iterations: args.iterations,
@@ -232,8 +252,18 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
             ModelArg::Builtin => HallCalibrationSettings::loop_defaults().polish_iterations,
             ModelArg::Openfoam | ModelArg::Command => 0,
         }),
+        robust_nu: match args.likelihood {
+            Likelihood::StudentT => Some(args.nu),
+            Likelihood::Gaussian => None,
+        },
         ..HallCalibrationSettings::loop_defaults()
     };
+    if core.robust_nu.is_some() && core.polish_iterations == 0 {
+        eprintln!(
+            "note: --likelihood student-t weighs residuals in the polish steps, and --polish is 0: \
+             only the reported uncertainty changes"
+        );
+    }
     core.check().map_err(|e| match e {
         kalibre_core::Error::InvalidSetting { name, reason } => {
             CliError::Input(format!("--{}: {reason}", flag_of(&name)))
