@@ -217,6 +217,9 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert!(whole.join("report.html").exists());
     let html = std::fs::read_to_string(whole.join("report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("Where the model fails"));
+    // The default likelihood is the paper's, and the report says so.
+    assert!(report["settings"].get("robust_nu").is_none());
+    assert!(html.contains("<td>likelihood</td><td>least squares"));
     // The report says how well the measurements pin down each parameter, and so does the
     // summary and the HTML.
     let params = report["best"]["params"].as_object().unwrap();

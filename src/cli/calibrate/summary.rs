@@ -91,6 +91,11 @@ pub(super) fn print_summary(
         "model runs", report.runs.total, report.runs.new, report.runs.cached, report.runs.failed
     );
     println!("  {:<28} {:?}", "stopped", report.stop_reason);
+    println!(
+        "  {:<28} {}",
+        "likelihood",
+        kalibre_dc::report::likelihood_text(report)
+    );
     print_uncertainty(report);
     println!("  {:<28} {wall_s:.1} s", "wall time");
     if !penalty.violations.is_empty() {
