@@ -258,12 +258,6 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         },
         ..HallCalibrationSettings::loop_defaults()
     };
-    if core.robust_nu.is_some() && core.polish_iterations == 0 {
-        eprintln!(
-            "note: --likelihood student-t weighs residuals in the polish steps, and --polish is 0: \
-             only the reported uncertainty changes"
-        );
-    }
     core.check().map_err(|e| match e {
         kalibre_core::Error::InvalidSetting { name, reason } => {
             CliError::Input(format!("--{}: {reason}", flag_of(&name)))

@@ -105,6 +105,12 @@ pub(super) fn print_summary(
             penalty.violations.len()
         );
     }
+    if report.settings.robust_nu.is_some() && report.settings.polish_iterations == 0 {
+        println!(
+            "  note: the Student-t likelihood weighs residuals in the polish steps, and none ran \
+             (--polish 0, or more than 64 parameters): only the reported uncertainty used it"
+        );
+    }
     println!("  best parameters:");
     for (name, value) in &report.best.params.0 {
         println!("    {name:<30} {value:.5}");
