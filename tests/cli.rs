@@ -350,3 +350,93 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         .arg(&cal));
     assert_input_error(&o, "--nu: must be finite and > 0, got 0");
 }
+
+/// `kalibre diagnose --write-hall` writes the hall with the top significant suggestion
+/// added and warm-started at the calibrated values, which `kalibre calibrate` takes as it
+/// is; with nothing significant it writes nothing and says so.
+#[test]
+fn diagnose_writes_the_next_hall() {
+    let dir = tmp("next-hall");
+    let (hall, snaps) = (
+        data("of-dev-crac-offset/hall.json"),
+        data("of-dev-crac-offset/snapshots.csv"),
+    );
+    let cal = dir.join("cal");
+    let o = run(kalibre()
+        .args(["calibrate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let next = dir.join("next").join("hall.json");
+    let o = run(kalibre()
+        .args(["diagnose", "--json", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--calibration")
+        .arg(&cal)
+        .arg("--write-hall")
+        .arg(&next));
+    assert!(o.status.success(), "{}", stderr(&o));
+    // stdout stays one JSON document; the file is announced on stderr.
+    let d: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    assert!(
+        stderr(&o).contains("crac_supply_offset added"),
+        "{}",
+        stderr(&o)
+    );
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&next).unwrap()).unwrap();
+    let effects = written["effects"].as_array().unwrap();
+    assert_eq!(effects.len(), 1);
+    assert_eq!(effects[0], d["hypotheses"][0]["suggestion"]);
+    // Warm start: every type's initial alpha is the calibrated one.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cal.join("report.json")).unwrap()).unwrap();
+    for t in written["server_types"].as_array().unwrap() {
+        let name = format!("alpha/{}", t["id"].as_str().unwrap());
+        let calibrated = report["best"]["params"][&name].as_f64().unwrap();
+        let initial = t["alpha_cfm_per_w"]["initial"].as_f64().unwrap();
+        assert!((initial - calibrated).abs() < 1e-12, "{name}");
+    }
+    let o = run(kalibre()
+        .args(["calibrate", "--iterations", "1", "--polish", "1"])
+        .args(["--likelihood", "student-t", "--hall"])
+        .arg(&next)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("cal-next")));
+    assert!(o.status.success(), "{}", stderr(&o));
+    // The clean hall: nothing significant, nothing written.
+    let (hall, snaps) = (
+        data("of-dev-clean/hall.json"),
+        data("of-dev-clean/snapshots.csv"),
+    );
+    let cal = dir.join("cal-clean");
+    let o = run(kalibre()
+        .args(["calibrate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let none = dir.join("none.json");
+    let o = run(kalibre()
+        .args(["diagnose", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--calibration")
+        .arg(&cal)
+        .arg("--write-hall")
+        .arg(&none));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("nothing significant:"), "{out}");
+    assert!(!none.exists());
+}

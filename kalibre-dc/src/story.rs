@@ -22,7 +22,7 @@ use crate::effects::EffectRegistry;
 use crate::hall::{AlphaMode, EffectSpec, Hall};
 use crate::report::{ThermalPlane, INLET_HEIGHT_M};
 use crate::snapshots::HallSnapshot;
-use crate::{Error, ParamLayout, Result};
+use crate::{Error, HallModel, ParamLayout, Result};
 
 /// The schema tag of `story.json`.
 pub const STORY_SCHEMA: &str = "kalibre.story/1";
@@ -431,8 +431,20 @@ pub fn with_effect(
     registry: &EffectRegistry,
     entry: &EffectSpec,
 ) -> Result<Hall> {
-    let best = &cal.report.best.params;
-    let layout: &ParamLayout = cal.model.layout();
+    with_effect_from_report(hall, &cal.report, &cal.model, registry, entry)
+}
+
+/// [`with_effect`] from a calibration's report and the model of `hall` it calibrated (as
+/// `kalibre diagnose --write-hall` has them).
+pub fn with_effect_from_report(
+    hall: &Hall,
+    report: &Report,
+    model: &HallModel,
+    registry: &EffectRegistry,
+    entry: &EffectSpec,
+) -> Result<Hall> {
+    let best = &report.best.params;
+    let layout: &ParamLayout = model.layout();
     let mut next = hall.clone();
     let values = best.values();
     if layout.mode() != AlphaMode::Fixed {
@@ -450,8 +462,7 @@ pub fn with_effect(
             }
         }
     }
-    for (e, (effect, spec)) in cal
-        .model
+    for (e, (effect, spec)) in model
         .effects()
         .iter()
         .zip(next.effects.iter_mut())

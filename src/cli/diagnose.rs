@@ -11,6 +11,7 @@ use kalibre_dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::snapshots;
+use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
 
 use super::simulate::sim_config;
@@ -47,6 +48,11 @@ pub struct DiagnoseArgs {
     /// any one sensor left out, so that one sensor the model misses cannot carry it).
     #[arg(long)]
     no_single_output_check: bool,
+    /// Write FILE: the hall with the top significant suggestion added to its effects, and
+    /// the calibrated values as every parameter's initial value (a warm start), ready for
+    /// the next `kalibre calibrate --hall FILE`. Not written when nothing is significant.
+    #[arg(long = "write-hall", value_name = "FILE")]
+    write_hall: Option<PathBuf>,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -136,12 +142,21 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             &settings,
         )
     })??;
+    // The next hall first, so that a file that cannot be written fails before any output.
+    let written = match &args.write_hall {
+        Some(path) => write_next_hall(&hall, &report, &model, &d, path)?,
+        None => None,
+    };
     if args.json {
         println!(
             "{}",
             serde_json::to_string_pretty(&d.to_json())
                 .map_err(|e| CliError::Run(format!("JSON: {e}")))?
         );
+        // stdout is the JSON document; say what was written on stderr.
+        if let Some(line) = &written {
+            eprintln!("{line}");
+        }
         return Ok(());
     }
     print_where_it_fails(&hall, &report);
@@ -168,7 +183,44 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
     }
     print_unexplained(&d.diagnosis);
+    if let Some(line) = &written {
+        println!("\n{line}");
+    }
     Ok(())
+}
+
+/// `--write-hall`: the hall with the top significant suggestion added, warm-started at
+/// the calibrated values; returns what to tell the user.
+fn write_next_hall(
+    hall: &Hall,
+    report: &Report,
+    model: &HallModel,
+    d: &kalibre_dc::diagnosis::HallDiagnosis,
+    path: &std::path::Path,
+) -> CliResult<Option<String>> {
+    let top = d
+        .diagnosis
+        .hypotheses
+        .iter()
+        .zip(&d.suggestions)
+        .find(|(h, _)| h.significant);
+    let Some((h, entry)) = top else {
+        return Ok(Some(format!(
+            "nothing significant: {} not written",
+            path.display()
+        )));
+    };
+    let next = with_effect_from_report(hall, report, model, &EffectRegistry::builtin(), entry)?;
+    if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| CliError::Input(format!("--write-hall: {}: {e}", dir.display())))?;
+    }
+    next.save(path)?;
+    Ok(Some(format!(
+        "wrote {}: the hall with {} added, warm-started at the calibrated values",
+        path.display(),
+        h.name
+    )))
 }
 
 /// The sensors no candidate explains: the model's own error there, or a faulty sensor.
