@@ -42,7 +42,7 @@ use serde_json::{json, Value};
 
 #[path = "openfoam_cases/mod.rs"]
 mod openfoam_cases;
-use openfoam_cases::{cases, CaseData, Dataset, DATASETS, NOISE_C, REMOVED_SENSORS};
+use openfoam_cases::{cases, write_json, CaseData, Dataset, DATASETS, NOISE_C, REMOVED_SENSORS};
 
 /// A diagnosis setting: `(robust_nu, single_output_check)` over the library's
 /// `DiagnoseSettings::default()`, or none to keep the defaults as they are.
@@ -291,11 +291,7 @@ fn run(o: &Options) -> Result<(), String> {
         "settings": settings.iter().map(|s| s.name).collect::<Vec<_>>(),
         "summary": rows, "cases": records,
     });
-    if let Some(parent) = o.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
-    }
-    let text = serde_json::to_string_pretty(&doc).map_err(|e| format!("JSON: {e}"))?;
-    std::fs::write(&o.out, text).map_err(|e| format!("{}: {e}", o.out.display()))?;
+    write_json(&o.out, &doc)?;
     println!(
         "\nwrote {} ({total} cases, {:.0} s)",
         o.out.display(),

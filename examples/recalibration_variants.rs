@@ -35,7 +35,7 @@ use serde_json::{json, Value};
 
 #[path = "openfoam_cases/mod.rs"]
 mod openfoam_cases;
-use openfoam_cases::{cases, CaseData, Dataset, DATASETS};
+use openfoam_cases::{cases, write_json, CaseData, Dataset, DATASETS};
 
 /// The likelihoods compared: name and `Settings::robust_nu`.
 const LIKELIHOODS: [(&str, Option<f64>); 2] = [("least squares", None), ("student-t 4", Some(4.0))];
@@ -172,14 +172,20 @@ fn run(o: &Options) -> Result<(), String> {
                 removed,
             } = data.case(di, case)?;
             let what = |e: String| format!("{dataset}, {}: {e}", case.label());
-            let mut plain = Vec::new();
-            for (li, (_, nu)) in LIKELIHOODS.iter().enumerate() {
-                let cal = calibrate(&hall, &snaps, *nu).map_err(what)?;
-                rows.entry((di, 0, li))
-                    .or_default()
-                    .add(&cal, &data.truth, None);
-                plain.push(cal);
-            }
+            // The hall calibrated under each likelihood, counted in its stage's rows.
+            let mut calibrate_all = |hall: &Hall, stage: usize| -> Result<Vec<_>, String> {
+                let mut cals = Vec::new();
+                for (li, (_, nu)) in LIKELIHOODS.iter().enumerate() {
+                    let cal = calibrate(hall, &snaps, *nu).map_err(what)?;
+                    let param = if stage == 1 { effect } else { None };
+                    rows.entry((di, stage, li))
+                        .or_default()
+                        .add(&cal, &data.truth, param);
+                    cals.push(cal);
+                }
+                Ok(cals)
+            };
+            let plain = calibrate_all(&hall, 0)?;
             let params = plain[0].report.best.params.values();
             let d = diagnose_hall(
                 &hall,
@@ -201,13 +207,7 @@ fn run(o: &Options) -> Result<(), String> {
                 let mut next = hall.clone();
                 next.effects
                     .push(d.suggestions[i.expect("the top is a hypothesis")].clone());
-                for (li, (_, nu)) in LIKELIHOODS.iter().enumerate() {
-                    let cal = calibrate(&next, &snaps, *nu).map_err(what)?;
-                    rows.entry((di, 1, li))
-                        .or_default()
-                        .add(&cal, &data.truth, effect);
-                    with_effect.push(cal);
-                }
+                with_effect = calibrate_all(&next, 1)?;
             }
             let summary = |cal: &HallCalibration| {
                 json!({
@@ -291,11 +291,7 @@ fn run(o: &Options) -> Result<(), String> {
         "named_by_diagnosis": named.iter().map(|(d, n)| (DATASETS[*d].0, *n)).collect::<BTreeMap<_, _>>(),
         "summary": summary, "cases": records,
     });
-    if let Some(parent) = o.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
-    }
-    let text = serde_json::to_string_pretty(&doc).map_err(|e| format!("JSON: {e}"))?;
-    std::fs::write(&o.out, text).map_err(|e| format!("{}: {e}", o.out.display()))?;
+    write_json(&o.out, &doc)?;
     println!(
         "\nwrote {} ({} cases, {:.0} s)",
         o.out.display(),

@@ -30,6 +30,18 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// `kalibre COMMAND --hall DATASET/hall.json --snapshots DATASET/snapshots.csv`, on an
+/// OpenFOAM development dataset.
+fn on_dataset(command: &str, dataset: &str) -> Command {
+    let mut c = kalibre();
+    c.arg(command)
+        .arg("--hall")
+        .arg(data(&format!("{dataset}/hall.json")))
+        .arg("--snapshots")
+        .arg(data(&format!("{dataset}/snapshots.csv")));
+    c
+}
+
 /// A bad input gives exit code 2 and one readable error line naming what is wrong.
 fn assert_input_error(o: &Output, needle: &str) {
     let err = stderr(o);
@@ -296,19 +308,13 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
 fn diagnose_prints_json_and_refuses_another_halls_calibration() {
     let dir = tmp("diagnose");
     let cal = dir.join("cal");
-    let o = run(kalibre()
-        .args(["calibrate", "--iterations", "1", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-clean/snapshots.csv"))
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args(["--iterations", "1"])
         .arg("--out")
         .arg(&cal));
     assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(kalibre()
-        .args(["diagnose", "--json", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-clean/snapshots.csv"))
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--json"])
         .arg("--calibration")
         .arg(&cal));
     assert!(o.status.success(), "{}", stderr(&o));
@@ -332,20 +338,13 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         assert_eq!(h["suggestion"]["kind"], h["effect"]);
     }
     // The same geometry under another name is another hall: refused.
-    let o = run(kalibre()
-        .args(["diagnose", "--hall"])
-        .arg(data("of-dev-crac-offset/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-crac-offset/snapshots.csv"))
+    let o = run(on_dataset("diagnose", "of-dev-crac-offset")
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "runs of another model");
     // A Student-t with no degrees of freedom is no likelihood.
-    let o = run(kalibre()
-        .args(["diagnose", "--nu", "0", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-clean/snapshots.csv"))
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--nu", "0"])
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "--nu: must be finite and > 0, got 0");
@@ -357,25 +356,14 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
 #[test]
 fn diagnose_writes_the_next_hall() {
     let dir = tmp("next-hall");
-    let (hall, snaps) = (
-        data("of-dev-crac-offset/hall.json"),
-        data("of-dev-crac-offset/snapshots.csv"),
-    );
     let cal = dir.join("cal");
-    let o = run(kalibre()
-        .args(["calibrate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
+    let o = run(on_dataset("calibrate", "of-dev-crac-offset")
         .arg("--out")
         .arg(&cal));
     assert!(o.status.success(), "{}", stderr(&o));
     let next = dir.join("next").join("hall.json");
-    let o = run(kalibre()
-        .args(["diagnose", "--json", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
+    let o = run(on_dataset("diagnose", "of-dev-crac-offset")
+        .arg("--json")
         .arg("--calibration")
         .arg(&cal)
         .arg("--write-hall")
@@ -407,30 +395,18 @@ fn diagnose_writes_the_next_hall() {
         .args(["--likelihood", "student-t", "--hall"])
         .arg(&next)
         .arg("--snapshots")
-        .arg(&snaps)
+        .arg(data("of-dev-crac-offset/snapshots.csv"))
         .arg("--out")
         .arg(dir.join("cal-next")));
     assert!(o.status.success(), "{}", stderr(&o));
     // The clean hall: nothing significant, nothing written.
-    let (hall, snaps) = (
-        data("of-dev-clean/hall.json"),
-        data("of-dev-clean/snapshots.csv"),
-    );
     let cal = dir.join("cal-clean");
-    let o = run(kalibre()
-        .args(["calibrate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
+    let o = run(on_dataset("calibrate", "of-dev-clean")
         .arg("--out")
         .arg(&cal));
     assert!(o.status.success(), "{}", stderr(&o));
     let none = dir.join("none.json");
-    let o = run(kalibre()
-        .args(["diagnose", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
+    let o = run(on_dataset("diagnose", "of-dev-clean")
         .arg("--calibration")
         .arg(&cal)
         .arg("--write-hall")

@@ -196,3 +196,12 @@ pub struct CaseData {
     pub removal_seed: Option<u64>,
     pub removed: Vec<String>,
 }
+
+/// Writes `doc` as pretty JSON to `out`, creating its directory.
+pub fn write_json(out: &Path, doc: &Value) -> Result<(), String> {
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+    }
+    let text = serde_json::to_string_pretty(doc).map_err(|e| format!("JSON: {e}"))?;
+    std::fs::write(out, text).map_err(|e| format!("{}: {e}", out.display()))
+}

@@ -5,38 +5,16 @@
 mod common;
 
 use common::*;
-use kalibre_core::{Calibrator, Error, Observations, OutputInfo, Settings, Snapshot};
+use kalibre_core::{Calibrator, Error, Observations, Settings};
 
 /// Five snapshots of the analytic model at the truth, with a small deterministic noise,
 /// and output `s1` of the first snapshot off by `outlier`.
 fn observations_with_outlier(outlier: f64) -> Observations<Scen> {
-    let outputs = (0..4)
-        .map(|k| OutputInfo {
-            name: format!("s{k}"),
-            group: "all".into(),
-        })
-        .collect();
-    let snaps = [1.0, 1.5, 2.0, 2.5, 3.0]
-        .iter()
-        .enumerate()
-        .map(|(id, &load)| {
-            let measured = poly_outputs(load, &TRUTH)
-                .into_iter()
-                .enumerate()
-                .map(|(k, y)| {
-                    let noise = 0.03 * ((7 * id + 3 * k) as f64).sin();
-                    let off = if id == 0 && k == 1 { outlier } else { 0.0 };
-                    Some(y + noise + off)
-                })
-                .collect();
-            Snapshot {
-                label: format!("t{id}"),
-                scenario: Scen { id, load },
-                measured,
-            }
-        })
-        .collect();
-    Observations::new(outputs, snaps).unwrap()
+    observations_with(&[1.0, 1.5, 2.0, 2.5, 3.0], |id, k, y| {
+        let noise = 0.03 * ((7 * id + 3 * k) as f64).sin();
+        let off = if id == 0 && k == 1 { outlier } else { 0.0 };
+        Some(y + noise + off)
+    })
 }
 
 /// Calibrates the analytic model against the observations with an outlier; returns the

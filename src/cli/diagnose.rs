@@ -67,6 +67,22 @@ pub enum Likelihood {
     Gaussian,
 }
 
+impl Likelihood {
+    /// The settings' `robust_nu` for this likelihood and `--nu`, which is checked whatever
+    /// the likelihood (a bad value is refused, not ignored).
+    pub fn robust_nu(self, nu: f64) -> CliResult<Option<f64>> {
+        if !(nu.is_finite() && nu > 0.0) {
+            return Err(CliError::Input(format!(
+                "--nu: must be finite and > 0, got {nu}"
+            )));
+        }
+        Ok(match self {
+            Likelihood::StudentT => Some(nu),
+            Likelihood::Gaussian => None,
+        })
+    }
+}
+
 /// Runs `kalibre diagnose`.
 pub fn run(args: DiagnoseArgs) -> CliResult {
     let hall = Hall::load(&args.hall)?;
@@ -118,21 +134,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
     }
     let params = report.best.params.values();
-    if !(args.nu.is_finite() && args.nu > 0.0) {
-        return Err(CliError::Input(format!(
-            "--nu: must be finite and > 0, got {}",
-            args.nu
-        )));
-    }
+    let robust_nu = args.likelihood.robust_nu(args.nu)?;
     let mut settings = HallDiagnosisSettings {
         sim,
         ..HallDiagnosisSettings::default()
     };
     settings.diagnose.single_output_check = !args.no_single_output_check;
-    settings.diagnose.robust_nu = match args.likelihood {
-        Likelihood::StudentT => Some(args.nu),
-        Likelihood::Gaussian => None,
-    };
+    settings.diagnose.robust_nu = robust_nu;
     let d = with_threads(args.threads, || {
         diagnose_hall(
             &hall,

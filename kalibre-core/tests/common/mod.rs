@@ -91,26 +91,32 @@ pub fn space() -> ParamSpace {
 
 /// Two snapshots measured from the model at the truth (one output missing in the second).
 pub fn observations() -> Observations<Scen> {
+    observations_with(&[1.0, 2.0], |id, k, y| (!(id == 1 && k == 3)).then_some(y))
+}
+
+/// One snapshot per load, the model at the truth read through `reading(snapshot, output,
+/// value)` (none: not measured).
+pub fn observations_with(
+    loads: &[f64],
+    reading: impl Fn(usize, usize, f64) -> Option<f64>,
+) -> Observations<Scen> {
     let outputs = (0..4)
         .map(|k| OutputInfo {
             name: format!("s{k}"),
             group: if k < 2 { "cold" } else { "hot" }.into(),
         })
         .collect();
-    let snaps = [1.0, 2.0]
+    let snaps = loads
         .iter()
         .enumerate()
-        .map(|(id, &load)| {
-            let y = poly_outputs(load, &TRUTH);
-            let mut measured: Vec<Option<f64>> = y.into_iter().map(Some).collect();
-            if id == 1 {
-                measured[3] = None;
-            }
-            Snapshot {
-                label: format!("t{id}"),
-                scenario: Scen { id, load },
-                measured,
-            }
+        .map(|(id, &load)| Snapshot {
+            label: format!("t{id}"),
+            scenario: Scen { id, load },
+            measured: poly_outputs(load, &TRUTH)
+                .into_iter()
+                .enumerate()
+                .map(|(k, y)| reading(id, k, y))
+                .collect(),
         })
         .collect();
     Observations::new(outputs, snaps).unwrap()

@@ -225,13 +225,6 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         .with_steps(args.adam_steps)
         .build()
         .map_err(|e| CliError::Input(format!("--adam-steps: {e}")))?;
-    // Checked whatever the likelihood, as `kalibre diagnose` does.
-    if !(args.nu.is_finite() && args.nu > 0.0) {
-        return Err(CliError::Input(format!(
-            "--nu: must be finite and > 0, got {}",
-            args.nu
-        )));
-    }
     let core = kalibre_core::Settings {
         seed: args.seed,
         max_iterations: args.iterations,
@@ -252,10 +245,7 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
             ModelArg::Builtin => HallCalibrationSettings::loop_defaults().polish_iterations,
             ModelArg::Openfoam | ModelArg::Command => 0,
         }),
-        robust_nu: match args.likelihood {
-            Likelihood::StudentT => Some(args.nu),
-            Likelihood::Gaussian => None,
-        },
+        robust_nu: args.likelihood.robust_nu(args.nu)?,
         ..HallCalibrationSettings::loop_defaults()
     };
     core.check().map_err(|e| match e {
