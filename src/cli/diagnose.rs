@@ -247,8 +247,8 @@ pub(super) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
         );
     }
     println!(
-        "  to calibrate again (with a suggested effect) counting them as little, add \
-         `--likelihood student-t` to `kalibre calibrate`"
+        "  to calibrate again (with a suggested effect) weighing them down as this ranking does, \
+         add `--likelihood student-t` to `kalibre calibrate`"
     );
 }
 
