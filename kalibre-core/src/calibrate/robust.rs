@@ -73,8 +73,8 @@ impl RobustFit {
         v * (r * r / v).ln_1p()
     }
 
-    /// The IRLS weight of residual `r`: 1 well inside the scale, `(nu + 1) / (r / s)^2`
-    /// far beyond it.
+    /// The IRLS weight of residual `r`: `(nu + 1) / nu` at zero, `(nu + 1) / (r / s)^2`
+    /// far beyond the scale.
     pub fn weight(&self, r: f64) -> f64 {
         self.likelihood.weight(r, self.scale)
     }

@@ -28,7 +28,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::robust::RobustFit;
+use super::robust::{residuals, RobustFit};
 use super::state::BestPoint;
 use crate::search::{cholesky, cholesky_solve};
 use crate::{Observations, ParamSpace, Surrogate};
@@ -111,14 +111,8 @@ pub(crate) fn estimate<Su: Surrogate>(
         }
         Some(out)
     };
-    let mut residual = Vec::new();
-    for (snap, outputs) in obs.snapshots().iter().zip(&best.outputs) {
-        for (m, y) in snap.measured.iter().zip(outputs) {
-            if let Some(m) = m {
-                residual.push(y - m);
-            }
-        }
-    }
+    // Model minus measurement (negation is exact: `y - m` bit for bit).
+    let residual: Vec<f64> = residuals(obs, &best.outputs).iter().map(|r| -r).collect();
     let m = residual.len();
     // Columns of J, one per parameter.
     let mut jac: Vec<Vec<f64>> = Vec::with_capacity(d);
