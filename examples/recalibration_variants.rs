@@ -99,17 +99,30 @@ impl Row {
         }
     }
 
+    fn mean_mae(&self) -> f64 {
+        self.mae / self.cases.max(1) as f64
+    }
+
+    fn mean_alpha_abs_rel_err(&self) -> f64 {
+        self.alpha_abs_err / self.alpha_types.max(1) as f64
+    }
+
+    /// Mean, minimum and maximum of the fitted effect values; none without any.
+    fn fitted_range(&self) -> Option<(f64, f64, f64)> {
+        let f = &self.fitted;
+        let min = f.iter().copied().reduce(f64::min)?;
+        let max = f.iter().copied().reduce(f64::max)?;
+        Some((f.iter().sum::<f64>() / f.len() as f64, min, max))
+    }
+
     fn json(&self) -> Value {
-        let n = self.cases.max(1) as f64;
-        let mean_fitted = (!self.fitted.is_empty())
-            .then(|| self.fitted.iter().sum::<f64>() / self.fitted.len() as f64);
+        let range = self.fitted_range();
         json!({
-            "cases": self.cases, "mean_mae_c": self.mae / n,
-            "mean_alpha_abs_rel_err": self.alpha_abs_err / self.alpha_types.max(1) as f64,
+            "cases": self.cases, "mean_mae_c": self.mean_mae(),
+            "mean_alpha_abs_rel_err": self.mean_alpha_abs_rel_err(),
             "alpha_within_10_percent": self.alpha_within_10, "alpha_types": self.alpha_types,
-            "fitted": self.fitted, "mean_fitted": mean_fitted,
-            "fitted_min": self.fitted.iter().copied().reduce(f64::min),
-            "fitted_max": self.fitted.iter().copied().reduce(f64::max),
+            "fitted": self.fitted, "mean_fitted": range.map(|r| r.0),
+            "fitted_min": range.map(|r| r.1), "fitted_max": range.map(|r| r.2),
         })
     }
 }
@@ -247,8 +260,8 @@ fn run(o: &Options) -> Result<(), String> {
             DATASETS[*di].0,
             LIKELIHOODS[*li].0,
             r.cases,
-            r.mae / r.cases.max(1) as f64,
-            100.0 * r.alpha_abs_err / r.alpha_types.max(1) as f64,
+            r.mean_mae(),
+            100.0 * r.mean_alpha_abs_rel_err(),
             r.alpha_within_10,
             r.alpha_types
         );
@@ -260,16 +273,13 @@ fn run(o: &Options) -> Result<(), String> {
         let truth = effect_truth(DATASETS[*di].0)
             .and_then(|(_, v)| v)
             .map_or("about 0.16".to_string(), |v| format!("{v}"));
-        let f = r.json();
+        let (mean, min, max) = r.fitted_range().unwrap_or((f64::NAN, f64::NAN, f64::NAN));
         println!(
-            "| {} | {} | {} | {:.3} | {:.3} ({:.3} to {:.3}) | {truth} |",
+            "| {} | {} | {} | {:.3} | {mean:.3} ({min:.3} to {max:.3}) | {truth} |",
             DATASETS[*di].0,
             LIKELIHOODS[*li].0,
             r.cases,
-            r.mae / r.cases.max(1) as f64,
-            f["mean_fitted"].as_f64().unwrap_or(f64::NAN),
-            f["fitted_min"].as_f64().unwrap_or(f64::NAN),
-            f["fitted_max"].as_f64().unwrap_or(f64::NAN),
+            r.mean_mae(),
         );
     }
     let summary: Vec<Value> = rows
