@@ -348,6 +348,12 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "--nu: must be finite and > 0, got 0");
+    // OpenFOAM's options belong to --model openfoam.
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--np", "2"])
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "--np is an OpenFOAM option: add --model openfoam");
 }
 
 /// `kalibre diagnose --write-hall` writes the hall with the top significant suggestion

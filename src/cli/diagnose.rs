@@ -7,13 +7,16 @@ use std::path::PathBuf;
 use clap::Args;
 use kalibre_core::calibrate::Report;
 use kalibre_core::Model;
-use kalibre_dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
+use kalibre_dc::diagnosis::{diagnose_hall_with, EffectSolver, HallDiagnosisSettings};
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
+use kalibre_dc::openfoam::{OpenFoamEffectSolver, OpenFoamModel};
+use kalibre_dc::sim::Simulator;
 use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
 
+use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::simulate::sim_config;
 use super::{with_threads, CliError, CliResult};
 
@@ -32,10 +35,18 @@ pub struct DiagnoseArgs {
     /// Print the diagnosis as JSON (`kalibre.diagnosis/1`) instead of text.
     #[arg(long)]
     json: bool,
-    /// Grid cell size of the built-in simulator that supplies the Jacobians (m); use the
-    /// calibration's.
+    /// Grid cell size (m) of the model that supplies the Jacobians; use the calibration's.
     #[arg(long = "grid-m")]
     grid_m: Option<f64>,
+    /// What solves the calibrated model and each candidate effect: `builtin` (the
+    /// built-in simulator, seconds, whatever model was calibrated) or `openfoam` (the
+    /// calibration's OpenFOAM model: one solve per snapshot for the base, each calibrated
+    /// parameter and each candidate it can represent, `crac_supply_offset` and `bypass`;
+    /// finished solves are kept in CALIBRATION/openfoam and reused).
+    #[arg(long, value_enum, default_value_t = DiagnoseModel::Builtin)]
+    model: DiagnoseModel,
+    #[command(flatten)]
+    openfoam: OpenFoamArgs,
     /// How residuals are weighed: `student-t` (robust: a few sensors the model misses
     /// for reasons no candidate names, e.g. its own physics or a faulty sensor, count
     /// less) or `gaussian` (least squares: every residual counts by its square).
@@ -56,6 +67,15 @@ pub struct DiagnoseArgs {
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+}
+
+/// The model of `kalibre diagnose`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DiagnoseModel {
+    /// The built-in simulator.
+    Builtin,
+    /// OpenFOAM, as `kalibre calibrate --model openfoam` runs it.
+    Openfoam,
 }
 
 /// The likelihood of `kalibre diagnose`.
@@ -83,8 +103,15 @@ impl Likelihood {
     }
 }
 
+/// `--model openfoam`: finite-difference step of the calibrated parameters (unit box).
+const OPENFOAM_UNIT_STEP: f64 = 0.03;
+/// `--model openfoam`: step of a candidate's parameter (share of its range).
+const OPENFOAM_EFFECT_STEP: f64 = 0.2;
+
 /// Runs `kalibre diagnose`.
 pub fn run(args: DiagnoseArgs) -> CliResult {
+    args.openfoam
+        .refuse_unless(args.model == DiagnoseModel::Openfoam)?;
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
@@ -100,6 +127,22 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     })?;
     let sim = sim_config(args.grid_m)?;
     let model = HallModel::new(&hall, sim.clone())?;
+    // The solver, and the fingerprint of the model the calibration must have run.
+    let (solver, fp): (Box<dyn EffectSolver>, String) = match args.model {
+        DiagnoseModel::Builtin => (
+            Box::new(Simulator::new(&hall, sim.clone())?),
+            model.fingerprint(),
+        ),
+        DiagnoseModel::Openfoam => {
+            let of = args
+                .openfoam
+                .settings(&args.calibration.join("openfoam"), args.grid_m)?;
+            let fp = OpenFoamModel::new(&hall, of.clone())
+                .map_err(of_err)?
+                .fingerprint();
+            (Box::new(OpenFoamEffectSolver::new(&hall, of)?), fp)
+        }
+    };
     let space = model.layout().space();
     let names: Vec<&str> = report
         .best
@@ -120,16 +163,19 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     // The journal names the model it ran: refuse a calibration of another hall or grid.
     let journal = args.calibration.join("runs.jsonl");
     if let Ok(lines) = std::fs::read_to_string(&journal) {
-        let fp = model.fingerprint();
         let other = lines
             .lines()
             .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
             .find(|v| v["fingerprint"].as_str().is_some_and(|f| f != fp));
         if other.is_some() {
             return Err(CliError::Input(format!(
-                "{}: runs of another model (a different hall.json, effects or --grid-m) than `{}`",
+                "{}: runs of another model (a different hall.json, effects, --grid-m, --model or OpenFOAM option) than `{}` with --model {}",
                 journal.display(),
-                args.hall.display()
+                args.hall.display(),
+                match args.model {
+                    DiagnoseModel::Builtin => "builtin",
+                    DiagnoseModel::Openfoam => "openfoam",
+                }
             )));
         }
     }
@@ -141,13 +187,38 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     };
     settings.diagnose.single_output_check = !args.no_single_output_check;
     settings.diagnose.robust_nu = robust_nu;
+    if args.model == DiagnoseModel::Openfoam {
+        // Larger steps than the built-in simulator's: a solve's sensor values are window
+        // means of oscillating probes, so a step must move them well beyond that scatter;
+        // and the effect's step is then a typical size of the effect (a tenth of the
+        // supply for a bypass), so the linearisation is a secant where it matters.
+        settings.unit_step = OPENFOAM_UNIT_STEP;
+        settings.effect_step = OPENFOAM_EFFECT_STEP;
+        let registry = EffectRegistry::builtin();
+        let candidates: usize = registry
+            .kinds()
+            .iter()
+            .filter(|k| solver.supports(k))
+            .filter_map(|k| registry.get(k))
+            .map(|f| f.candidates(&hall).len())
+            .sum();
+        eprintln!(
+            "diagnosing with OpenFOAM: {} solves ({} snapshots x (1 base + {} calibrated parameters + {} candidates)); finished solves are kept in {} and reused",
+            snaps.len() * (1 + space.dim() + candidates),
+            snaps.len(),
+            space.dim(),
+            candidates,
+            args.calibration.join("openfoam").display()
+        );
+    }
     let d = with_threads(args.threads, || {
-        diagnose_hall(
+        diagnose_hall_with(
             &hall,
             &snaps,
             &params,
             &EffectRegistry::builtin(),
             &settings,
+            solver.as_ref(),
         )
     })??;
     // The next hall first, so that a file that cannot be written fails before any output.
@@ -191,6 +262,17 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
     }
     print_unexplained(&d.diagnosis);
+    if !d.not_tried.is_empty() {
+        println!("\nnot tried:");
+        for n in &d.not_tried {
+            let count = if n.count > 1 {
+                format!(" ({} candidates)", n.count)
+            } else {
+                String::new()
+            };
+            println!("  {}{count}: {}", n.candidate, n.reason);
+        }
+    }
     if let Some(line) = &written {
         println!("\n{line}");
     }

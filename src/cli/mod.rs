@@ -4,6 +4,7 @@ mod calibrate;
 mod demo;
 mod diagnose;
 mod error;
+mod openfoam_args;
 mod simulate;
 mod synth;
 

@@ -127,7 +127,7 @@ pub fn control_dict(g: &CaseGeometry, st: &OpenFoamSettings) -> String {
         let _ = writeln!(s, "            {}", v3(*p));
     }
     s += "        );\n    }\n";
-    for p in g.tiles.iter().chain(&g.returns) {
+    for p in g.tiles.iter().chain(&g.openings).chain(&g.returns) {
         let _ = write!(
             s,
             "    flux_{0}\n    {{\n        type surfaceFieldValue;\n        libs (\"libfieldFunctionObjects.so\");\n        \
@@ -247,6 +247,14 @@ fn field(
             patch(p, PatchRole::Tile(t))
         );
     }
+    for (b, p) in g.openings.iter().enumerate() {
+        let _ = write!(
+            s,
+            "    {}\n    {{\n{}    }}\n",
+            p.name,
+            patch(p, PatchRole::Opening(b))
+        );
+    }
     for p in &g.returns {
         let _ = write!(
             s,
@@ -265,6 +273,8 @@ enum PatchRole {
     Intake(usize),
     Exhaust(usize),
     Tile(usize),
+    /// A bypass floor opening: an inflow like a tile, with its own flow.
+    Opening(usize),
     Return,
 }
 
@@ -299,6 +309,11 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
                 &format!("volumetricFlowRate $q_tile{t};"),
                 "value uniform (0 0 0);",
             ]),
+            PatchRole::Opening(b) => lines(&[
+                "type flowRateInletVelocity;",
+                &format!("volumetricFlowRate $q_byp{b};"),
+                "value uniform (0 0 0);",
+            ]),
             PatchRole::Return => {
                 let _ = p;
                 lines(&[
@@ -326,6 +341,9 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
             ]),
             PatchRole::Tile(t) => {
                 lines(&["type fixedValue;", &format!("value uniform $t_tile{t};")])
+            }
+            PatchRole::Opening(b) => {
+                lines(&["type fixedValue;", &format!("value uniform $t_byp{b};")])
             }
             PatchRole::Return => {
                 let _ = p;
@@ -365,7 +383,7 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
     let inflow = |name: &'static str| {
         move |_: &FacePatch, role: PatchRole| match role {
             PatchRole::Intake(_) => lines(&["type zeroGradient;"]),
-            PatchRole::Exhaust(_) | PatchRole::Tile(_) => {
+            PatchRole::Exhaust(_) | PatchRole::Tile(_) | PatchRole::Opening(_) => {
                 lines(&["type fixedValue;", &format!("value uniform ${name}_in;")])
             }
             PatchRole::Return => lines(&[

@@ -1,11 +1,11 @@
 //! The hall on the OpenFOAM grid: which cells are solid, which boundary faces form each
-//! patch (server intakes and exhausts, tiles, returns), the heated cell layers and the
-//! probe points, all checked in Rust before any OpenFOAM program runs.
+//! patch (server intakes and exhausts, tiles, bypass openings, returns), the heated cell
+//! layers and the probe points, all checked in Rust before any OpenFOAM program runs.
 //!
-//! Patch names are built from indices (`srv7-in`, `tile2`, `ret0`) because hall ids may
+//! Patch names are built from indices (`srv7-in`, `tile2`, `byp0`, `ret0`) because hall ids may
 //! hold characters OpenFOAM does not accept in a word; the order is the hall's.
 
-use crate::hall::{Hall, Side, SupplyKind};
+use crate::hall::{Aabb, Hall, Side, SupplyKind};
 
 use super::OpenFoamError;
 
@@ -69,6 +69,9 @@ pub struct CaseGeometry {
     pub servers: Vec<ServerPatches>,
     /// Per tile, hall order.
     pub tiles: Vec<FacePatch>,
+    /// Extra floor openings that deliver part of the supply (the `bypass` effect), in the
+    /// order given.
+    pub openings: Vec<FacePatch>,
     /// Per return grille, hall order.
     pub returns: Vec<FacePatch>,
     /// Probe points (sensor positions), hall order.
@@ -88,6 +91,14 @@ fn geo(field: impl Into<String>, message: impl Into<String>) -> OpenFoamError {
 impl CaseGeometry {
     /// Places `hall` on a grid of cell size `h` (m). Every box edge must lie on a grid line.
     pub fn new(hall: &Hall, h: f64) -> Result<Self, OpenFoamError> {
+        Self::with_openings(hall, h, &[])
+    }
+
+    /// As [`CaseGeometry::new`], with extra floor openings (`z` 0 boxes, as the `bypass`
+    /// effect gives them) that become inflow patches `byp0`, `byp1`, ... in that order.
+    /// An opening must lie on the grid, on fluid floor, and clear of the tiles and of
+    /// the other openings (a face can belong to one patch only).
+    pub fn with_openings(hall: &Hall, h: f64, openings: &[Aabb]) -> Result<Self, OpenFoamError> {
         if !(h.is_finite() && h > 0.0) {
             return Err(OpenFoamError::Setting {
                 name: "grid_m".into(),
@@ -172,6 +183,7 @@ impl CaseGeometry {
             solids,
             servers: Vec::new(),
             tiles: Vec::new(),
+            openings: Vec::new(),
             returns: Vec::new(),
             probes: Vec::new(),
             fluid_cells,
@@ -230,6 +242,36 @@ impl CaseGeometry {
                 &snap,
             )?;
             g.tiles.push(p);
+        }
+        for (b, o) in openings.iter().enumerate() {
+            let field = format!("bypass opening {b}");
+            if o.min[2].abs() > GRID_TOL || o.max[2].abs() > GRID_TOL {
+                return Err(geo(
+                    &field,
+                    "not on the floor (the case has floor openings only)",
+                ));
+            }
+            let p = g.plane_patch(
+                [o.min[0], o.min[1]],
+                [o.max[0] - o.min[0], o.max[1] - o.min[1]],
+                0,
+                format!("byp{b}"),
+                &field,
+                &snap,
+            )?;
+            let clash = g
+                .tiles
+                .iter()
+                .map(|t| (t, "a tile"))
+                .chain(g.openings.iter().map(|t| (t, "another opening")))
+                .find(|(t, _)| overlap(&t.cells, &p.cells));
+            if let Some((t, what)) = clash {
+                return Err(geo(
+                    &field,
+                    format!("overlaps {what} (`{}`) on the grid", t.name),
+                ));
+            }
+            g.openings.push(p);
         }
         for (r, ret) in hall.returns.iter().enumerate() {
             let p = g.plane_patch(
@@ -396,8 +438,14 @@ impl CaseGeometry {
             .iter()
             .flat_map(|s| [&s.intake, &s.exhaust])
             .chain(&self.tiles)
+            .chain(&self.openings)
             .chain(&self.returns)
     }
+}
+
+/// Whether two cell ranges share a cell.
+fn overlap(a: &CellRange, b: &CellRange) -> bool {
+    (0..3).all(|k| a.lo[k] < b.hi[k] && b.lo[k] < a.hi[k])
 }
 
 #[cfg(test)]
@@ -424,6 +472,66 @@ mod tests {
             .all(|s| s.intake.faces == 15 && s.exhaust.faces == 15));
         assert_eq!(g.tiles.iter().map(|t| t.faces).sum::<usize>(), 5 * 12);
         assert_eq!(g.probes.len(), 24);
+    }
+
+    fn floor_box(x: [f64; 2], y: [f64; 2]) -> Aabb {
+        Aabb {
+            min: [x[0], y[0], 0.0],
+            max: [x[1], y[1], 0.0],
+        }
+    }
+
+    #[test]
+    fn a_bypass_opening_becomes_a_floor_patch_of_its_own() {
+        // The development bypass dataset's cable cutout: x 3.6-4.2, y 4.2-4.6.
+        let cut = floor_box([3.6, 4.2], [4.2, 4.6]);
+        let g = CaseGeometry::with_openings(&dev_hall(), 0.2, &[cut]).unwrap();
+        assert_eq!(g.openings.len(), 1);
+        let o = &g.openings[0];
+        assert_eq!(
+            (o.name.as_str(), o.axis, o.plane, o.faces),
+            ("byp0", 2, 0, 6)
+        );
+        assert_eq!(o.cells.lo, [18, 21, 0]);
+        assert!(g.patches().any(|p| p.name == "byp0"));
+        // The mesh is the same; only faces change patch.
+        assert_eq!(g.fluid_cells, 11_140);
+    }
+
+    #[test]
+    fn openings_on_tiles_off_the_floor_or_off_the_grid_are_refused() {
+        let hall = dev_hall();
+        let t = &hall.tiles[0];
+        let on_tile = floor_box(
+            [t.position_m[0], t.position_m[0] + 0.2],
+            [t.position_m[1], t.position_m[1] + 0.2],
+        );
+        let err = CaseGeometry::with_openings(&hall, 0.2, &[on_tile])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("overlaps a tile") && err.contains("tile0"),
+            "{err}"
+        );
+        let cut = floor_box([3.6, 4.2], [4.2, 4.6]);
+        let err = CaseGeometry::with_openings(&hall, 0.2, &[cut, cut])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("bypass opening 1") && err.contains("another opening"),
+            "{err}"
+        );
+        let mut raised = cut;
+        raised.max[2] = 0.2;
+        let err = CaseGeometry::with_openings(&hall, 0.2, &[raised])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("not on the floor"), "{err}");
+        let off = floor_box([3.65, 4.2], [4.2, 4.6]);
+        let err = CaseGeometry::with_openings(&hall, 0.2, &[off])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("not on the 0.2 m grid"), "{err}");
     }
 
     #[test]

@@ -1,8 +1,10 @@
 //! OpenFOAM as the hall's model: [`OpenFoamModel`] builds a case from `hall.json` once
 //! (blockMesh on the grid, racks and CRACs cut out with `topoSet` + `subsetMesh`, one
-//! intake and one exhaust patch per server, tiles and returns made by `createPatch`), and
-//! per run writes only `0.orig/include/params` and runs `buoyantBoussinesqSimpleFoam`
-//! (k-epsilon, Boussinesq buoyancy) serially or with `mpirun -np N` after `decomposePar`.
+//! intake and one exhaust patch per server, tiles, bypass openings and returns made by
+//! `createPatch`), and per run writes only `0.orig/include/params` and runs
+//! `buoyantBoussinesqSimpleFoam` (k-epsilon, Boussinesq buoyancy) serially or with
+//! `mpirun -np N` after `decomposePar`. [`OpenFoamEffectSolver`] lets a diagnosis solve
+//! its candidate effects with OpenFOAM too.
 //!
 //! Outputs are the window means of the probes at the sensors; their window standard
 //! deviations are the run's spread. A run fails (a [`kalibre_core::ModelError`], journaled,
@@ -18,15 +20,17 @@ mod model;
 mod params;
 mod results;
 mod settings;
+mod solver;
 
 use thiserror::Error;
 
 pub use case::{CaseDir, MeshSummary};
 pub use geometry::{CaseGeometry, CellRange, FacePatch, ServerPatches};
-pub use model::{OpenFoamModel, RunTimings};
+pub use model::{OpenFoamModel, RunTimings, SUPPORTED_EFFECTS};
 pub use params::{RunInputs, M3_S_PER_CFM};
 pub use results::{log_verdict, probe_window, ProbeWindow};
 pub use settings::OpenFoamSettings;
+pub use solver::OpenFoamEffectSolver;
 
 /// Errors of building an OpenFOAM case (a run's failure is a
 /// [`kalibre_core::ModelError`] instead).

@@ -12,13 +12,14 @@ use super::params::RunInputs;
 use super::results::{file_tail, last_field_value, log_verdict, probe_window};
 use super::{OpenFoamError, OpenFoamSettings};
 use crate::effects::{Effect, EffectRegistry};
-use crate::hall::Hall;
+use crate::hall::{Aabb, Hall};
 use crate::sim::SimMods;
 use crate::snapshots::OperatingState;
 use crate::ParamLayout;
 
-/// The only effect kind the case can represent (a change of the tiles' temperature).
-const SUPPORTED_EFFECTS: [&str; 1] = ["crac_supply_offset"];
+/// The effect kinds the case can represent: a change of the tiles' temperature, and an
+/// extra floor opening that takes part of the tiles' flow.
+pub const SUPPORTED_EFFECTS: [&str; 2] = ["crac_supply_offset", "bypass"];
 
 /// Version of the case generator: part of the fingerprint and the case directory name.
 const GENERATOR: &str = "kalibre-dc-openfoam/1";
@@ -28,6 +29,8 @@ const GENERATOR: &str = "kalibre-dc-openfoam/1";
 pub struct OpenFoamModel {
     hall: Hall,
     geometry: CaseGeometry,
+    /// The supply openings' boxes, in the geometry's order (`byp0`, ...).
+    openings: Vec<Aabb>,
     effects: Vec<Box<dyn Effect>>,
     layout: ParamLayout,
     settings: OpenFoamSettings,
@@ -89,16 +92,37 @@ impl OpenFoamModel {
                 )));
             }
         }
-        let geometry = CaseGeometry::new(hall, settings.grid_m)?;
+        // An opening is part of the mesh, so it must be known before any run: each
+        // effect at its parameters' upper bounds shows where its openings are.
+        let mut openings: Vec<Aabb> = Vec::new();
+        for (e, effect) in effects.iter().enumerate() {
+            let upper: Vec<f64> = effect.parameters().iter().map(|p| p.upper).collect();
+            let mut mods = SimMods::new(hall.cracs.len());
+            effect
+                .modify(&upper, hall, &mut mods)
+                .map_err(|err| OpenFoamError::Unsupported(format!("effect {e}: {err}")))?;
+            for o in mods.supply_openings {
+                if !openings.contains(&o.region) {
+                    openings.push(o.region);
+                }
+            }
+        }
+        let geometry = CaseGeometry::with_openings(hall, settings.grid_m, &openings)?;
         let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
         let hall_json = json(hall)?;
         let settings_json = json(&settings)?;
         let effects_json = json(&specs)?;
-        let case_key = hash_hex(&[
+        let openings_key = format!("{openings:?}");
+        let mut case_parts: Vec<&[u8]> = vec![
             GENERATOR.as_bytes(),
             hall_json.as_bytes(),
             settings_json.as_bytes(),
-        ]);
+        ];
+        // Without openings the key is the one earlier versions gave, so meshed cases stay.
+        if !openings.is_empty() {
+            case_parts.push(openings_key.as_bytes());
+        }
+        let case_key = hash_hex(&case_parts);
         let fingerprint = format!(
             "{GENERATOR}:{}",
             hash_hex(&[
@@ -118,6 +142,7 @@ impl OpenFoamModel {
             hall: hall.clone(),
             sensor_names: hall.sensors.iter().map(|s| s.id.clone()).collect(),
             geometry,
+            openings,
             effects,
             layout,
             settings,
@@ -153,27 +178,57 @@ impl OpenFoamModel {
             .space()
             .check_physical(params)
             .map_err(|e| ModelError::InvalidParams(e.to_string()))?;
+        let alpha = self.layout.alpha_per_server(params);
+        let values: Vec<&[f64]> = (0..self.effects.len())
+            .map(|e| self.layout.effect_values(params, e))
+            .collect();
+        self.inputs_at(state, &alpha, &values)
+    }
+
+    /// The inputs of one run at per-server `alpha` (cfm/W) and each effect's values.
+    pub fn inputs_at(
+        &self,
+        state: &OperatingState,
+        alpha: &[f64],
+        effect_values: &[&[f64]],
+    ) -> Result<RunInputs, ModelError> {
         if state.power_w.len() != self.geometry.servers.len()
+            || alpha.len() != self.geometry.servers.len()
             || state.setpoint_c.len() != self.hall.cracs.len()
             || state.fan_speed.len() != self.hall.cracs.len()
+            || effect_values.len() != self.effects.len()
         {
             return Err(ModelError::InvalidParams(format!(
-                "snapshot `{}` does not match the hall's servers and CRACs",
+                "snapshot `{}`, alphas or effect values do not match the hall's servers, CRACs and effects",
                 state.label
             )));
         }
-        let alpha = self.layout.alpha_per_server(params);
         let mut mods = SimMods::new(self.hall.cracs.len());
-        for (e, effect) in self.effects.iter().enumerate() {
+        for (effect, values) in self.effects.iter().zip(effect_values) {
             effect
-                .modify(self.layout.effect_values(params, e), &self.hall, &mut mods)
+                .modify(values, &self.hall, &mut mods)
                 .map_err(|err| ModelError::InvalidParams(err.to_string()))?;
+        }
+        let mut opening_share = vec![0.0; self.openings.len()];
+        for o in &mods.supply_openings {
+            let b = self
+                .openings
+                .iter()
+                .position(|r| *r == o.region)
+                .ok_or_else(|| {
+                    ModelError::InvalidParams(format!(
+                        "a supply opening at {:?} that the meshed case does not have",
+                        o.region
+                    ))
+                })?;
+            opening_share[b] += o.share;
         }
         RunInputs::new(
             &self.hall,
             state,
-            &alpha,
+            alpha,
             &mods.supply_offset_c,
+            &opening_share,
             &self.settings,
         )
         .map_err(ModelError::InvalidParams)
@@ -187,7 +242,36 @@ impl OpenFoamModel {
     ) -> Result<(Outputs, RunTimings), ModelError> {
         let t0 = Instant::now();
         let inputs = self.inputs(state, params)?;
-        let key = params.iter().fold(
+        self.solve_inputs(state, params, &inputs, t0)
+    }
+
+    /// Runs one solve at per-server `alpha` (cfm/W) and each effect's values (as a
+    /// diagnosis linearises candidates), returning the outputs and where the time went.
+    pub fn evaluate_at(
+        &self,
+        state: &OperatingState,
+        alpha: &[f64],
+        effect_values: &[&[f64]],
+    ) -> Result<(Outputs, RunTimings), ModelError> {
+        let t0 = Instant::now();
+        let inputs = self.inputs_at(state, alpha, effect_values)?;
+        let key: Vec<f64> = alpha
+            .iter()
+            .chain(effect_values.iter().flat_map(|v| v.iter()))
+            .copied()
+            .collect();
+        self.solve_inputs(state, &key, &inputs, t0)
+    }
+
+    /// Solves `inputs` in a fresh run directory named from `key`'s values.
+    fn solve_inputs(
+        &self,
+        state: &OperatingState,
+        key: &[f64],
+        inputs: &RunInputs,
+        t0: Instant,
+    ) -> Result<(Outputs, RunTimings), ModelError> {
+        let key = key.iter().fold(
             u128::from_str_radix(&self.fingerprint[GENERATOR.len() + 1..], 16).unwrap_or(0),
             |h, p| h.rotate_left(13) ^ u128::from(p.to_bits()),
         );
@@ -195,7 +279,7 @@ impl OpenFoamModel {
             .runs
             .create(&state.label, key)
             .map_err(|e| ModelError::failed(format!("cannot create a run directory: {e}")))?;
-        let mut result = self.run_in(&dir, &inputs, t0);
+        let mut result = self.run_in(&dir, inputs, t0);
         let keep = self.settings.keep_runs || result.is_err();
         if !keep {
             let t3 = Instant::now();
@@ -279,7 +363,13 @@ impl OpenFoamModel {
         let window = probe_window(&text, self.geometry.probes.len(), k * st.average_from, k)
             .map_err(ModelError::failed)?;
         let mut flux_sum = 0.0;
-        for p in self.geometry.tiles.iter().chain(&self.geometry.returns) {
+        for p in self
+            .geometry
+            .tiles
+            .iter()
+            .chain(&self.geometry.openings)
+            .chain(&self.geometry.returns)
+        {
             let f = dir.join(format!(
                 "postProcessing/flux_{}/0/surfaceFieldValue.dat",
                 p.name

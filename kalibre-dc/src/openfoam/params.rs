@@ -25,6 +25,10 @@ pub struct RunInputs {
     pub tile_flow_m3_s: Vec<f64>,
     /// Supply temperature per tile (C).
     pub tile_t_c: Vec<f64>,
+    /// Flow per bypass opening (m3/s), in the geometry's order.
+    pub opening_flow_m3_s: Vec<f64>,
+    /// Supply temperature per bypass opening (C).
+    pub opening_t_c: Vec<f64>,
     /// Initial temperature of the room (C).
     pub t_init_c: f64,
     /// Total server heat (W).
@@ -32,14 +36,24 @@ pub struct RunInputs {
 }
 
 impl RunInputs {
-    /// The inputs of `state` at per-server `alpha` (cfm/W) and per-CRAC supply offset (C).
+    /// The inputs of `state` at per-server `alpha` (cfm/W), per-CRAC supply offset (C)
+    /// and per-opening share of the floor supply (the tiles deliver the rest, split as
+    /// before).
     pub fn new(
         hall: &Hall,
         state: &OperatingState,
         alpha: &[f64],
         supply_offset_c: &[f64],
+        opening_share: &[f64],
         st: &OpenFoamSettings,
     ) -> Result<Self, String> {
+        let open_share: f64 = opening_share.iter().sum();
+        if !(0.0..1.0).contains(&open_share) || opening_share.iter().any(|s| s.is_nan() || *s < 0.0)
+        {
+            return Err(format!(
+                "bypass openings take a share {open_share} of the supply; must be in [0, 1)"
+            ));
+        }
         let mut floor_q = 0.0;
         let mut floor_qt = 0.0;
         for (c, crac) in hall.cracs.iter().enumerate() {
@@ -77,8 +91,13 @@ impl RunInputs {
         Ok(RunInputs {
             server_heat_k_m3_s: state.power_w.iter().map(|p| p / rho_cp).collect(),
             server_flow_m3_s: server_flow,
-            tile_flow_m3_s: weights.iter().map(|w| floor_q * w / w_sum).collect(),
+            tile_flow_m3_s: weights
+                .iter()
+                .map(|w| (1.0 - open_share) * floor_q * w / w_sum)
+                .collect(),
             tile_t_c: vec![supply_t; hall.tiles.len()],
+            opening_flow_m3_s: opening_share.iter().map(|s| s * floor_q).collect(),
+            opening_t_c: vec![supply_t; opening_share.len()],
             t_init_c: supply_t,
             heat_w: state.power_w.iter().sum(),
         })
@@ -100,6 +119,67 @@ impl RunInputs {
         for (t, (q, temp)) in self.tile_flow_m3_s.iter().zip(&self.tile_t_c).enumerate() {
             let _ = writeln!(s, "q_tile{t} {q:.9e};\nt_tile{t} {temp:.9e};");
         }
+        for (b, (q, temp)) in self
+            .opening_flow_m3_s
+            .iter()
+            .zip(&self.opening_t_c)
+            .enumerate()
+        {
+            let _ = writeln!(s, "q_byp{b} {q:.9e};\nt_byp{b} {temp:.9e};");
+        }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn dev() -> (Hall, OperatingState) {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
+        let hall = Hall::load(&dir.join("hall.json")).unwrap();
+        let snaps = crate::snapshots::load_snapshots(&hall, &dir.join("snapshots.csv")).unwrap();
+        (hall, snaps[0].state.clone())
+    }
+
+    /// Mass balance: the openings take their share of the floor supply and the tiles
+    /// deliver the rest, so the total is the CRACs' flow whatever the share.
+    #[test]
+    fn openings_take_their_share_and_the_tiles_the_rest() {
+        let (hall, state) = dev();
+        let alpha = vec![0.15; state.power_w.len()];
+        let st = OpenFoamSettings::default();
+        let plain = RunInputs::new(&hall, &state, &alpha, &[], &[], &st).unwrap();
+        let with = RunInputs::new(&hall, &state, &alpha, &[], &[0.1, 0.05], &st).unwrap();
+        let total =
+            |r: &RunInputs| -> f64 { r.tile_flow_m3_s.iter().chain(&r.opening_flow_m3_s).sum() };
+        let crac: f64 = hall.cracs[0].rated_flow_m3_s * state.fan_speed[0];
+        assert!((total(&plain) - crac).abs() < 1e-12);
+        assert!((total(&with) - crac).abs() < 1e-12);
+        assert!((with.opening_flow_m3_s[0] - 0.1 * crac).abs() < 1e-12);
+        for (a, b) in plain.tile_flow_m3_s.iter().zip(&with.tile_flow_m3_s) {
+            assert!((b - 0.85 * a).abs() < 1e-12);
+        }
+        assert_eq!(with.opening_t_c, vec![state.setpoint_c[0]; 2]);
+        let text = with.render();
+        assert!(
+            text.contains("q_byp1 ") && text.contains("t_byp0 "),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_share_of_the_whole_supply_or_nan_is_refused() {
+        let (hall, state) = dev();
+        let alpha = vec![0.15; state.power_w.len()];
+        let st = OpenFoamSettings::default();
+        for shares in [vec![0.6, 0.4], vec![f64::NAN], vec![-0.1]] {
+            let err = RunInputs::new(&hall, &state, &alpha, &[], &shares, &st).unwrap_err();
+            assert!(
+                err.contains("bypass openings take a share"),
+                "{shares:?}: {err}"
+            );
+        }
     }
 }

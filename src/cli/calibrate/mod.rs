@@ -6,7 +6,7 @@ mod progress;
 mod summary;
 
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use clap::{Args, ValueEnum};
 use kalibre_core::calibrate::Report;
@@ -16,11 +16,12 @@ use kalibre_core::Observe;
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
-use kalibre_dc::openfoam::{OpenFoamError, OpenFoamModel, OpenFoamSettings};
+use kalibre_dc::openfoam::OpenFoamModel;
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
 
 use super::diagnose::Likelihood;
+use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::simulate::sim_config;
 use super::{io_err, with_threads, CliError, CliResult};
 use hall_command::HallCommand;
@@ -161,17 +162,8 @@ pub struct CalibrateArgs {
     /// external program described by --config). The surrogate is the same for all three.
     #[arg(long, value_enum, default_value_t = ModelArg::Builtin)]
     model: ModelArg,
-    /// OpenFOAM: processes per solve; 1 runs serially, more runs decomposePar then
-    /// `mpirun -np N` (set --parallel-runs 1 so solves do not compete for cores).
-    #[arg(long)]
-    np: Option<u32>,
-    /// OpenFOAM: SIMPLE iterations per solve; sensors are averaged over the second half.
-    #[arg(long = "of-iterations")]
-    of_iterations: Option<u32>,
-    /// OpenFOAM: wall-clock limit per solve (s); a solve past it is killed with its whole
-    /// process group and recorded as failed.
-    #[arg(long = "of-timeout-s")]
-    of_timeout_s: Option<f64>,
+    #[command(flatten)]
+    openfoam: OpenFoamArgs,
     /// `--model command`: the model description (`model.toml`, see docs/models.md); its
     /// params must be the hall's calibrated parameters in order and its outputs the
     /// hall's sensors in order.
@@ -274,18 +266,8 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
 
 /// Refuses model options that do not belong to the chosen model.
 fn check_model_flags(args: &CalibrateArgs) -> CliResult {
-    let of_flags = [
-        ("--np", args.np.is_some()),
-        ("--of-iterations", args.of_iterations.is_some()),
-        ("--of-timeout-s", args.of_timeout_s.is_some()),
-    ];
-    if args.model != ModelArg::Openfoam {
-        if let Some((flag, _)) = of_flags.iter().find(|(_, given)| *given) {
-            return Err(CliError::Input(format!(
-                "{flag} is an OpenFOAM option: add --model openfoam"
-            )));
-        }
-    }
+    args.openfoam
+        .refuse_unless(args.model == ModelArg::Openfoam)?;
     match (args.model, &args.config) {
         (ModelArg::Command, None) => Err(CliError::Input(
             "--model command needs --config model.toml (see docs/models.md)".into(),
@@ -294,50 +276,6 @@ fn check_model_flags(args: &CalibrateArgs) -> CliResult {
             Err(CliError::Input("--config is for --model command".into()))
         }
         _ => Ok(()),
-    }
-}
-
-/// The OpenFOAM adapter's settings from the arguments; cases and runs go in OUT/openfoam.
-fn openfoam_settings(args: &CalibrateArgs) -> CliResult<OpenFoamSettings> {
-    let mut s = OpenFoamSettings::default().with_cache_root(args.out.join("openfoam"));
-    if let Some(h) = args.grid_m {
-        s = s.with_grid_m(h);
-    }
-    if let Some(np) = args.np {
-        s = s.with_np(np);
-    }
-    if let Some(k) = args.of_iterations {
-        s = s.with_iterations(k);
-    }
-    if let Some(t) = args.of_timeout_s {
-        if !(t.is_finite() && t > 0.0 && t < 1e9) {
-            return Err(CliError::Input(format!(
-                "--of-timeout-s: {t} is not a positive number of seconds"
-            )));
-        }
-        s = s.with_timeout(Duration::from_secs_f64(t));
-    }
-    s.check().map_err(|e| {
-        CliError::Input(match e {
-            OpenFoamError::Setting { name, reason } => {
-                let flag = match name.as_str() {
-                    "np" => "--np",
-                    "iterations" => "--of-iterations",
-                    "grid_m" => "--grid-m",
-                    "timeout" => "--of-timeout-s",
-                    other => other,
-                };
-                format!("{flag}: {reason}")
-            }
-            e => e.to_string(),
-        })
-    })
-}
-
-fn of_err(e: OpenFoamError) -> CliError {
-    match e {
-        OpenFoamError::Meshing { .. } | OpenFoamError::Io { .. } => CliError::Run(e.to_string()),
-        e => CliError::Input(e.to_string()),
     }
 }
 
@@ -360,7 +298,12 @@ fn calibrate_with_model<'o>(
             Ok((c.report, c.penalty_report))
         }
         ModelArg::Openfoam => {
-            let model = OpenFoamModel::new(&hall, openfoam_settings(args)?).map_err(of_err)?;
+            let model = OpenFoamModel::new(
+                &hall,
+                args.openfoam
+                    .settings(&args.out.join("openfoam"), args.grid_m)?,
+            )
+            .map_err(of_err)?;
             let c = calibrate_hall_model(
                 &hall,
                 snaps,

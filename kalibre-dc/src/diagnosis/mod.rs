@@ -1,6 +1,11 @@
-//! Where a calibrated hall model fails and which physical effect is missing: the
-//! built-in simulator supplies the Jacobians (cheap, whatever model was calibrated), each
-//! effect kind supplies its candidate placements, and `kalibre_core::diagnose` ranks them.
+//! Where a calibrated hall model fails and which physical effect is missing: a solver
+//! supplies the Jacobians (by default the built-in simulator, cheap whatever model was
+//! calibrated; or the calibrated model itself, see [`EffectSolver`]), each effect kind
+//! supplies its candidate placements, and `kalibre_core::diagnose` ranks them.
+
+mod solver;
+
+pub use solver::EffectSolver;
 
 use ndarray::Array2;
 use rayon::prelude::*;
@@ -13,7 +18,7 @@ use kalibre_core::ParamSpace;
 
 use crate::effects::{Effect, EffectRegistry};
 use crate::hall::{EffectSpec, Hall};
-use crate::sim::{SimConfig, Simulator};
+use crate::sim::Simulator;
 use crate::snapshots::{self, HallSnapshot, OperatingState};
 use crate::{Error, ParamLayout, Result};
 
@@ -21,15 +26,15 @@ use crate::{Error, ParamLayout, Result};
 ///
 /// | Name | Default | Meaning |
 /// |---|---|---|
-/// | `sim` | [`SimConfig::default`] | the simulator that supplies the Jacobians |
+/// | `sim` | [`SimConfig::default`] | the built-in simulator, when it supplies the Jacobians ([`diagnose_hall`]) |
 /// | `unit_step` | 0.01 | finite-difference step of calibrated parameters (unit box) |
 /// | `effect_step` | 0.05 | finite-difference step of effect parameters (share of their range) |
-/// | `refine_factor` | 0.5 | the model's own discretisation error, estimated by one more solve per snapshot on a grid this much finer, is each sensor's model uncertainty (no hypothesis earns credit for what the grid alone could produce); none: no such solve |
+/// | `refine_factor` | 0.5 | the model's own discretisation error, estimated by one more solve per snapshot on a grid this much finer, is each sensor's model uncertainty (no hypothesis earns credit for what the grid alone could produce); none: no such solve (nor when the solver offers no finer grid) |
 /// | `diagnose` | [`DiagnoseSettings::default`] | ranking, significance, held-out check |
 #[derive(Debug, Clone)]
 pub struct HallDiagnosisSettings {
-    /// Simulator configuration.
-    pub sim: SimConfig,
+    /// Built-in simulator configuration.
+    pub sim: crate::sim::SimConfig,
     /// Step of calibrated parameters in the unit box.
     pub unit_step: f64,
     /// Step of effect parameters as a share of their range.
@@ -43,7 +48,7 @@ pub struct HallDiagnosisSettings {
 impl Default for HallDiagnosisSettings {
     fn default() -> Self {
         HallDiagnosisSettings {
-            sim: SimConfig::default(),
+            sim: crate::sim::SimConfig::default(),
             unit_step: 0.01,
             effect_step: 0.05,
             refine_factor: Some(0.5),
@@ -60,6 +65,21 @@ pub struct HallDiagnosis {
     /// Per hypothesis (same order as `diagnosis.hypotheses`): the `effects` entry to add,
     /// with the fitted parameter values.
     pub suggestions: Vec<EffectSpec>,
+    /// Candidates that were not tried, and why (a kind the solver cannot represent, or
+    /// a failed run).
+    pub not_tried: Vec<NotTried>,
+}
+
+/// Candidates left out of a diagnosis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NotTried {
+    /// The candidate (`bypass(behind_rack=B3)`), or the kind when every candidate of it
+    /// was left out.
+    pub candidate: String,
+    /// How many candidates this stands for.
+    pub count: usize,
+    /// Why.
+    pub reason: String,
 }
 
 impl HallDiagnosis {
@@ -98,12 +118,20 @@ impl HallDiagnosis {
                 })
             })
             .collect();
-        json!({
+        let mut doc = json!({
             "schema": "kalibre.diagnosis/1",
             "mae_c": self.diagnosis.mae,
             "hypotheses": hyps,
             "unexplained_sensors": unexplained,
-        })
+        });
+        if !self.not_tried.is_empty() {
+            doc["not_tried"] = self
+                .not_tried
+                .iter()
+                .map(|n| json!({"candidate": n.candidate, "count": n.count, "reason": n.reason}))
+                .collect();
+        }
+        doc
     }
 }
 
@@ -154,7 +182,8 @@ struct Job {
 }
 
 /// Diagnoses `hall` at calibrated parameters `params` (in the order of the hall's
-/// [`ParamLayout`], e.g. a report's best parameters) against `snaps`.
+/// [`ParamLayout`], e.g. a report's best parameters) against `snaps`, with the built-in
+/// simulator (`settings.sim`) supplying every solve.
 pub fn diagnose_hall(
     hall: &Hall,
     snaps: &[HallSnapshot],
@@ -162,12 +191,34 @@ pub fn diagnose_hall(
     registry: &EffectRegistry,
     settings: &HallDiagnosisSettings,
 ) -> Result<HallDiagnosis> {
+    let sim = Simulator::new(hall, settings.sim.clone())?;
+    diagnose_hall_with(hall, snaps, params, registry, settings, &sim)
+}
+
+/// As [`diagnose_hall`], with `solver` supplying every solve (`settings.sim` is unused).
+/// Candidates of kinds the solver cannot represent are not tried; a candidate whose run
+/// fails is dropped; both are listed in [`HallDiagnosis::not_tried`]. The base run and
+/// the calibrated parameters' steps must succeed.
+pub fn diagnose_hall_with(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    params: &[f64],
+    registry: &EffectRegistry,
+    settings: &HallDiagnosisSettings,
+    solver: &dyn EffectSolver,
+) -> Result<HallDiagnosis> {
     let obs = snapshots::to_observations(hall, snaps)?;
     let effects = registry.build_all(hall)?;
     let layout = ParamLayout::new(hall, &effects)?;
     let space: &ParamSpace = layout.space();
     space.check_physical(params)?;
-    let sim = Simulator::new(hall, settings.sim.clone())?;
+    if let Some(e) = effects.iter().find(|e| !solver.supports(e.kind())) {
+        return Err(Error::Mismatch(format!(
+            "the hall's effect `{}` cannot be represented by {}",
+            e.kind(),
+            solver.name()
+        )));
+    }
     // A candidate the hall already has (same kind and placement, whatever its parameter
     // values) is no hypothesis: it is calibrated already.
     let present: Vec<EffectSpec> = hall
@@ -176,9 +227,21 @@ pub fn diagnose_hall(
         .zip(&effects)
         .map(|(spec, e)| placement(spec, e.as_ref()))
         .collect();
+    let mut not_tried = Vec::new();
+    for kind in registry.kinds() {
+        let n = registry.get(kind).map_or(0, |f| f.candidates(hall).len());
+        if n > 0 && !solver.supports(kind) {
+            not_tried.push(NotTried {
+                candidate: kind.to_string(),
+                count: n,
+                reason: format!("{} cannot represent it", solver.name()),
+            });
+        }
+    }
     let candidates: Vec<(EffectSpec, Box<dyn Effect>)> = registry
         .kinds()
         .iter()
+        .filter(|k| solver.supports(k))
         .filter_map(|k| registry.get(k))
         .flat_map(|f| f.candidates(hall))
         .map(|spec| registry.build(&spec, hall).map(|e| (spec, e)))
@@ -239,7 +302,7 @@ pub fn diagnose_hall(
         }
     }
     let states: Vec<&OperatingState> = snaps.iter().map(|s| &s.state).collect();
-    let outputs: Vec<Vec<f64>> = jobs
+    let outputs: Vec<Result<Vec<f64>>> = jobs
         .par_iter()
         .map(|job| {
             let mut list: Vec<(&dyn Effect, &[f64])> = effects
@@ -250,12 +313,26 @@ pub fn diagnose_hall(
             if let Some((c, v)) = &job.extra {
                 list.push((candidates[*c].1.as_ref(), v.as_slice()));
             }
-            sim.solve(states[job.snapshot], &job.alpha, &list)
-                .map(|sol| sol.sensor_c().to_vec())
+            solver.solve(states[job.snapshot], &job.alpha, &list)
         })
-        .collect::<Result<_>>()?;
-
+        .collect();
     let per_snap = 1 + steps.len() + candidates.len();
+    // The base and the calibrated parameters' steps are needed; a candidate whose run
+    // failed in any snapshot is dropped.
+    let mut failed: Vec<Option<String>> = vec![None; candidates.len()];
+    let mut outputs_ok: Vec<Vec<f64>> = Vec::with_capacity(outputs.len());
+    for (j, out) in outputs.into_iter().enumerate() {
+        let slot = j % per_snap;
+        match out {
+            Ok(v) => outputs_ok.push(v),
+            Err(e) if slot <= steps.len() => return Err(e),
+            Err(e) => {
+                failed[slot - 1 - steps.len()].get_or_insert(e.to_string());
+                outputs_ok.push(Vec::new());
+            }
+        }
+    }
+    let outputs = outputs_ok;
     let n_out = hall.sensors.len();
     let base: Vec<Vec<f64>> = (0..n_snap).map(|s| outputs[s * per_snap].clone()).collect();
     let column = |s: usize, j: usize, h: f64| -> Vec<f64> {
@@ -284,44 +361,44 @@ pub fn diagnose_hall(
                 "refine_factor must be in (0, 1), got {factor}"
             )));
         }
-        let fine = Simulator::new(
-            hall,
-            SimConfig {
-                cell_m: settings.sim.cell_m * factor,
-                ..settings.sim.clone()
-            },
-        )?;
-        let list: Vec<(&dyn Effect, &[f64])> = effects
-            .iter()
-            .zip(&values0)
-            .map(|(e, v)| (e.as_ref(), v.as_slice()))
-            .collect();
-        let fine_out: Vec<Vec<f64>> = states
-            .par_iter()
-            .map(|st| {
-                fine.solve(st, &alpha0, &list)
-                    .map(|s| s.sensor_c().to_vec())
-            })
-            .collect::<Result<_>>()?;
-        // Rows in the order of the residuals: snapshot-major, measured sensors only.
-        let uncertainty: Vec<f64> = snaps
-            .iter()
-            .enumerate()
-            .flat_map(|(s, snap)| {
-                let (f, b) = (&fine_out[s], &base[s]);
-                snap.sensor_c
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, m)| m.is_some())
-                    .map(move |(k, _)| (f[k] - b[k]).abs())
-            })
-            .collect();
-        residuals = residuals.with_uncertainty(uncertainty)?;
+        if let Some(fine) = solver.refined(factor)? {
+            let list: Vec<(&dyn Effect, &[f64])> = effects
+                .iter()
+                .zip(&values0)
+                .map(|(e, v)| (e.as_ref(), v.as_slice()))
+                .collect();
+            let fine_out: Vec<Vec<f64>> = states
+                .par_iter()
+                .map(|st| fine.solve(st, &alpha0, &list))
+                .collect::<Result<_>>()?;
+            // Rows in the order of the residuals: snapshot-major, measured sensors only.
+            let uncertainty: Vec<f64> = snaps
+                .iter()
+                .enumerate()
+                .flat_map(|(s, snap)| {
+                    let (f, b) = (&fine_out[s], &base[s]);
+                    snap.sensor_c
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, m)| m.is_some())
+                        .map(move |(k, _)| (f[k] - b[k]).abs())
+                })
+                .collect();
+            residuals = residuals.with_uncertainty(uncertainty)?;
+        }
     }
     let mut hypotheses = Vec::with_capacity(candidates.len());
     for (c, (spec, e)) in candidates.iter().enumerate() {
         let ps = e.parameters();
         let name = candidate_name(spec);
+        if let Some(reason) = &failed[c] {
+            not_tried.push(NotTried {
+                candidate: name,
+                count: 1,
+                reason: format!("a run failed: {reason}"),
+            });
+            continue;
+        }
         let hp: Vec<HypothesisParam> = ps
             .iter()
             .map(|p| {
@@ -376,5 +453,6 @@ pub fn diagnose_hall(
     Ok(HallDiagnosis {
         diagnosis,
         suggestions,
+        not_tried,
     })
 }

@@ -1,0 +1,188 @@
+//! The diagnosis over any [`EffectSolver`]: candidates of kinds the solver cannot
+//! represent are listed as not tried, a candidate whose run fails is dropped and listed,
+//! a failed base run is an error, and the built-in simulator through the trait gives the
+//! same diagnosis as `diagnose_hall`.
+
+use kalibre_dc::diagnosis::{
+    diagnose_hall, diagnose_hall_with, EffectSolver, HallDiagnosis, HallDiagnosisSettings,
+};
+use kalibre_dc::effects::{Effect, EffectRegistry};
+use kalibre_dc::sim::Simulator;
+use kalibre_dc::snapshots::OperatingState;
+use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions, Synthesised};
+use kalibre_dc::{Error, HallModel, Result};
+
+/// The built-in simulator, restricted to some kinds, failing some runs.
+struct Restricted {
+    sim: Simulator,
+    kinds: Vec<&'static str>,
+    /// Runs with a `bypass` behind this rack fail.
+    fail_bypass_behind: Option<String>,
+    /// Runs without any effect fail (the base and the calibrated parameters' steps).
+    fail_base: bool,
+}
+
+impl EffectSolver for Restricted {
+    fn name(&self) -> String {
+        "a restricted solver".into()
+    }
+
+    fn supports(&self, kind: &str) -> bool {
+        self.kinds.contains(&kind)
+    }
+
+    fn solve(
+        &self,
+        state: &OperatingState,
+        alpha: &[f64],
+        effects: &[(&dyn Effect, &[f64])],
+    ) -> Result<Vec<f64>> {
+        if self.fail_base && effects.is_empty() {
+            return Err(Error::Simulation("the base run diverged".into()));
+        }
+        for (e, _) in effects {
+            let spec = e.to_spec();
+            if spec.kind == "bypass"
+                && spec.fields.get("behind_rack").and_then(|v| v.as_str())
+                    == self.fail_bypass_behind.as_deref()
+            {
+                return Err(Error::Simulation("the candidate's run diverged".into()));
+            }
+        }
+        EffectSolver::solve(&self.sim, state, alpha, effects)
+    }
+
+    fn refined(&self, factor: f64) -> Result<Option<Box<dyn EffectSolver>>> {
+        self.sim.refined(factor)
+    }
+}
+
+/// `demo` with every CRAC 1 C low, and its true per-type alphas.
+fn demo() -> (Synthesised, Vec<f64>) {
+    let opts = SynthOptions::new(Preset::Demo, 1)
+        .with_noise_c(0.15)
+        .with_effect(parse_effect_arg("crac_supply_offset:offset_c=-1").unwrap());
+    let s = synth::generate(&opts).unwrap();
+    let model = HallModel::new(&s.hall, Default::default()).unwrap();
+    let params: Vec<f64> = model
+        .layout()
+        .space()
+        .names()
+        .iter()
+        .map(|n| s.truth.alpha_type_cfm_per_w[n.trim_start_matches("alpha/")])
+        .collect();
+    (s, params)
+}
+
+fn run(s: &Synthesised, params: &[f64], solver: &dyn EffectSolver) -> Result<HallDiagnosis> {
+    diagnose_hall_with(
+        &s.hall,
+        &s.snapshots,
+        params,
+        &EffectRegistry::builtin(),
+        &HallDiagnosisSettings::default(),
+        solver,
+    )
+}
+
+fn restricted(s: &Synthesised) -> Restricted {
+    Restricted {
+        sim: Simulator::new(&s.hall, Default::default()).unwrap(),
+        kinds: vec!["crac_supply_offset", "bypass"],
+        fail_bypass_behind: None,
+        fail_base: false,
+    }
+}
+
+#[test]
+fn the_simulator_through_the_trait_is_the_default_diagnosis() {
+    let (s, params) = demo();
+    let sim = Simulator::new(&s.hall, Default::default()).unwrap();
+    let a = run(&s, &params, &sim).unwrap();
+    let b = diagnose_hall(
+        &s.hall,
+        &s.snapshots,
+        &params,
+        &EffectRegistry::builtin(),
+        &HallDiagnosisSettings::default(),
+    )
+    .unwrap();
+    assert_eq!(a.to_json(), b.to_json());
+    assert!(a.not_tried.is_empty());
+    assert!(a.to_json().get("not_tried").is_none());
+}
+
+#[test]
+fn unsupported_kinds_and_failed_candidates_are_listed_not_dropped() {
+    let (s, params) = demo();
+    let racks = s.hall.racks.len();
+    let d = run(&s, &params, &restricted(&s)).unwrap();
+    let kinds: Vec<&str> = d.suggestions.iter().map(|e| e.kind.as_str()).collect();
+    assert!(kinds
+        .iter()
+        .all(|k| *k == "crac_supply_offset" || *k == "bypass"));
+    let rr = d
+        .not_tried
+        .iter()
+        .find(|n| n.candidate == "rack_recirculation")
+        .expect("rack_recirculation listed");
+    assert_eq!(rr.count, racks);
+    assert!(rr.reason.contains("a restricted solver"), "{}", rr.reason);
+    // The offset is still found among what was tried.
+    assert_eq!(
+        d.diagnosis.significant().next().map(|h| h.name.as_str()),
+        Some("crac_supply_offset")
+    );
+
+    let rack = s.hall.racks[0].id.clone();
+    let failing = Restricted {
+        fail_bypass_behind: Some(rack.clone()),
+        ..restricted(&s)
+    };
+    let d = run(&s, &params, &failing).unwrap();
+    let name = format!("bypass(behind_rack={rack})");
+    assert!(d.diagnosis.hypotheses.iter().all(|h| h.name != name));
+    let failed = d
+        .not_tried
+        .iter()
+        .find(|n| n.candidate == name)
+        .expect("the failed candidate listed");
+    assert_eq!(failed.count, 1);
+    assert!(failed.reason.contains("diverged"), "{}", failed.reason);
+    let json = d.to_json();
+    assert!(json["not_tried"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|n| n["candidate"] == name.as_str()));
+}
+
+#[test]
+fn a_failed_base_run_is_an_error() {
+    let (s, params) = demo();
+    let failing = Restricted {
+        fail_base: true,
+        ..restricted(&s)
+    };
+    let err = run(&s, &params, &failing).unwrap_err().to_string();
+    assert!(err.contains("the base run diverged"), "{err}");
+}
+
+#[test]
+fn a_hall_effect_the_solver_cannot_represent_is_refused() {
+    let (mut s, params) = demo();
+    s.hall.effects.push(
+        serde_json::from_value(serde_json::json!({
+            "kind": "rack_recirculation",
+            "rack": s.hall.racks[0].id,
+        }))
+        .unwrap(),
+    );
+    let mut p = params;
+    p.push(0.1);
+    let err = run(&s, &p, &restricted(&s)).unwrap_err().to_string();
+    assert!(
+        err.contains("`rack_recirculation` cannot be represented by a restricted solver"),
+        "{err}"
+    );
+}

@@ -1,0 +1,119 @@
+//! Helpers shared by the OpenFOAM test files: the development data, the small test hall
+//! and its OpenFOAM measurements.
+
+#![allow(dead_code)] // each test file uses its own part
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use kalibre_core::Model;
+use kalibre_dc::hall::Hall;
+use kalibre_dc::openfoam::{OpenFoamModel, OpenFoamSettings};
+use kalibre_dc::snapshots::{self, HallSnapshot, OperatingState};
+
+/// True alpha of the development datasets (cfm/W).
+pub const TRUE_ALPHA: [(&str, f64); 3] = [("web", 0.13), ("db", 0.17), ("gpu", 0.12)];
+/// SIMPLE iterations on the small hall (the measurements use the same, so the truth is
+/// exactly reachable).
+pub const SMALL_ITERATIONS: u32 = 400;
+
+/// A development dataset's file.
+pub fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/openfoam")
+        .join(name)
+}
+
+/// Fails (never skips) when OpenFOAM is not installed.
+pub fn require_openfoam() {
+    let found = std::env::var_os("PATH")
+        .map(|p| std::env::split_paths(&p).any(|d| d.join("blockMesh").is_file()))
+        .unwrap_or(false);
+    assert!(
+        found,
+        "OpenFOAM is not installed (`blockMesh` is not in PATH): install it with \
+         `apt-get install -y openfoam` (.ci/run does); these tests do not skip"
+    );
+}
+
+/// A fresh scratch directory for this process.
+pub fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("kalibre-of-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The true alphas for the per-type parameter names.
+pub fn true_params(names: &[String]) -> Vec<f64> {
+    names
+        .iter()
+        .map(|n| {
+            let t = n.trim_start_matches("alpha/");
+            TRUE_ALPHA.iter().find(|(k, _)| *k == t).unwrap().1
+        })
+        .collect()
+}
+
+/// Mean absolute difference.
+pub fn mae(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64
+}
+
+/// The small test hall: the development hall cut to two rows of four racks in a
+/// 6.0 x 4.8 x 2.4 m room (7,120 cells at 0.2 m), snapshots t0 and t1 with the dev
+/// powers, and measurements made by OpenFOAM at the true alphas.
+pub fn small_hall() -> &'static (Hall, Vec<HallSnapshot>) {
+    static HALL: OnceLock<(Hall, Vec<HallSnapshot>)> = OnceLock::new();
+    HALL.get_or_init(|| {
+        let dev = Hall::load(&data("of-dev-clean/hall.json")).unwrap();
+        let dev_snaps =
+            snapshots::load_snapshots(&dev, &data("of-dev-clean/snapshots.csv")).unwrap();
+        let mut h = dev.clone();
+        h.name = "of-test-small".into();
+        h.room.size_m = [6.0, 4.8, 2.4];
+        h.racks.retain(|r| r.position_m[0] < 4.7);
+        h.tiles.retain(|t| t.position_m[0] < 4.7);
+        h.sensors
+            .retain(|s| !s.id.contains("A5") && !s.id.contains("B5"));
+        let hall = Hall::from_json_str(&h.to_json_pretty(), "small hall.json").unwrap();
+        let dev_ids: Vec<String> = dev.servers().map(|s| s.server.id.clone()).collect();
+        let model = OpenFoamModel::new(
+            &hall,
+            OpenFoamSettings::default()
+                .with_iterations(SMALL_ITERATIONS)
+                .with_cache_root(tmp("truth")),
+        )
+        .unwrap();
+        let params = true_params(&model.layout().space().names());
+        let snaps: Vec<HallSnapshot> = dev_snaps[..2]
+            .iter()
+            .map(|s| {
+                let power_w = hall
+                    .servers()
+                    .map(|srv| {
+                        let i = dev_ids.iter().position(|d| *d == srv.server.id).unwrap();
+                        s.state.power_w[i]
+                    })
+                    .collect();
+                let state = OperatingState {
+                    power_w,
+                    ..s.state.clone()
+                };
+                let out = model.evaluate(&state, &params).unwrap();
+                HallSnapshot {
+                    state,
+                    sensor_c: out.values.into_iter().map(Some).collect(),
+                }
+            })
+            .collect();
+        (hall, snaps)
+    })
+}
+
+/// The adapter's settings for the small hall, cases under `root`.
+pub fn small_settings(root: &Path) -> OpenFoamSettings {
+    OpenFoamSettings::default()
+        .with_iterations(SMALL_ITERATIONS)
+        .with_cache_root(root)
+}
