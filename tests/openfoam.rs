@@ -12,9 +12,12 @@ use std::time::{Duration, Instant};
 use kalibre_core::{Model, ModelError, Outputs};
 use kalibre_dc::calibration::HallCalibrationSettings;
 use kalibre_dc::calibration_model::calibrate_hall_model;
-use kalibre_dc::hall::Hall;
-use kalibre_dc::openfoam::{OpenFoamModel, OpenFoamSettings};
+use kalibre_dc::effects::Effect;
+use kalibre_dc::hall::{EffectSpec, Hall};
+use kalibre_dc::openfoam::{OpenFoamModel, OpenFoamSettings, M3_S_PER_CFM};
+use kalibre_dc::sim::SimMods;
 use kalibre_dc::snapshots::{self, OperatingState};
+use kalibre_dc::ParamLayout;
 
 mod openfoam_common;
 use openfoam_common::*;
@@ -95,6 +98,25 @@ fn mae_against_openfoam_data(dataset: &str, hall: &Hall, tag: &str) -> f64 {
     m
 }
 
+/// A dataset's noise-free readings, snapshot-major, in `hall`'s sensor order.
+fn noise_free(hall: &Hall, dataset: &str) -> Vec<f64> {
+    let t: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(data(&format!("{dataset}/truth.json"))).unwrap(),
+    )
+    .unwrap();
+    ["t0", "t1", "t2"]
+        .iter()
+        .flat_map(|snap| {
+            let t = &t;
+            hall.sensors.iter().map(move |s| {
+                t["snapshots"][snap]["sensor_c_noise_free"][&s.id]
+                    .as_f64()
+                    .unwrap()
+            })
+        })
+        .collect()
+}
+
 /// At the true alphas the adapter reproduces the development hall's noise-free OpenFOAM
 /// readings (made with the same solver by another route), with a closed energy balance.
 #[test]
@@ -127,28 +149,73 @@ fn bypass_effect_reproduces_the_openfoam_cutout_data() {
     hall.effects
         .push(serde_json::from_value(entry).expect("an effect entry"));
     let m = mae_against_openfoam_data("of-dev-bypass", &hall, "bypass");
-    let noise_free = |dataset: &str| -> Vec<f64> {
-        let t: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(data(&format!("{dataset}/truth.json"))).unwrap(),
-        )
-        .unwrap();
-        ["t0", "t1", "t2"]
-            .iter()
-            .flat_map(|snap| {
-                let t = &t;
-                hall.sensors.iter().map(move |s| {
-                    t["snapshots"][snap]["sensor_c_noise_free"][&s.id]
-                        .as_f64()
-                        .unwrap()
-                })
-            })
-            .collect()
-    };
-    let footprint = mae(&noise_free("of-dev-clean"), &noise_free("of-dev-bypass"));
+    let footprint = mae(
+        &noise_free(&hall, "of-dev-clean"),
+        &noise_free(&hall, "of-dev-bypass"),
+    );
     eprintln!("the cutout's footprint: {footprint:.3} C; the bypass effect's run: {m:.3} C");
     assert!(m < 0.15, "MAE {m:.3} C against the OpenFOAM cutout data");
     assert!(
         m < 0.25 * footprint,
+        "{m:.3} C against a footprint of {footprint:.3} C"
+    );
+}
+
+/// The `rack_recirculation` effect in the OpenFOAM case: the missing blanking panel of
+/// `of-dev-blanking` written as an effect entry (B4, the slot's band z 1.0-1.2 m, and
+/// its forced flow, drive velocity x slot area, as a fraction of B4's server flow at the
+/// true alphas) reproduces that dataset. The dataset drives air through a real slot; the
+/// effect returns the same flow from B4's rear faces to its front faces in that band.
+#[test]
+fn rack_recirculation_effect_reproduces_the_openfoam_blanking_data() {
+    require_openfoam();
+    let mut hall = Hall::load(&data("of-dev-blanking/hall.json")).unwrap();
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("of-dev-blanking/truth.json")).unwrap())
+            .unwrap();
+    let slot = &truth["hidden_effect"];
+    let z = [
+        slot["slot_z"][0].as_f64().unwrap(),
+        slot["slot_z"][1].as_f64().unwrap(),
+    ];
+    let slot_flow =
+        slot["drive_u_m_s"].as_f64().unwrap() * slot["width_m"].as_f64().unwrap() * (z[1] - z[0]);
+    let snaps = snapshots::load_snapshots(&hall, &data("of-dev-blanking/snapshots.csv")).unwrap();
+    let rack = slot["rack"].as_str().unwrap();
+    let alpha: std::collections::HashMap<&str, f64> = TRUE_ALPHA.into_iter().collect();
+    let rack_flow: f64 = snaps
+        .iter()
+        .map(|s| {
+            hall.servers()
+                .zip(&s.state.power_w)
+                .filter(|(srv, _)| srv.rack.id == rack)
+                .map(|(srv, p)| alpha[srv.server.server_type.as_str()] * p * M3_S_PER_CFM)
+                .sum::<f64>()
+        })
+        .sum::<f64>()
+        / snaps.len() as f64;
+    let fraction = slot_flow / rack_flow;
+    eprintln!(
+        "slot flow {slot_flow:.3} m3/s, {rack} draws {rack_flow:.3} m3/s: fraction {fraction:.3}"
+    );
+    hall.effects.push(
+        serde_json::from_value(serde_json::json!({
+            "kind": "rack_recirculation",
+            "rack": rack,
+            "z_m": z,
+            "fraction": fraction,
+        }))
+        .expect("an effect entry"),
+    );
+    let m = mae_against_openfoam_data("of-dev-blanking", &hall, "blanking");
+    let footprint = mae(
+        &noise_free(&hall, "of-dev-clean"),
+        &noise_free(&hall, "of-dev-blanking"),
+    );
+    eprintln!("the slot's footprint: {footprint:.3} C; the recirculation effect's run: {m:.3} C");
+    assert!(m < 0.15, "MAE {m:.3} C against the OpenFOAM blanking data");
+    assert!(
+        m < 0.5 * footprint,
         "{m:.3} C against a footprint of {footprint:.3} C"
     );
 }
@@ -374,13 +441,25 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
         !solving.is_empty(),
         "no OpenFOAM solve was running at the kill"
     );
-    // The orphaned solve (its own process group) is ours to end.
-    for pid in solver_pids_under(&dir.join("out/openfoam")) {
+    // The solve has its own process group, so the kill does not reach it; the kernel
+    // ends it when kalibre ends (PR_SET_PDEATHSIG), rather than letting it run on.
+    let t = Instant::now();
+    while !solver_pids_under(&dir.join("out/openfoam")).is_empty()
+        && t.elapsed() < Duration::from_secs(20)
+    {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let left = solver_pids_under(&dir.join("out/openfoam"));
+    for pid in &left {
         // SAFETY: kill has no memory effects; these are processes this test started.
         unsafe {
-            libc_kill(pid, 9);
+            libc_kill(*pid, 9);
         }
     }
+    assert!(
+        left.is_empty(),
+        "solver processes outlived kalibre: {left:?}"
+    );
     let before = journal_lines(&journal);
     let done_before = before.len();
     assert!(done_before >= 3, "only {done_before} runs before the kill");
@@ -412,6 +491,37 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
     keys.sort();
     keys.dedup();
     assert_eq!(keys.len(), n, "a run was repeated");
+
+    // `kalibre diagnose` must solve with the model the calibration ran: the built-in
+    // simulator, or OpenFOAM with other settings, is refused before any solve.
+    let diagnose = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_kalibre"))
+            .arg("diagnose")
+            .args(extra)
+            .arg("--hall")
+            .arg(dir.join("hall.json"))
+            .arg("--snapshots")
+            .arg(dir.join("snapshots.csv"))
+            .arg("--calibration")
+            .arg(dir.join("out"))
+            .output()
+            .unwrap()
+    };
+    for (extra, model) in [
+        (&[][..], "builtin"),
+        (
+            &["--model", "openfoam", "--of-iterations", "300"][..],
+            "openfoam",
+        ),
+    ] {
+        let o = diagnose(extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(
+            err.contains("runs of another model") && err.contains(&format!("--model {model}")),
+            "{extra:?}: {err}"
+        );
+    }
 }
 
 extern "C" {
@@ -472,19 +582,35 @@ fn parallel_solve_agrees_with_serial() {
     assert!(timing.energy_balance.is_finite());
 }
 
-/// An effect the case cannot represent is refused by name before anything is meshed.
+/// An effect kind the case cannot represent (here a user's own kind) is refused by name
+/// before anything is meshed.
 #[test]
 fn unsupported_effects_are_refused_by_name() {
-    let mut hall = Hall::load(&data("of-dev-clean/hall.json")).unwrap();
-    hall.effects.push(
-        serde_json::from_value(serde_json::json!({"kind": "rack_recirculation", "rack": "B4"}))
-            .unwrap(),
-    );
-    let err = OpenFoamModel::new(&hall, small_settings(&tmp("unsupported")))
-        .unwrap_err()
-        .to_string();
+    #[derive(Debug)]
+    struct Fog;
+    impl Effect for Fog {
+        fn kind(&self) -> &str {
+            "fog"
+        }
+        fn parameters(&self) -> Vec<kalibre_core::Param> {
+            vec![]
+        }
+        fn to_spec(&self) -> EffectSpec {
+            serde_json::from_value(serde_json::json!({"kind": "fog"})).unwrap()
+        }
+        fn modify(&self, _: &[f64], _: &Hall, _: &mut SimMods) -> kalibre_dc::Result<()> {
+            Ok(())
+        }
+    }
+    let hall = Hall::load(&data("of-dev-clean/hall.json")).unwrap();
+    let effects: Vec<Box<dyn Effect>> = vec![Box::new(Fog)];
+    let layout = ParamLayout::new(&hall, &effects).unwrap();
+    let err =
+        OpenFoamModel::with_layout(&hall, small_settings(&tmp("unsupported")), effects, layout)
+            .unwrap_err()
+            .to_string();
     assert!(
-        err.contains("rack_recirculation") && err.contains("crac_supply_offset, bypass"),
+        err.contains("`fog`") && err.contains("crac_supply_offset, bypass, rack_recirculation"),
         "{err}"
     );
 }

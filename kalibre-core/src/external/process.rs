@@ -113,6 +113,27 @@ pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
     for (k, v) in spec.env {
         cmd.env(k, v);
     }
+    // The run has its own process group, so a Ctrl-C or a kill of kalibre does not reach
+    // it: ask the kernel to send it SIGTERM when the thread that started it ends (this
+    // thread waits for the run, so only kalibre's own end can trigger it). An orphaned
+    // solver would otherwise hold its cores until its end, and its result is lost anyway.
+    #[cfg(target_os = "linux")]
+    {
+        let parent = std::process::id() as libc::pid_t;
+        // SAFETY: only async-signal-safe calls (prctl, getppid, _exit) between fork and exec.
+        unsafe {
+            cmd.pre_exec(move || {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(io::Error::last_os_error());
+                }
+                // kalibre may have ended before the prctl took effect.
+                if libc::getppid() != parent {
+                    libc::_exit(1);
+                }
+                Ok(())
+            });
+        }
+    }
     let start = Instant::now();
     let mut child = cmd.spawn()?;
     let pid = child.id() as libc::pid_t;

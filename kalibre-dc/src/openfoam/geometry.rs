@@ -54,6 +54,37 @@ pub struct ServerPatches {
     pub heat_cells: CellRange,
 }
 
+/// What effects add to the mesh: bypass openings and recirculation gaps.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CaseExtras {
+    /// Extra floor openings (`z` 0 boxes, as the `bypass` effect gives them).
+    pub openings: Vec<Aabb>,
+    /// Recirculation gaps through racks (the `rack_recirculation` effect).
+    pub gaps: Vec<RackGap>,
+}
+
+/// A gap through a rack: `z_m` its height band; when `None` (a gap over the whole
+/// height), one face row near the rack's middle, see [`CaseGeometry::with_extras`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RackGap {
+    /// Index of the rack in `hall.racks`.
+    pub rack: usize,
+    /// Height band (m).
+    pub z_m: Option<[f64; 2]>,
+}
+
+/// A gap's two patches: air leaves the room at the rack's exhaust side and re-enters at
+/// its intake side, at the temperature it left with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GapPatches {
+    /// The gap.
+    pub gap: RackGap,
+    /// Exhaust side (outflow).
+    pub rear: FacePatch,
+    /// Intake side (inflow).
+    pub front: FacePatch,
+}
+
 /// The hall on the grid.
 #[derive(Debug, Clone)]
 pub struct CaseGeometry {
@@ -72,6 +103,8 @@ pub struct CaseGeometry {
     /// Extra floor openings that deliver part of the supply (the `bypass` effect), in the
     /// order given.
     pub openings: Vec<FacePatch>,
+    /// Recirculation gaps through racks, in the order given.
+    pub gaps: Vec<GapPatches>,
     /// Per return grille, hall order.
     pub returns: Vec<FacePatch>,
     /// Probe points (sensor positions), hall order.
@@ -91,14 +124,21 @@ fn geo(field: impl Into<String>, message: impl Into<String>) -> OpenFoamError {
 impl CaseGeometry {
     /// Places `hall` on a grid of cell size `h` (m). Every box edge must lie on a grid line.
     pub fn new(hall: &Hall, h: f64) -> Result<Self, OpenFoamError> {
-        Self::with_openings(hall, h, &[])
+        Self::with_extras(hall, h, &CaseExtras::default())
     }
 
-    /// As [`CaseGeometry::new`], with extra floor openings (`z` 0 boxes, as the `bypass`
-    /// effect gives them) that become inflow patches `byp0`, `byp1`, ... in that order.
-    /// An opening must lie on the grid, on fluid floor, and clear of the tiles and of
-    /// the other openings (a face can belong to one patch only).
-    pub fn with_openings(hall: &Hall, h: f64, openings: &[Aabb]) -> Result<Self, OpenFoamError> {
+    /// As [`CaseGeometry::new`], with what effects add:
+    /// - floor openings become inflow patches `byp0`, `byp1`, ... in order; each must lie
+    ///   on the grid, on fluid floor, clear of the tiles and of the other openings (a face
+    ///   belongs to one patch only);
+    /// - each gap takes its rack's face rows over its band on both sides as patches
+    ///   `rec<r>-out` and `rec<r>-in`, and the rack's servers draw through the rest of
+    ///   their faces; a gap must not split a server's span nor cover it, and a rack has
+    ///   at most one gap. Without a band (a gap over the whole height) it takes one row:
+    ///   the one above the boundary between two servers nearest the rack's middle (the
+    ///   centre of an even release), or the top row when one server fills the rack.
+    pub fn with_extras(hall: &Hall, h: f64, extras: &CaseExtras) -> Result<Self, OpenFoamError> {
+        let openings = &extras.openings;
         if !(h.is_finite() && h > 0.0) {
             return Err(OpenFoamError::Setting {
                 name: "grid_m".into(),
@@ -184,11 +224,60 @@ impl CaseGeometry {
             servers: Vec::new(),
             tiles: Vec::new(),
             openings: Vec::new(),
+            gaps: Vec::new(),
             returns: Vec::new(),
             probes: Vec::new(),
             fluid_cells,
             solid,
         };
+
+        // Face rows [lo, hi) of each gap, per rack.
+        let mut gap_rows: Vec<Option<(usize, usize)>> = vec![None; hall.racks.len()];
+        for (r, gap) in extras.gaps.iter().enumerate() {
+            let field = format!("recirculation gap {r}");
+            let rr = *rack_ranges
+                .get(gap.rack)
+                .ok_or_else(|| geo(&field, format!("no rack {}", gap.rack)))?;
+            let rows = match gap.z_m {
+                // One face row stands for a gap over the whole height: the row above the
+                // boundary between two of the rack's servers nearest the rack's middle
+                // (the centre of an even release; a row cannot split a server), or the
+                // top row when one server fills the rack.
+                None => {
+                    let mid2 = rr.lo[2] + rr.hi[2];
+                    let boundary = hall
+                        .servers()
+                        .filter(|s| s.rack_index == gap.rack)
+                        .map(|s| {
+                            let rack = s.rack;
+                            let units = rack.units.max(1) as f64;
+                            let z0 = rack.position_m[2]
+                                + (s.server.u as f64 - 1.0) / units * rack.size_m[2];
+                            ((z0 / h) - 0.5).ceil().max(0.0) as usize
+                        })
+                        .filter(|k| *k > rr.lo[2] && *k < rr.hi[2])
+                        .min_by_key(|k| (2 * k).abs_diff(mid2));
+                    match boundary {
+                        Some(k) => (k, k + 1),
+                        None => (rr.hi[2] - 1, rr.hi[2]),
+                    }
+                }
+                Some([z0, z1]) => {
+                    let lo = (((z0 / h) - 0.5).ceil().max(0.0) as usize).max(rr.lo[2]);
+                    let hi = (((z1 / h) - 0.5).ceil().max(0.0) as usize).min(rr.hi[2]);
+                    if hi <= lo {
+                        return Err(geo(
+                            &field,
+                            format!("z {z0}-{z1} m holds no {h} m face row of its rack"),
+                        ));
+                    }
+                    (lo, hi)
+                }
+            };
+            if gap_rows[gap.rack].replace(rows).is_some() {
+                return Err(geo(&field, "a second gap in the same rack"));
+            }
+        }
 
         for s in hall.servers() {
             let rack = s.rack;
@@ -206,6 +295,24 @@ impl CaseGeometry {
                     &field,
                     format!("spans z {z0:.3}-{z1:.3} m, less than one {h} m cell face"),
                 ));
+            }
+            let (mut k_lo, mut k_hi) = (k_lo, k_hi);
+            if let Some((g_lo, g_hi)) = gap_rows[s.rack_index] {
+                if g_lo < k_hi && k_lo < g_hi {
+                    if g_lo <= k_lo && g_hi >= k_hi {
+                        return Err(geo(&field, "lies entirely in its rack's recirculation gap"));
+                    } else if g_lo <= k_lo {
+                        k_lo = g_hi;
+                    } else if g_hi >= k_hi {
+                        k_hi = g_lo;
+                    } else {
+                        return Err(geo(
+                            &field,
+                            "its rack's recirculation gap splits the server's span (the OpenFOAM \
+                             case needs the gap at a server's edge)",
+                        ));
+                    }
+                }
             }
             let mut span = rr;
             span.lo[2] = k_lo;
@@ -272,6 +379,21 @@ impl CaseGeometry {
                 ));
             }
             g.openings.push(p);
+        }
+        for (r, gap) in extras.gaps.iter().enumerate() {
+            let field = format!("recirculation gap {r}");
+            let (lo, hi) = gap_rows[gap.rack].expect("rows of every gap");
+            let rack = &hall.racks[gap.rack];
+            let mut span = rack_ranges[gap.rack];
+            span.lo[2] = lo;
+            span.hi[2] = hi;
+            let rear = g.side_patch(&span, rack.inlet.opposite(), format!("rec{r}-out"), &field)?;
+            let front = g.side_patch(&span, rack.inlet, format!("rec{r}-in"), &field)?;
+            g.gaps.push(GapPatches {
+                gap: *gap,
+                rear,
+                front,
+            });
         }
         for (r, ret) in hall.returns.iter().enumerate() {
             let p = g.plane_patch(
@@ -439,6 +561,7 @@ impl CaseGeometry {
             .flat_map(|s| [&s.intake, &s.exhaust])
             .chain(&self.tiles)
             .chain(&self.openings)
+            .chain(self.gaps.iter().flat_map(|g| [&g.rear, &g.front]))
             .chain(&self.returns)
     }
 }
@@ -474,6 +597,62 @@ mod tests {
         assert_eq!(g.probes.len(), 24);
     }
 
+    fn openings(boxes: &[Aabb]) -> CaseExtras {
+        CaseExtras {
+            openings: boxes.to_vec(),
+            gaps: vec![],
+        }
+    }
+
+    #[test]
+    fn a_gap_takes_its_band_from_the_servers_and_refuses_to_split_one() {
+        let hall = dev_hall();
+        let b4 = hall.racks.iter().position(|r| r.id == "B4").unwrap();
+        // The blanking dataset's slot: z 1.0-1.2, at the edge of the upper server.
+        let slot = RackGap {
+            rack: b4,
+            z_m: Some([1.0, 1.2]),
+        };
+        let extras = CaseExtras {
+            openings: vec![],
+            gaps: vec![slot],
+        };
+        let g = CaseGeometry::with_extras(&hall, 0.2, &extras).unwrap();
+        let gp = &g.gaps[0];
+        assert_eq!((gp.rear.faces, gp.front.faces), (3, 3));
+        assert_eq!(
+            (gp.rear.name.as_str(), gp.front.name.as_str()),
+            ("rec0-out", "rec0-in")
+        );
+        // B4's upper server keeps 3 x 4 faces; every other server its 3 x 5.
+        let faces: Vec<usize> = g.servers.iter().map(|s| s.intake.faces).collect();
+        assert_eq!(faces.iter().filter(|f| **f == 12).count(), 1);
+        assert_eq!(faces.iter().filter(|f| **f == 15).count(), 19);
+        // Without a band: the row above the servers' boundary at z 1.0 m, mid-rack.
+        let whole = CaseExtras {
+            openings: vec![],
+            gaps: vec![RackGap {
+                rack: b4,
+                z_m: None,
+            }],
+        };
+        let g = CaseGeometry::with_extras(&hall, 0.2, &whole).unwrap();
+        assert_eq!(g.gaps[0].rear.cells.lo[2], 5);
+        assert_eq!(g.gaps[0].rear.cells.hi[2], 6);
+        // A band inside a server's span would split it.
+        let split = CaseExtras {
+            openings: vec![],
+            gaps: vec![RackGap {
+                rack: b4,
+                z_m: Some([0.4, 0.6]),
+            }],
+        };
+        let err = CaseGeometry::with_extras(&hall, 0.2, &split)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("splits the server's span"), "{err}");
+    }
+
     fn floor_box(x: [f64; 2], y: [f64; 2]) -> Aabb {
         Aabb {
             min: [x[0], y[0], 0.0],
@@ -485,7 +664,7 @@ mod tests {
     fn a_bypass_opening_becomes_a_floor_patch_of_its_own() {
         // The development bypass dataset's cable cutout: x 3.6-4.2, y 4.2-4.6.
         let cut = floor_box([3.6, 4.2], [4.2, 4.6]);
-        let g = CaseGeometry::with_openings(&dev_hall(), 0.2, &[cut]).unwrap();
+        let g = CaseGeometry::with_extras(&dev_hall(), 0.2, &openings(&[cut])).unwrap();
         assert_eq!(g.openings.len(), 1);
         let o = &g.openings[0];
         assert_eq!(
@@ -506,7 +685,7 @@ mod tests {
             [t.position_m[0], t.position_m[0] + 0.2],
             [t.position_m[1], t.position_m[1] + 0.2],
         );
-        let err = CaseGeometry::with_openings(&hall, 0.2, &[on_tile])
+        let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[on_tile]))
             .unwrap_err()
             .to_string();
         assert!(
@@ -514,7 +693,7 @@ mod tests {
             "{err}"
         );
         let cut = floor_box([3.6, 4.2], [4.2, 4.6]);
-        let err = CaseGeometry::with_openings(&hall, 0.2, &[cut, cut])
+        let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[cut, cut]))
             .unwrap_err()
             .to_string();
         assert!(
@@ -523,12 +702,12 @@ mod tests {
         );
         let mut raised = cut;
         raised.max[2] = 0.2;
-        let err = CaseGeometry::with_openings(&hall, 0.2, &[raised])
+        let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[raised]))
             .unwrap_err()
             .to_string();
         assert!(err.contains("not on the floor"), "{err}");
         let off = floor_box([3.65, 4.2], [4.2, 4.6]);
-        let err = CaseGeometry::with_openings(&hall, 0.2, &[off])
+        let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[off]))
             .unwrap_err()
             .to_string();
         assert!(err.contains("not on the 0.2 m grid"), "{err}");

@@ -25,7 +25,9 @@ mod solver;
 use thiserror::Error;
 
 pub use case::{CaseDir, MeshSummary};
-pub use geometry::{CaseGeometry, CellRange, FacePatch, ServerPatches};
+pub use geometry::{
+    CaseExtras, CaseGeometry, CellRange, FacePatch, GapPatches, RackGap, ServerPatches,
+};
 pub use model::{OpenFoamModel, RunTimings, SUPPORTED_EFFECTS};
 pub use params::{RunInputs, M3_S_PER_CFM};
 pub use results::{log_verdict, probe_window, ProbeWindow};

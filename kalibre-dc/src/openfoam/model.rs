@@ -7,19 +7,20 @@ use kalibre_core::external::{log_tail, ProcessEnd, RunDirs};
 use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 
 use super::case::{run_step, which, CaseDir};
-use super::geometry::CaseGeometry;
+use super::geometry::{CaseExtras, CaseGeometry, RackGap};
 use super::params::RunInputs;
 use super::results::{file_tail, last_field_value, log_verdict, probe_window};
 use super::{OpenFoamError, OpenFoamSettings};
 use crate::effects::{Effect, EffectRegistry};
-use crate::hall::{Aabb, Hall};
+use crate::hall::Hall;
 use crate::sim::SimMods;
 use crate::snapshots::OperatingState;
 use crate::ParamLayout;
 
-/// The effect kinds the case can represent: a change of the tiles' temperature, and an
-/// extra floor opening that takes part of the tiles' flow.
-pub const SUPPORTED_EFFECTS: [&str; 2] = ["crac_supply_offset", "bypass"];
+/// The effect kinds the case can represent: a change of the tiles' temperature, an extra
+/// floor opening that takes part of the tiles' flow, and a gap through a rack that
+/// returns part of its exhaust to its intake.
+pub const SUPPORTED_EFFECTS: [&str; 3] = ["crac_supply_offset", "bypass", "rack_recirculation"];
 
 /// Version of the case generator: part of the fingerprint and the case directory name.
 const GENERATOR: &str = "kalibre-dc-openfoam/1";
@@ -29,8 +30,8 @@ const GENERATOR: &str = "kalibre-dc-openfoam/1";
 pub struct OpenFoamModel {
     hall: Hall,
     geometry: CaseGeometry,
-    /// The supply openings' boxes, in the geometry's order (`byp0`, ...).
-    openings: Vec<Aabb>,
+    /// What the effects add to the mesh, in the geometry's order (`byp0`, `rec0`, ...).
+    extras: CaseExtras,
     effects: Vec<Box<dyn Effect>>,
     layout: ParamLayout,
     settings: OpenFoamSettings,
@@ -92,9 +93,9 @@ impl OpenFoamModel {
                 )));
             }
         }
-        // An opening is part of the mesh, so it must be known before any run: each
-        // effect at its parameters' upper bounds shows where its openings are.
-        let mut openings: Vec<Aabb> = Vec::new();
+        // Openings and gaps are part of the mesh, so they must be known before any run:
+        // each effect at its parameters' upper bounds shows where they are.
+        let mut extras = CaseExtras::default();
         for (e, effect) in effects.iter().enumerate() {
             let upper: Vec<f64> = effect.parameters().iter().map(|p| p.upper).collect();
             let mut mods = SimMods::new(hall.cracs.len());
@@ -102,25 +103,34 @@ impl OpenFoamModel {
                 .modify(&upper, hall, &mut mods)
                 .map_err(|err| OpenFoamError::Unsupported(format!("effect {e}: {err}")))?;
             for o in mods.supply_openings {
-                if !openings.contains(&o.region) {
-                    openings.push(o.region);
+                if !extras.openings.contains(&o.region) {
+                    extras.openings.push(o.region);
+                }
+            }
+            for r in mods.rack_recirculation {
+                let gap = RackGap {
+                    rack: r.rack,
+                    z_m: r.z_m,
+                };
+                if !extras.gaps.contains(&gap) {
+                    extras.gaps.push(gap);
                 }
             }
         }
-        let geometry = CaseGeometry::with_openings(hall, settings.grid_m, &openings)?;
+        let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras)?;
         let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
         let hall_json = json(hall)?;
         let settings_json = json(&settings)?;
         let effects_json = json(&specs)?;
-        let openings_key = format!("{openings:?}");
+        let extras_key = format!("{extras:?}");
         let mut case_parts: Vec<&[u8]> = vec![
             GENERATOR.as_bytes(),
             hall_json.as_bytes(),
             settings_json.as_bytes(),
         ];
-        // Without openings the key is the one earlier versions gave, so meshed cases stay.
-        if !openings.is_empty() {
-            case_parts.push(openings_key.as_bytes());
+        // Without extras the key is the one earlier versions gave, so meshed cases stay.
+        if extras != CaseExtras::default() {
+            case_parts.push(extras_key.as_bytes());
         }
         let case_key = hash_hex(&case_parts);
         let fingerprint = format!(
@@ -142,7 +152,7 @@ impl OpenFoamModel {
             hall: hall.clone(),
             sensor_names: hall.sensors.iter().map(|s| s.id.clone()).collect(),
             geometry,
-            openings,
+            extras,
             effects,
             layout,
             settings,
@@ -209,9 +219,10 @@ impl OpenFoamModel {
                 .modify(values, &self.hall, &mut mods)
                 .map_err(|err| ModelError::InvalidParams(err.to_string()))?;
         }
-        let mut opening_share = vec![0.0; self.openings.len()];
+        let mut opening_share = vec![0.0; self.extras.openings.len()];
         for o in &mods.supply_openings {
             let b = self
+                .extras
                 .openings
                 .iter()
                 .position(|r| *r == o.region)
@@ -223,12 +234,32 @@ impl OpenFoamModel {
                 })?;
             opening_share[b] += o.share;
         }
+        let mut gap_fraction: Vec<(usize, f64)> =
+            self.extras.gaps.iter().map(|g| (g.rack, 0.0)).collect();
+        for r in &mods.rack_recirculation {
+            let gap = RackGap {
+                rack: r.rack,
+                z_m: r.z_m,
+            };
+            let i = self
+                .extras
+                .gaps
+                .iter()
+                .position(|g| *g == gap)
+                .ok_or_else(|| {
+                    ModelError::InvalidParams(format!(
+                        "a recirculation gap ({gap:?}) that the meshed case does not have"
+                    ))
+                })?;
+            gap_fraction[i].1 += r.fraction;
+        }
         RunInputs::new(
             &self.hall,
             state,
             alpha,
             &mods.supply_offset_c,
             &opening_share,
+            &gap_fraction,
             &self.settings,
         )
         .map_err(ModelError::InvalidParams)

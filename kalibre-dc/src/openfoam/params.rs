@@ -29,6 +29,8 @@ pub struct RunInputs {
     pub opening_flow_m3_s: Vec<f64>,
     /// Supply temperature per bypass opening (C).
     pub opening_t_c: Vec<f64>,
+    /// Flow through each recirculation gap (m3/s), in the geometry's order.
+    pub gap_flow_m3_s: Vec<f64>,
     /// Initial temperature of the room (C).
     pub t_init_c: f64,
     /// Total server heat (W).
@@ -36,17 +38,26 @@ pub struct RunInputs {
 }
 
 impl RunInputs {
-    /// The inputs of `state` at per-server `alpha` (cfm/W), per-CRAC supply offset (C)
-    /// and per-opening share of the floor supply (the tiles deliver the rest, split as
-    /// before).
+    /// The inputs of `state` at per-server `alpha` (cfm/W), per-CRAC supply offset (C),
+    /// per-opening share of the floor supply (the tiles deliver the rest, split as
+    /// before) and per-gap (rack index, fraction of the rack's server flow).
     pub fn new(
         hall: &Hall,
         state: &OperatingState,
         alpha: &[f64],
         supply_offset_c: &[f64],
         opening_share: &[f64],
+        gap_fraction: &[(usize, f64)],
         st: &OpenFoamSettings,
     ) -> Result<Self, String> {
+        if let Some((_, f)) = gap_fraction
+            .iter()
+            .find(|(_, f)| f.is_nan() || *f < 0.0 || f.is_infinite())
+        {
+            return Err(format!(
+                "a recirculation gap takes a fraction {f} of its rack's flow; must be >= 0"
+            ));
+        }
         let open_share: f64 = opening_share.iter().sum();
         if !(0.0..1.0).contains(&open_share) || opening_share.iter().any(|s| s.is_nan() || *s < 0.0)
         {
@@ -88,6 +99,14 @@ impl RunInputs {
             .map(|(a, p)| a * p * M3_S_PER_CFM)
             .collect();
         let rho_cp = st.rho_kg_m3 * st.cp_j_kgk;
+        let mut rack_flow = vec![0.0; hall.racks.len()];
+        for (s, q) in hall.servers().zip(&server_flow) {
+            rack_flow[s.rack_index] += q;
+        }
+        let gap_flow: Vec<f64> = gap_fraction
+            .iter()
+            .map(|(r, f)| f * rack_flow.get(*r).copied().unwrap_or(0.0))
+            .collect();
         Ok(RunInputs {
             server_heat_k_m3_s: state.power_w.iter().map(|p| p / rho_cp).collect(),
             server_flow_m3_s: server_flow,
@@ -98,6 +117,7 @@ impl RunInputs {
             tile_t_c: vec![supply_t; hall.tiles.len()],
             opening_flow_m3_s: opening_share.iter().map(|s| s * floor_q).collect(),
             opening_t_c: vec![supply_t; opening_share.len()],
+            gap_flow_m3_s: gap_flow,
             t_init_c: supply_t,
             heat_w: state.power_w.iter().sum(),
         })
@@ -127,6 +147,9 @@ impl RunInputs {
         {
             let _ = writeln!(s, "q_byp{b} {q:.9e};\nt_byp{b} {temp:.9e};");
         }
+        for (r, q) in self.gap_flow_m3_s.iter().enumerate() {
+            let _ = writeln!(s, "q_rec{r} {q:.9e};");
+        }
         s
     }
 }
@@ -150,8 +173,8 @@ mod tests {
         let (hall, state) = dev();
         let alpha = vec![0.15; state.power_w.len()];
         let st = OpenFoamSettings::default();
-        let plain = RunInputs::new(&hall, &state, &alpha, &[], &[], &st).unwrap();
-        let with = RunInputs::new(&hall, &state, &alpha, &[], &[0.1, 0.05], &st).unwrap();
+        let plain = RunInputs::new(&hall, &state, &alpha, &[], &[], &[], &st).unwrap();
+        let with = RunInputs::new(&hall, &state, &alpha, &[], &[0.1, 0.05], &[], &st).unwrap();
         let total =
             |r: &RunInputs| -> f64 { r.tile_flow_m3_s.iter().chain(&r.opening_flow_m3_s).sum() };
         let crac: f64 = hall.cracs[0].rated_flow_m3_s * state.fan_speed[0];
@@ -175,7 +198,7 @@ mod tests {
         let alpha = vec![0.15; state.power_w.len()];
         let st = OpenFoamSettings::default();
         for shares in [vec![0.6, 0.4], vec![f64::NAN], vec![-0.1]] {
-            let err = RunInputs::new(&hall, &state, &alpha, &[], &shares, &st).unwrap_err();
+            let err = RunInputs::new(&hall, &state, &alpha, &[], &shares, &[], &st).unwrap_err();
             assert!(
                 err.contains("bypass openings take a share"),
                 "{shares:?}: {err}"
