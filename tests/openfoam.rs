@@ -39,19 +39,7 @@ fn mae_against_openfoam_data(dataset: &str, hall: &Hall, tag: &str) -> f64 {
     let model =
         OpenFoamModel::new(hall, OpenFoamSettings::default().with_cache_root(&dir)).unwrap();
     let space = model.layout().space();
-    // Alphas at the truth, effect parameters at the values the hall gives them.
-    let params: Vec<f64> = space
-        .names()
-        .iter()
-        .zip(space.initial())
-        .map(|(n, init)| {
-            if n.starts_with("alpha/") {
-                true_params(std::slice::from_ref(n))[0]
-            } else {
-                init
-            }
-        })
-        .collect();
+    let params = truth_with_effects(space);
     let results: Vec<_> = std::thread::scope(|s| {
         let handles: Vec<_> = snaps
             .iter()

@@ -80,18 +80,7 @@ fn readings_with(
     let h = Hall::from_json_str(&h.to_json_pretty(), "hall with an effect").unwrap();
     let model = OpenFoamModel::new(&h, settings.clone()).unwrap();
     let space = model.layout().space();
-    let params: Vec<f64> = space
-        .names()
-        .iter()
-        .zip(space.initial())
-        .map(|(n, init)| {
-            if n.starts_with("alpha/") {
-                true_params(std::slice::from_ref(n))[0]
-            } else {
-                init
-            }
-        })
-        .collect();
+    let params = truth_with_effects(space);
     std::thread::scope(|sc| {
         let runs: Vec<_> = snaps
             .iter()

@@ -55,6 +55,22 @@ pub fn true_params(names: &[String]) -> Vec<f64> {
         .collect()
 }
 
+/// Alphas at the truth, effect parameters at the values the hall gives them.
+pub fn truth_with_effects(space: &kalibre_core::ParamSpace) -> Vec<f64> {
+    space
+        .names()
+        .iter()
+        .zip(space.initial())
+        .map(|(n, init)| {
+            if n.starts_with("alpha/") {
+                true_params(std::slice::from_ref(n))[0]
+            } else {
+                init
+            }
+        })
+        .collect()
+}
+
 /// Mean absolute difference.
 pub fn mae(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64

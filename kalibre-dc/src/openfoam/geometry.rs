@@ -248,13 +248,7 @@ impl CaseGeometry {
                     let boundary = hall
                         .servers()
                         .filter(|s| s.rack_index == gap.rack)
-                        .map(|s| {
-                            let rack = s.rack;
-                            let units = rack.units.max(1) as f64;
-                            let z0 = rack.position_m[2]
-                                + (s.server.u as f64 - 1.0) / units * rack.size_m[2];
-                            ((z0 / h) - 0.5).ceil().max(0.0) as usize
-                        })
+                        .map(|s| face_row(server_span_m(&s)[0], h))
                         .filter(|k| *k > rr.lo[2] && *k < rr.hi[2])
                         .min_by_key(|k| (2 * k).abs_diff(mid2));
                     match boundary {
@@ -263,8 +257,8 @@ impl CaseGeometry {
                     }
                 }
                 Some([z0, z1]) => {
-                    let lo = (((z0 / h) - 0.5).ceil().max(0.0) as usize).max(rr.lo[2]);
-                    let hi = (((z1 / h) - 0.5).ceil().max(0.0) as usize).min(rr.hi[2]);
+                    let lo = face_row(z0, h).max(rr.lo[2]);
+                    let hi = face_row(z1, h).min(rr.hi[2]);
                     if hi <= lo {
                         return Err(geo(
                             &field,
@@ -282,13 +276,9 @@ impl CaseGeometry {
         for s in hall.servers() {
             let rack = s.rack;
             let rr = rack_ranges[s.rack_index];
-            let units = rack.units.max(1) as f64;
-            let z0 = rack.position_m[2] + (s.server.u as f64 - 1.0) / units * rack.size_m[2];
-            let z1 = z0 + s.server.height_u as f64 / units * rack.size_m[2];
-            // Faces whose centre height lies in [z0, z1): servers off the grid still get the
-            // faces nearest their span.
-            let k_lo = ((z0 / h) - 0.5).ceil().max(0.0) as usize;
-            let k_hi = (((z1 / h) - 0.5).ceil().max(0.0) as usize).min(rr.hi[2]);
+            let [z0, z1] = server_span_m(&s);
+            let k_lo = face_row(z0, h);
+            let k_hi = face_row(z1, h).min(rr.hi[2]);
             let field = format!("server `{}`", s.server.id);
             if k_hi <= k_lo {
                 return Err(geo(
@@ -564,6 +554,21 @@ impl CaseGeometry {
             .chain(self.gaps.iter().flat_map(|g| [&g.rear, &g.front]))
             .chain(&self.returns)
     }
+}
+
+/// A server's height span `[z0, z1]` (m) from its rack's units.
+fn server_span_m(s: &crate::hall::ServerRef<'_>) -> [f64; 2] {
+    let rack = s.rack;
+    let units = rack.units.max(1) as f64;
+    let z0 = rack.position_m[2] + (s.server.u as f64 - 1.0) / units * rack.size_m[2];
+    [z0, z0 + s.server.height_u as f64 / units * rack.size_m[2]]
+}
+
+/// The first face row whose centre lies at or above `z` (m): a span `[z0, z1)` covers
+/// rows `face_row(z0)..face_row(z1)`, so servers off the grid still get the faces
+/// nearest their span.
+fn face_row(z: f64, h: f64) -> usize {
+    ((z / h) - 0.5).ceil().max(0.0) as usize
 }
 
 /// Whether two cell ranges share a cell.
