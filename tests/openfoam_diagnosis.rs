@@ -159,16 +159,21 @@ fn openfoam_diagnosis_names_the_cutout_and_the_slot_and_nothing_on_the_clean_hal
     };
     ds.diagnose.robust_nu = Some(4.0);
     let registry = EffectRegistry::builtin();
-    let d = diagnose_hall_with(
-        hall,
-        &measured(clean, &cut_values, 11),
-        &alpha,
-        &registry,
-        &ds,
-        &solver,
-    )
-    .unwrap();
-    print("cutout", &d);
+    // The measurements `values` plus noise drawn from `seed`, diagnosed and printed.
+    let diagnose = |label: &str, values: &[Vec<f64>], seed: u64| {
+        let d = diagnose_hall_with(
+            hall,
+            &measured(clean, values, seed),
+            &alpha,
+            &registry,
+            &ds,
+            &solver,
+        )
+        .unwrap();
+        print(label, &d);
+        d
+    };
+    let d = diagnose("cutout", &cut_values, 11);
     let (name, fraction) = top(&d, "fraction").expect("a significant hypothesis");
     assert_eq!(name, "bypass(behind_rack=B3)");
     assert!(
@@ -181,32 +186,14 @@ fn openfoam_diagnosis_names_the_cutout_and_the_slot_and_nothing_on_the_clean_hal
     // Every solve is kept already: the other halls' readings differ, the runs do not.
     let kept = root.join("diagnosis-runs");
     let before = files_in(&kept);
-    let d = diagnose_hall_with(
-        hall,
-        &measured(clean, &slot_values, 13),
-        &alpha,
-        &registry,
-        &ds,
-        &solver,
-    )
-    .unwrap();
-    print("slot", &d);
+    let d = diagnose("slot", &slot_values, 13);
     let (name, fraction) = top(&d, "fraction").expect("a significant hypothesis");
     assert_eq!(name, "rack_recirculation(rack=A2)");
     assert!(
         (0.5 * SLOT_FRACTION..=2.0 * SLOT_FRACTION).contains(&fraction),
         "fitted fraction {fraction}"
     );
-    let d = diagnose_hall_with(
-        hall,
-        &measured(clean, &clean_values, 12),
-        &alpha,
-        &registry,
-        &ds,
-        &solver,
-    )
-    .unwrap();
-    print("clean", &d);
+    let d = diagnose("clean", &clean_values, 12);
     assert_eq!(files_in(&kept), before, "a kept solve was run again");
     assert!(
         d.diagnosis.significant().next().is_none(),

@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use clap::Args;
 use kalibre_core::calibrate::Report;
 use kalibre_core::Model;
-use kalibre_dc::diagnosis::{diagnose_hall_with, EffectSolver, HallDiagnosisSettings};
+use kalibre_dc::diagnosis::{
+    candidates_tried, diagnose_hall_with, EffectSolver, HallDiagnosisSettings,
+};
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::openfoam::{OpenFoamEffectSolver, OpenFoamModel};
@@ -194,14 +196,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         // supply for a bypass), so the linearisation is a secant where it matters.
         settings.unit_step = OPENFOAM_UNIT_STEP;
         settings.effect_step = OPENFOAM_EFFECT_STEP;
-        let registry = EffectRegistry::builtin();
-        let candidates: usize = registry
-            .kinds()
-            .iter()
-            .filter(|k| solver.supports(k))
-            .filter_map(|k| registry.get(k))
-            .map(|f| f.candidates(&hall).len())
-            .sum();
+        let candidates = candidates_tried(&hall, &EffectRegistry::builtin(), solver.as_ref());
         eprintln!(
             "diagnosing with OpenFOAM: {} solves ({} snapshots x (1 base + {} calibrated parameters + {} candidates)); finished solves are kept in {} and reused",
             snaps.len() * (1 + space.dim() + candidates),

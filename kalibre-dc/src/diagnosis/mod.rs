@@ -18,7 +18,7 @@ use kalibre_core::ParamSpace;
 
 use crate::effects::{Effect, EffectRegistry};
 use crate::hall::{EffectSpec, Hall};
-use crate::sim::Simulator;
+use crate::sim::{SimConfig, Simulator};
 use crate::snapshots::{self, HallSnapshot, OperatingState};
 use crate::{Error, ParamLayout, Result};
 
@@ -34,7 +34,7 @@ use crate::{Error, ParamLayout, Result};
 #[derive(Debug, Clone)]
 pub struct HallDiagnosisSettings {
     /// Built-in simulator configuration.
-    pub sim: crate::sim::SimConfig,
+    pub sim: SimConfig,
     /// Step of calibrated parameters in the unit box.
     pub unit_step: f64,
     /// Step of effect parameters as a share of their range.
@@ -48,7 +48,7 @@ pub struct HallDiagnosisSettings {
 impl Default for HallDiagnosisSettings {
     fn default() -> Self {
         HallDiagnosisSettings {
-            sim: crate::sim::SimConfig::default(),
+            sim: SimConfig::default(),
             unit_step: 0.01,
             effect_step: 0.05,
             refine_factor: Some(0.5),
@@ -179,6 +179,22 @@ struct Job {
     alpha: Vec<f64>,
     effects: Vec<Vec<f64>>,
     extra: Option<(usize, Vec<f64>)>,
+}
+
+/// How many candidate placements of `registry`'s kinds `solver` can represent in `hall`:
+/// a diagnosis solves each once per snapshot.
+pub fn candidates_tried(
+    hall: &Hall,
+    registry: &EffectRegistry,
+    solver: &dyn EffectSolver,
+) -> usize {
+    registry
+        .kinds()
+        .iter()
+        .filter(|k| solver.supports(k))
+        .filter_map(|k| registry.get(k))
+        .map(|f| f.candidates(hall).len())
+        .sum()
 }
 
 /// Diagnoses `hall` at calibrated parameters `params` (in the order of the hall's
