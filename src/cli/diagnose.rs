@@ -43,8 +43,9 @@ pub struct DiagnoseArgs {
     /// What solves the calibrated model and each candidate effect: `builtin` (the
     /// built-in simulator, seconds, whatever model was calibrated) or `openfoam` (the
     /// calibration's OpenFOAM model: one solve per snapshot for the base, each calibrated
-    /// parameter and each candidate it can represent, `crac_supply_offset` and `bypass`;
-    /// finished solves are kept in CALIBRATION/openfoam and reused).
+    /// parameter and each candidate it can represent: `crac_supply_offset`, `bypass` and
+    /// `rack_recirculation`; finished solves are kept in CALIBRATION/openfoam and reused;
+    /// use the calibration's --grid-m and OpenFOAM options).
     #[arg(long, value_enum, default_value_t = DiagnoseModel::Builtin)]
     model: DiagnoseModel,
     #[command(flatten)]

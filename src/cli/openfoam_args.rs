@@ -12,14 +12,15 @@ use super::{CliError, CliResult};
 #[derive(Debug, Args)]
 pub struct OpenFoamArgs {
     /// OpenFOAM: processes per solve; 1 runs serially, more runs decomposePar then
-    /// `mpirun -np N` (set --parallel-runs 1 so solves do not compete for cores).
+    /// `mpirun -np N` (then run fewer solves at once so they do not compete for cores:
+    /// `calibrate --parallel-runs 1`, `diagnose --threads 1`).
     #[arg(long)]
     pub np: Option<u32>,
     /// OpenFOAM: SIMPLE iterations per solve; sensors are averaged over the second half.
     #[arg(long = "of-iterations")]
     pub of_iterations: Option<u32>,
     /// OpenFOAM: wall-clock limit per solve (s); a solve past it is killed with its whole
-    /// process group and recorded as failed.
+    /// process group and recorded as failed (a diagnosis leaves that candidate out).
     #[arg(long = "of-timeout-s")]
     pub of_timeout_s: Option<f64>,
 }
