@@ -31,10 +31,7 @@ const CAL_ITERATIONS: usize = 6;
 fn mae_against_openfoam_data(dataset: &str, hall: &Hall, tag: &str) -> f64 {
     let snaps =
         snapshots::load_snapshots(hall, &data(&format!("{dataset}/snapshots.csv"))).unwrap();
-    let truth: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(data(&format!("{dataset}/truth.json"))).unwrap(),
-    )
-    .unwrap();
+    let truth = truth(dataset);
     let dir = tmp(tag);
     let model =
         OpenFoamModel::new(hall, OpenFoamSettings::default().with_cache_root(&dir)).unwrap();
@@ -51,15 +48,7 @@ fn mae_against_openfoam_data(dataset: &str, hall: &Hall, tag: &str) -> f64 {
     let mut all_want = Vec::new();
     for (snap, r) in snaps.iter().zip(results) {
         let (out, timing) = r.unwrap_or_else(|e| panic!("{}: {e}", snap.state.label));
-        let want: Vec<f64> = hall
-            .sensors
-            .iter()
-            .map(|s| {
-                truth["snapshots"][&snap.state.label]["sensor_c_noise_free"][&s.id]
-                    .as_f64()
-                    .unwrap()
-            })
-            .collect();
+        let want = noise_free_at(&truth, hall, &snap.state.label);
         let m = mae(&out.values, &want);
         eprintln!(
             "{dataset} {}: MAE {m:.3} C, energy balance {:+.3} %, solve {:.1} s, kalibre {:.4} s",
@@ -86,23 +75,29 @@ fn mae_against_openfoam_data(dataset: &str, hall: &Hall, tag: &str) -> f64 {
     m
 }
 
-/// A dataset's noise-free readings, snapshot-major, in `hall`'s sensor order.
-fn noise_free(hall: &Hall, dataset: &str) -> Vec<f64> {
-    let t: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(data(&format!("{dataset}/truth.json"))).unwrap(),
-    )
-    .unwrap();
-    ["t0", "t1", "t2"]
+/// One snapshot's noise-free readings in a dataset's truth, in `hall`'s sensor order.
+fn noise_free_at(truth: &serde_json::Value, hall: &Hall, label: &str) -> Vec<f64> {
+    hall.sensors
         .iter()
-        .flat_map(|snap| {
-            let t = &t;
-            hall.sensors.iter().map(move |s| {
-                t["snapshots"][snap]["sensor_c_noise_free"][&s.id]
-                    .as_f64()
-                    .unwrap()
-            })
+        .map(|s| {
+            truth["snapshots"][label]["sensor_c_noise_free"][&s.id]
+                .as_f64()
+                .unwrap()
         })
         .collect()
+}
+
+/// A hidden effect's footprint: the MAE (C) between `dataset`'s noise-free readings and
+/// the clean hall's, over the three snapshots.
+fn footprint_c(hall: &Hall, dataset: &str) -> f64 {
+    let readings = |d: &str| -> Vec<f64> {
+        let t = truth(d);
+        ["t0", "t1", "t2"]
+            .iter()
+            .flat_map(|label| noise_free_at(&t, hall, label))
+            .collect()
+    };
+    mae(&readings("of-dev-clean"), &readings(dataset))
 }
 
 /// At the true alphas the adapter reproduces the development hall's noise-free OpenFOAM
@@ -124,9 +119,7 @@ fn dev_hall_at_true_alpha_matches_the_openfoam_data() {
 fn bypass_effect_reproduces_the_openfoam_cutout_data() {
     require_openfoam();
     let mut hall = Hall::load(&data("of-dev-bypass/hall.json")).unwrap();
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(data("of-dev-bypass/truth.json")).unwrap())
-            .unwrap();
+    let truth = truth("of-dev-bypass");
     let cut = &truth["hidden_effect"];
     let entry = serde_json::json!({
         "kind": "bypass",
@@ -137,10 +130,7 @@ fn bypass_effect_reproduces_the_openfoam_cutout_data() {
     hall.effects
         .push(serde_json::from_value(entry).expect("an effect entry"));
     let m = mae_against_openfoam_data("of-dev-bypass", &hall, "bypass");
-    let footprint = mae(
-        &noise_free(&hall, "of-dev-clean"),
-        &noise_free(&hall, "of-dev-bypass"),
-    );
+    let footprint = footprint_c(&hall, "of-dev-bypass");
     eprintln!("the cutout's footprint: {footprint:.3} C; the bypass effect's run: {m:.3} C");
     assert!(m < 0.15, "MAE {m:.3} C against the OpenFOAM cutout data");
     assert!(
@@ -158,9 +148,7 @@ fn bypass_effect_reproduces_the_openfoam_cutout_data() {
 fn rack_recirculation_effect_reproduces_the_openfoam_blanking_data() {
     require_openfoam();
     let mut hall = Hall::load(&data("of-dev-blanking/hall.json")).unwrap();
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(data("of-dev-blanking/truth.json")).unwrap())
-            .unwrap();
+    let truth = truth("of-dev-blanking");
     let slot = &truth["hidden_effect"];
     let z = [
         slot["slot_z"][0].as_f64().unwrap(),
@@ -196,10 +184,7 @@ fn rack_recirculation_effect_reproduces_the_openfoam_blanking_data() {
         .expect("an effect entry"),
     );
     let m = mae_against_openfoam_data("of-dev-blanking", &hall, "blanking");
-    let footprint = mae(
-        &noise_free(&hall, "of-dev-clean"),
-        &noise_free(&hall, "of-dev-blanking"),
-    );
+    let footprint = footprint_c(&hall, "of-dev-blanking");
     eprintln!("the slot's footprint: {footprint:.3} C; the recirculation effect's run: {m:.3} C");
     assert!(m < 0.15, "MAE {m:.3} C against the OpenFOAM blanking data");
     assert!(

@@ -24,6 +24,13 @@ pub fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// A development dataset's `truth.json`.
+pub fn truth(dataset: &str) -> serde_json::Value {
+    let path = data(&format!("{dataset}/truth.json"));
+    serde_json::from_str(&std::fs::read_to_string(&path).unwrap())
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 /// Fails (never skips) when OpenFOAM is not installed.
 pub fn require_openfoam() {
     let found = std::env::var_os("PATH")
