@@ -33,7 +33,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
 use kalibre::dc::effects::EffectRegistry;
 use kalibre::dc::hall::Hall;
@@ -42,7 +41,9 @@ use serde_json::{json, Value};
 
 #[path = "openfoam_cases/mod.rs"]
 mod openfoam_cases;
-use openfoam_cases::{cases, write_json, CaseData, Dataset, DATASETS, NOISE_C, REMOVED_SENSORS};
+use openfoam_cases::{
+    calibrate_as_cli, cases, write_json, CaseData, Dataset, DATASETS, NOISE_C, REMOVED_SENSORS,
+};
 
 /// A diagnosis setting: `(robust_nu, single_output_check)` over the library's
 /// `DiagnoseSettings::default()`, or none to keep the defaults as they are.
@@ -85,22 +86,7 @@ fn run_case(
     dir: &Path,
     settings: &[&Setting],
 ) -> Result<Value, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    // A journal left by an earlier run would be replayed; start afresh so the result does
-    // not depend on what the work directory held.
-    let journal = dir.join("runs.jsonl");
-    if journal.exists() {
-        std::fs::remove_file(&journal).map_err(|e| format!("{}: {e}", journal.display()))?;
-    }
-    // The CLI's defaults (seed 1, 10 iterations, polish 8 with the built-in model) are
-    // `HallCalibrationSettings::default()`.
-    let cal_settings = HallCalibrationSettings::default();
-    let cal = calibrate_hall(hall, snaps, &cal_settings, Some(&journal), Vec::new())
-        .map_err(|e| format!("calibration: {e}"))?;
-    let report_path = dir.join("report.json");
-    let text =
-        serde_json::to_string_pretty(&cal.report).map_err(|e| format!("report.json: {e}"))?;
-    std::fs::write(&report_path, text).map_err(|e| format!("{}: {e}", report_path.display()))?;
+    let (cal, cal_settings) = calibrate_as_cli(hall, snaps, dir)?;
     let params = cal.report.best.params.values();
     let registry = EffectRegistry::builtin();
     let mut verdicts = Vec::new();

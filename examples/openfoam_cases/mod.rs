@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use kalibre::dc::calibration::{calibrate_hall, HallCalibration, HallCalibrationSettings};
 use kalibre::dc::effects::EffectRegistry;
 use kalibre::dc::hall::Hall;
 use kalibre::dc::snapshots::{self, HallSnapshot};
@@ -53,7 +54,7 @@ pub fn seed(dataset: usize, k: usize, variant: u64) -> u64 {
 }
 
 /// A standard normal draw (Box-Muller; the root package does not depend on `rand_distr`).
-fn gauss(rng: &mut Xoshiro256PlusPlus) -> f64 {
+pub fn gauss(rng: &mut Xoshiro256PlusPlus) -> f64 {
     let u1 = 1.0 - rng.random::<f64>(); // (0, 1]: ln stays finite
     let u2 = rng.random::<f64>();
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
@@ -204,4 +205,32 @@ pub fn write_json(out: &Path, doc: &Value) -> Result<(), String> {
     }
     let text = serde_json::to_string_pretty(doc).map_err(|e| format!("JSON: {e}"))?;
     std::fs::write(out, text).map_err(|e| format!("{}: {e}", out.display()))
+}
+
+/// Calibrates a case as `kalibre calibrate` does by default (built-in simulator, seed 1,
+/// 10 iterations, the polish), with its journal and `report.json` in `dir`; returns the
+/// calibration and its settings. A journal left in `dir` by an earlier run is removed
+/// first, so the result does not depend on what the directory held.
+pub fn calibrate_as_cli(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    dir: &Path,
+) -> Result<(HallCalibration, HallCalibrationSettings), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let journal = dir.join("runs.jsonl");
+    if journal.exists() {
+        std::fs::remove_file(&journal).map_err(|e| format!("{}: {e}", journal.display()))?;
+    }
+    // The CLI's defaults are `HallCalibrationSettings::default()`.
+    let settings = HallCalibrationSettings::default();
+    let cal = calibrate_hall(hall, snaps, &settings, Some(&journal), Vec::new())
+        .map_err(|e| format!("calibration: {e}"))?;
+    let report =
+        serde_json::to_string_pretty(&cal.report).map_err(|e| format!("report.json: {e}"))?;
+    write_text(&dir.join("report.json"), &report)?;
+    Ok((cal, settings))
+}
+
+fn write_text(path: &Path, text: &str) -> Result<(), String> {
+    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
 }

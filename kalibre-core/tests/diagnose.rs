@@ -566,3 +566,43 @@ fn a_hypothesis_that_raises_the_mae_is_not_significant() {
     assert!(h.predicted_mae > d.refit_mae, "{h:?} vs {}", d.refit_mae);
     assert!(!h.significant, "{h:?}");
 }
+
+/// A placement next to the true one, with a footprint of much the same shape, is
+/// reported as a close alternative of the best; unrelated hypotheses are not, and a
+/// clear winner or a clean residual has none.
+#[test]
+fn a_neighbour_with_a_similar_footprint_is_a_close_alternative() {
+    let p = Problem::new(31, 3, 40);
+    // 0.15 rad from `b`: a BIC about 120 x 0.15^2 = 2.7 worse at this amount (0.1 of
+    // a unit column, noise 0.1), short of the 6 of strong evidence.
+    let near: Vec<f64> = (0..p.n)
+        .map(|i| 0.15_f64.cos() * p.b[i] + 0.15_f64.sin() * p.a[i])
+        .collect();
+    let mut hyps = p.hypotheses();
+    hyps.push(hyp("b_near", &[near]));
+    let settings = DiagnoseSettings::new().with_noise_sigma(SIGMA);
+    let d = diagnose(&p.residuals(0.1), &hyps, &settings).unwrap();
+    let best = d
+        .significant()
+        .next()
+        .expect("b or its neighbour is significant");
+    let other = if best.name == "b" { "b_near" } else { "b" };
+    assert!(["b", "b_near"].contains(&best.name.as_str()), "{d:#?}");
+    let close: Vec<&str> = d
+        .close_alternatives()
+        .iter()
+        .map(|h| h.name.as_str())
+        .collect();
+    assert_eq!(close, [other], "{d:#?}");
+    let gap = find(&d, other).delta_bic - best.delta_bic;
+    assert!((0.0..6.0).contains(&gap), "{gap}");
+
+    // A clear winner: at 0.5 of `b` (and no neighbour), `a` and `c` are far behind.
+    let d = diagnose(&p.residuals(0.5), &p.hypotheses(), &settings).unwrap();
+    assert_eq!(d.hypotheses[0].name, "b");
+    assert!(d.close_alternatives().is_empty(), "{d:#?}");
+    // Nothing significant: nothing to be close to.
+    let d = diagnose(&p.residuals(0.0), &p.hypotheses(), &settings).unwrap();
+    assert_eq!(d.significant().count(), 0);
+    assert!(d.close_alternatives().is_empty());
+}

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use kalibre_core::calibrate::Report;
+use kalibre_core::diagnose::{Diagnosis, HypothesisResult, CLOSE_ALTERNATIVE_BIC};
 use kalibre_core::Model;
 use kalibre_dc::diagnosis::{
     candidates_tried, diagnose_hall_with, EffectSolver, HallDiagnosisSettings,
@@ -256,6 +257,9 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             let entry = serde_json::to_string(s).unwrap_or_default();
             println!("    add to hall.json \"effects\": {entry}");
         }
+        if significant.first().is_some_and(|best| best.name == h.name) {
+            print_close_alternatives(&d.diagnosis, h);
+        }
     }
     print_unexplained(&d.diagnosis);
     if !d.not_tried.is_empty() {
@@ -307,6 +311,23 @@ fn write_next_hall(
         path.display(),
         h.name
     )))
+}
+
+/// The hypotheses the data hardly tell from the best one, under it: a neighbouring
+/// placement is often among them, and the place to look is then either.
+fn print_close_alternatives(d: &Diagnosis, best: &HypothesisResult) {
+    let close = d.close_alternatives();
+    if close.is_empty() {
+        return;
+    }
+    let names: Vec<String> = close
+        .iter()
+        .map(|h| format!("{} (BIC {:+.1})", h.name, h.delta_bic - best.delta_bic))
+        .collect();
+    println!(
+        "    the data hardly tell it from (BIC within {CLOSE_ALTERNATIVE_BIC:.0}): {}",
+        names.join(", ")
+    );
 }
 
 /// The sensors no candidate explains: the model's own error there, or a faulty sensor.

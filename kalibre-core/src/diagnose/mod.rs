@@ -89,6 +89,11 @@ use robust::Likelihood;
 /// strong evidence should prefer the bigger change.
 const MODESTY_WINDOW_BIC: f64 = 6.0;
 
+/// How far above the best significant hypothesis's BIC another may lie and still be
+/// reported as a close alternative: 6, as [`MODESTY_WINDOW_BIC`]; below it the evidence
+/// between the two is at most "positive" on the Kass-Raftery scale, not "strong".
+pub const CLOSE_ALTERNATIVE_BIC: f64 = MODESTY_WINDOW_BIC;
+
 /// An output is reported as unexplained when its residuals, after the best explanation,
 /// are this many scales of the likelihood off (RMS over its rows). A Student-t with 4
 /// degrees of freedom puts a residual there about once in 25 rows, so an output that
@@ -144,6 +149,30 @@ impl Diagnosis {
     /// The significant hypotheses, best first (empty: no significant missing effect).
     pub fn significant(&self) -> impl Iterator<Item = &HypothesisResult> {
         self.hypotheses.iter().filter(|h| h.significant)
+    }
+
+    /// The hypotheses the data hardly tell from the best significant one: fitted within
+    /// their range, not inert, and with a BIC less than [`CLOSE_ALTERNATIVE_BIC`] above
+    /// the best's (short of "strong" evidence between the two), best first. Empty when
+    /// nothing is significant. Whether or not each is significant itself, a reader should
+    /// weigh it beside the best: a neighbouring placement with a footprint of much the
+    /// same shape, say.
+    pub fn close_alternatives(&self) -> Vec<&HypothesisResult> {
+        let Some(best) = self.significant().next() else {
+            return Vec::new();
+        };
+        let mut close: Vec<&HypothesisResult> = self
+            .hypotheses
+            .iter()
+            .filter(|h| {
+                h.name != best.name
+                    && h.in_range
+                    && !h.inert
+                    && h.delta_bic < best.delta_bic + CLOSE_ALTERNATIVE_BIC
+            })
+            .collect();
+        close.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+        close
     }
 }
 

@@ -124,6 +124,13 @@ impl HallDiagnosis {
             "hypotheses": hyps,
             "unexplained_sensors": unexplained,
         });
+        let close = self.diagnosis.close_alternatives();
+        if let (Some(best), false) = (self.diagnosis.significant().next(), close.is_empty()) {
+            doc["close_alternatives"] = close
+                .iter()
+                .map(|h| json!({"name": h.name, "bic_above_best": h.delta_bic - best.delta_bic}))
+                .collect();
+        }
         if !self.not_tried.is_empty() {
             doc["not_tried"] = self
                 .not_tried
