@@ -9,7 +9,10 @@
 //!
 //! Options: `--work DIR` (datasets and calibrations, default `out/openfoam_heldout/`),
 //! `--out FILE` (JSON, default `out/openfoam_heldout.json`), `--np N` (OpenFOAM
-//! processes per solve, default 1), `--only NAME[,NAME]` (a subset of the cases).
+//! processes per solve, default 1), `--only NAME[,NAME]` (a subset of the cases),
+//! `--variants N` (default 0: per dataset also N fresh noise draws from the noise-free
+//! readings, and the same draws with 4 seeded random sensors removed, as
+//! `diagnosis_variants` does for the development data; no OpenFOAM solve).
 //!
 //! The development data (`data/openfoam/of-dev-*`) were tuned against: the diagnosis's
 //! settings were chosen on them. These cases were not. Each is written as a dataset in
@@ -26,6 +29,7 @@
 //! effect was hidden, `wrong` when another hypothesis is the top significant one. The
 //! expected name's rank among all hypotheses is recorded too.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -41,7 +45,10 @@ use serde_json::{json, Value};
 
 #[path = "openfoam_cases/mod.rs"]
 mod openfoam_cases;
-use openfoam_cases::{calibrate_as_cli, gauss, write_json, Dataset, NOISE_C};
+use openfoam_cases::{
+    calibrate_as_cli, cases as variant_cases, gauss, write_json, Case, CaseData, Dataset, NOISE_C,
+    REMOVED_SENSORS,
+};
 
 /// One held-out case: true alphas (web, db, gpu in cfm/W), the hidden effect as a
 /// `hall.json` effect entry, and the hypothesis the diagnosis should put on top.
@@ -288,21 +295,21 @@ fn openfoam_readings(
 }
 
 /// Calibrates and diagnoses one dataset as the CLI does by default; the case's record.
-fn evaluate(case: &HeldOut, data: &Dataset, work: &Path) -> Result<Value, String> {
-    let (cal, cal_settings) = calibrate_as_cli(&data.hall, &data.snaps, work)?;
+fn evaluate(
+    case: &HeldOut,
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    footprint_mae_c: &Value,
+    work: &Path,
+) -> Result<Value, String> {
+    let (cal, cal_settings) = calibrate_as_cli(hall, snaps, work)?;
     let params = cal.report.best.params.values();
     let ds = HallDiagnosisSettings {
         sim: cal_settings.sim.clone(),
         ..HallDiagnosisSettings::default()
     };
-    let d = diagnose_hall(
-        &data.hall,
-        &data.snaps,
-        &params,
-        &EffectRegistry::builtin(),
-        &ds,
-    )
-    .map_err(|e| format!("diagnosis: {e}"))?;
+    let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
+        .map_err(|e| format!("diagnosis: {e}"))?;
     let top = d.diagnosis.significant().next();
     let verdict = match (top, case.expected) {
         (None, None) => "pass",
@@ -333,7 +340,7 @@ fn evaluate(case: &HeldOut, data: &Dataset, work: &Path) -> Result<Value, String
         "close_alternatives": d.diagnosis.close_alternatives().iter().map(|h| &h.name).collect::<Vec<_>>(),
         "expected_hypothesis": expected.map(summary),
         "first_three": hyps.iter().take(3).map(summary).collect::<Vec<_>>(),
-        "footprint_mae_c": data.truth["footprint"]["mae_c"],
+        "footprint_mae_c": footprint_mae_c,
         "diagnosis_mae_c": d.diagnosis.mae,
         "calibration": {
             "best_mae_c": cal.report.best.mae_c, "model_runs": cal.report.runs.total,
@@ -347,6 +354,7 @@ struct Options {
     out: PathBuf,
     np: u32,
     only: Option<Vec<String>>,
+    variants: usize,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -355,6 +363,7 @@ fn parse_args() -> Result<Options, String> {
         out: PathBuf::from("out/openfoam_heldout.json"),
         np: 1,
         only: None,
+        variants: 0,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
@@ -372,9 +381,14 @@ fn parse_args() -> Result<Options, String> {
                     .ok_or_else(|| format!("--np needs a whole number >= 1, got `{value}`"))?
             }
             "--only" => o.only = Some(value.split(',').map(str::to_string).collect()),
+            "--variants" => {
+                o.variants = value
+                    .parse()
+                    .map_err(|_| format!("--variants needs a whole number >= 0, got `{value}`"))?
+            }
             _ => {
                 return Err(format!(
-                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES)"
+                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N)"
                 ))
             }
         }
@@ -416,24 +430,47 @@ fn run(o: &Options) -> Result<(), String> {
         {
             continue;
         }
-        let t = Instant::now();
         let dir = o.work.join(case.name);
         let data = dataset(case, i, &dev, &dir, &settings)?;
-        let record = evaluate(case, &data, &dir.join("calibration"))
-            .map_err(|e| format!("{}: {e}", case.name))?;
-        eprintln!(
-            "{}: {} (top {}, expected rank {}), {:.0} s",
-            case.name,
-            record["verdict"].as_str().unwrap_or(""),
-            record["top_significant"]["name"].as_str().unwrap_or("-"),
-            record["expected_rank"],
-            t.elapsed().as_secs_f64()
-        );
-        records.push(record);
+        for variant in variant_cases(o.variants) {
+            let t = Instant::now();
+            // Dataset indices from 100: no noise seed of the development variants recurs.
+            let CaseData {
+                hall,
+                snaps,
+                noise_seed,
+                removed,
+                ..
+            } = data.case(100 + i, variant)?;
+            let work = match variant {
+                Case::Original => dir.join("calibration"),
+                _ => dir.join(variant.slug()),
+            };
+            let footprint = &data.truth["footprint"]["mae_c"];
+            let mut record = evaluate(case, &hall, &snaps, footprint, &work)
+                .map_err(|e| format!("{}, {}: {e}", case.name, variant.label()))?;
+            eprintln!(
+                "{}, {}: {} (top {}, expected rank {}), {:.0} s",
+                case.name,
+                variant.label(),
+                record["verdict"].as_str().unwrap_or(""),
+                record["top_significant"]["name"].as_str().unwrap_or("-"),
+                record["expected_rank"],
+                t.elapsed().as_secs_f64()
+            );
+            record["case"] = json!(variant.label());
+            record["noise_seed"] = json!(noise_seed);
+            record["removed_sensors"] = json!(removed);
+            records.push(record);
+        }
     }
+    let originals: Vec<&Value> = records
+        .iter()
+        .filter(|r| r["case"] == Case::Original.label())
+        .collect();
     println!("| dataset | hidden | footprint C | verdict | top significant (fitted) | close alternatives | expected's rank | calibrated MAE C |");
     println!("|---|---|---|---|---|---|---|---|");
-    for r in &records {
+    for r in &originals {
         let top = match r["top_significant"]["name"].as_str() {
             Some(n) => format!("{n} ({})", r["top_significant"]["fitted"]),
             None => "nothing".into(),
@@ -449,16 +486,53 @@ fn run(o: &Options) -> Result<(), String> {
             r["calibration"]["best_mae_c"].as_f64().unwrap_or(f64::NAN)
         );
     }
-    let count = |v: &str| records.iter().filter(|r| r["verdict"] == v).count();
-    let (pass, miss, wrong) = (count("pass"), count("miss"), count("wrong"));
-    println!(
-        "\npass {pass}, miss {miss}, wrong {wrong} of {}",
-        records.len()
+    let count = |rs: &[&Value], v: &str| rs.iter().filter(|r| r["verdict"] == v).count();
+    let (pass, miss, wrong) = (
+        count(&originals, "pass"),
+        count(&originals, "miss"),
+        count(&originals, "wrong"),
     );
+    println!(
+        "\nas stored: pass {pass}, miss {miss}, wrong {wrong} of {}",
+        originals.len()
+    );
+    let mut summary = Vec::new();
+    if o.variants > 0 {
+        println!("\n| dataset | cases | pass | miss | wrong | wrong names |");
+        println!("|---|---|---|---|---|---|");
+        for case in &all {
+            let rs: Vec<&Value> = records
+                .iter()
+                .filter(|r| r["dataset"] == case.name)
+                .collect();
+            if rs.is_empty() {
+                continue;
+            }
+            let mut wrong: BTreeMap<&str, usize> = BTreeMap::new();
+            let names = rs.iter().filter(|r| r["verdict"] == "wrong");
+            for name in names.filter_map(|r| r["top_significant"]["name"].as_str()) {
+                *wrong.entry(name).or_default() += 1;
+            }
+            let wrong_names: Vec<String> = wrong.iter().map(|(n, c)| format!("{n} x{c}")).collect();
+            let (p, m, w) = (count(&rs, "pass"), count(&rs, "miss"), count(&rs, "wrong"));
+            println!(
+                "| {} | {} | {p} | {m} | {w} | {} |",
+                case.name,
+                rs.len(),
+                wrong_names.join(", ")
+            );
+            summary.push(json!({
+                "dataset": case.name, "cases": rs.len(), "pass": p, "miss": m, "wrong": w,
+                "wrong_names": wrong_names,
+            }));
+        }
+    }
     // No wall times in the JSON: the same options give the same file.
     let doc = json!({
         "experiment": "openfoam_heldout", "noise_c": NOISE_C,
-        "summary": {"pass": pass, "miss": miss, "wrong": wrong},
+        "variants": o.variants, "removed_sensors": REMOVED_SENSORS,
+        "as_stored": {"pass": pass, "miss": miss, "wrong": wrong},
+        "per_dataset": summary,
         "cases": records,
     });
     write_json(&o.out, &doc)?;
