@@ -19,7 +19,8 @@
 //! the formats of `docs/formats.md` (`hall.json` without the effect, `snapshots.csv`,
 //! `truth.json` with the effect entry, the true alphas and the noise-free readings), so
 //! the CLI can be run on it by hand. A dataset already in `--work` is reused: its
-//! OpenFOAM solves (about 30 s each, 3 per dataset) are not repeated.
+//! OpenFOAM solves are not repeated (about 30 s each serially, 12 s at `--np 2`; 3 per
+//! clean dataset, 6 per dataset with an effect: with it and without it, for its footprint).
 //!
 //! Measurements: the development hall's three snapshots (setpoints, fan speeds, powers),
 //! OpenFOAM at the case's true alphas with its effect, 1000 SIMPLE iterations as in the

@@ -227,10 +227,7 @@ pub fn calibrate_as_cli(
         .map_err(|e| format!("calibration: {e}"))?;
     let report =
         serde_json::to_string_pretty(&cal.report).map_err(|e| format!("report.json: {e}"))?;
-    write_text(&dir.join("report.json"), &report)?;
+    let path = dir.join("report.json");
+    std::fs::write(&path, report).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok((cal, settings))
-}
-
-fn write_text(path: &Path, text: &str) -> Result<(), String> {
-    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
 }
