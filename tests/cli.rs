@@ -248,6 +248,11 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     }
     assert!(String::from_utf8_lossy(&o.stdout).contains("parameters identified"));
     assert!(html.contains("one standard deviation (linearised)"));
+    // The built-in model's polish measured the model's own slopes at the best run, and the
+    // spreads say so.
+    assert_eq!(report["uncertainty_slopes"], "model_finite_differences");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("slopes of the spreads"));
+    assert!(html.contains("Spreads linearised with the model's finite differences"));
 
     // Start again, kill once a few runs are journaled, then resume.
     let cut = tmp("cut");

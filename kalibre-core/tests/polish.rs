@@ -5,6 +5,7 @@
 mod common;
 
 use common::*;
+use kalibre_core::calibrate::UncertaintySlopes;
 use kalibre_core::{Calibrator, Report, RunStore, Settings};
 
 fn run(polish: usize, budget: Option<usize>, store: Option<RunStore>) -> (Report, usize) {
@@ -96,4 +97,70 @@ fn polish_runs_replay_from_the_journal() {
     assert_eq!(second.runs.cached, second.runs.total);
     assert_eq!(best_bits(&first), best_bits(&second));
     let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn the_uncertainty_takes_the_models_own_slopes_where_its_runs_measure_them() {
+    // Measurements with +-0.05 of noise, so that the spread is not zero.
+    let noisy = observations_with(&[1.0, 2.0], |id, k, y| {
+        let e = if (id + k) % 2 == 0 { 0.05 } else { -0.05 };
+        (!(id == 1 && k == 3)).then_some(y + e)
+    });
+    let (model, space) = (Poly::new(), space());
+    let report = |polish| {
+        Calibrator::new(&model, QuadSurface::default(), &noisy, &space)
+            .with_settings(Settings {
+                seed: 5,
+                max_iterations: 1,
+                polish_iterations: polish,
+                ..Settings::default()
+            })
+            .run()
+            .unwrap()
+    };
+    let polished = report(10);
+    assert_eq!(
+        polished.uncertainty_slopes,
+        Some(UncertaintySlopes::ModelFiniteDifferences)
+    );
+    // The Gauss-Newton spread from the model's exact Jacobian at the best run (unit box:
+    // a spans 4, b 2.5; the box as a unit prior).
+    let (a, b) = (
+        polished.best.params.get("a").unwrap(),
+        polished.best.params.get("b").unwrap(),
+    );
+    let (mut jtj, mut rss, mut m) = ([[0.0; 2]; 2], 0.0, 0);
+    for snap in noisy.snapshots() {
+        let load = snap.scenario.load;
+        let y = poly_outputs(load, &[a, b]);
+        let slopes = [[load, 1.0], [b, a], [-1.0, 2.0 * load * b], [a, 0.0]];
+        for ((meas, y), g) in snap.measured.iter().zip(&y).zip(slopes) {
+            let Some(meas) = meas else { continue };
+            let g = [g[0] * 4.0, g[1] * 2.5];
+            for i in 0..2 {
+                for j in 0..2 {
+                    jtj[i][j] += g[i] * g[j];
+                }
+            }
+            rss += (y - meas).powi(2);
+            m += 1;
+        }
+    }
+    let s2 = rss / (m - 2) as f64;
+    let f = [
+        [jtj[0][0] / s2 + 1.0, jtj[0][1] / s2],
+        [jtj[1][0] / s2, jtj[1][1] / s2 + 1.0],
+    ];
+    let det = f[0][0] * f[1][1] - f[0][1] * f[1][0];
+    let want = [(f[1][1] / det).sqrt() * 4.0, (f[0][0] / det).sqrt() * 2.5];
+    for (u, w) in polished.uncertainty.iter().zip(want) {
+        let got = u.std.unwrap();
+        assert!((got - w).abs() <= 0.03 * w, "{}: {got} vs {w}", u.name);
+    }
+    // One loop iteration and no polish: five points, too few for a local fit of the
+    // model's runs, so the surrogate's slopes.
+    assert_eq!(
+        report(0).uncertainty_slopes,
+        Some(UncertaintySlopes::Surrogate)
+    );
 }

@@ -12,6 +12,7 @@ mod report;
 mod robust;
 mod runner;
 mod settings;
+mod slopes;
 mod state;
 mod trust;
 mod uncertainty;
@@ -21,6 +22,7 @@ pub use report::{
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
 };
 pub use settings::Settings;
+pub use slopes::UncertaintySlopes;
 pub use uncertainty::{
     ParamUncertainty, CONVERGED_SHIFT_STDS, IDENTIFIED_REL_STD, UNCERTAINTY_MAX_PARAMS,
 };
@@ -447,6 +449,7 @@ where
             self.emit(Event::IterationDone { record: &record });
             history.push(record);
         };
+        let mut model_jacobian = None;
         if st.polish_iterations > 0 && stop != StopReason::TargetError {
             let polish = polish::Polish {
                 runner: &runner,
@@ -458,21 +461,36 @@ where
                 t_start,
             };
             let observers = &self.observers;
-            let records = polish.run(&mut state, iteration, |record| {
+            let (records, jacobian) = polish.run(&mut state, iteration, |record| {
                 for o in observers {
                     o.observe(&Event::IterationDone { record });
                 }
             })?;
             history.extend(records);
+            model_jacobian = jacobian;
         }
         self.emit(Event::Stopped { reason: stop });
 
         // Only once a fit has run: an unfitted surrogate has no slopes to speak of.
-        let uncertainty = match &state.best {
+        let (uncertainty, uncertainty_slopes) = match &state.best {
             Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
-                uncertainty::estimate(&self.surrogate, obs, space, b, st.robust_nu)
+                match slopes::slopes_at(
+                    b,
+                    model_jacobian.as_ref(),
+                    &state,
+                    &self.surrogate,
+                    obs,
+                    space,
+                ) {
+                    Some((jac, source)) => {
+                        let u = uncertainty::estimate(&jac, obs, space, b, st.robust_nu);
+                        let source = (!u.is_empty()).then_some(source);
+                        (u, source)
+                    }
+                    None => (Vec::new(), None),
+                }
             }
-            _ => Vec::new(),
+            _ => (Vec::new(), None),
         };
         let best = state.best.ok_or_else(|| {
             Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
@@ -503,6 +521,7 @@ where
                 params: NamedValues::new(&names, &best.params),
             },
             uncertainty,
+            uncertainty_slopes,
             initial,
             history,
             residuals,

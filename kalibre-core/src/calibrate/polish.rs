@@ -13,6 +13,7 @@ use std::time::Instant;
 use super::report::{Errors, IterationRecord, NamedValues, SnapshotErrors, Timings};
 use super::robust::{residuals, RobustFit};
 use super::runner::{RunResult, Runner};
+use super::slopes::ModelJacobian;
 use super::state::{PointEval, State};
 use super::Settings;
 use crate::diagnose::linalg::lstsq;
@@ -85,11 +86,12 @@ pub(crate) fn record(
 }
 
 /// The model linearised at a point: the point (unit box), its residuals and the
-/// Jacobian's columns (residual change per unit-box step).
+/// Jacobian's columns (the model's change in each measured output per unit-box step).
 struct Linearisation {
     unit: Vec<f64>,
     residuals: Vec<f64>,
     columns: Vec<Vec<f64>>,
+    complete: bool,
 }
 
 /// The polish stage's context: what it runs and scores with.
@@ -115,13 +117,14 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
     }
 
     /// Runs up to `settings.polish_iterations` damped Gauss-Newton steps from the best
-    /// point, numbering them after `last_iteration`; returns their history records.
+    /// point, numbering them after `last_iteration`; returns their history records and
+    /// the model's last finite-difference Jacobian (the uncertainty's slopes).
     pub(crate) fn run(
         &self,
         state: &mut State,
         last_iteration: usize,
         mut emit: impl FnMut(&IterationRecord),
-    ) -> Result<Vec<IterationRecord>> {
+    ) -> Result<(Vec<IterationRecord>, Option<ModelJacobian>)> {
         let (obs, space) = (self.observations, self.space);
         let n_snap = obs.snapshots().len();
         let dim = space.dim();
@@ -163,6 +166,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 let results = self.runner.run(iteration, &phys)?;
                 model_s += t.elapsed().as_secs_f64();
                 let mut cols = Vec::with_capacity(dim);
+                let mut complete = true;
                 for (i, res) in results.into_iter().enumerate() {
                     let ok: Option<Vec<Vec<f64>>> = res
                         .iter()
@@ -175,7 +179,10 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                             .zip(&r0)
                             .map(|(r, r0)| (r0 - r) / steps[i])
                             .collect(),
-                        None => vec![0.0; r0.len()],
+                        None => {
+                            complete = false;
+                            vec![0.0; r0.len()]
+                        }
                     };
                     cols.push(col);
                     state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res);
@@ -184,12 +191,14 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                     unit: u0,
                     residuals: r0,
                     columns: cols,
+                    complete,
                 });
             }
             let Some(Linearisation {
                 unit: u0,
                 residuals: r0,
                 columns: cols,
+                ..
             }) = jac.as_ref()
             else {
                 break;
@@ -277,7 +286,12 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             emit(&rec);
             records.push(rec);
         }
-        Ok(records)
+        let model_jacobian = jac.map(|l| ModelJacobian {
+            unit: l.unit,
+            columns: l.columns,
+            complete: l.complete,
+        });
+        Ok((records, model_jacobian))
     }
 
     /// The Levenberg-Marquardt step in the unit box: `min |r0 - J d|^2 + lambda sum_j

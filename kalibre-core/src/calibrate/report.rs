@@ -277,6 +277,11 @@ pub struct Report {
     /// no fit ran). Missing in older reports: empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub uncertainty: Vec<super::ParamUncertainty>,
+    /// Which slopes `uncertainty` was computed with (the model's own where its runs
+    /// measure them, else the surrogate's). Missing in older reports and without an
+    /// uncertainty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty_slopes: Option<super::UncertaintySlopes>,
     /// The model at the initial values.
     pub initial: Initial,
     /// One record per four-step iteration.

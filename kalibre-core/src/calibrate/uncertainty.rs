@@ -2,10 +2,11 @@
 //! deviation per parameter at the best run, so that a report does not claim a value the
 //! data cannot tell apart from its neighbours.
 //!
-//! The Jacobian of the outputs is the last fitted surrogate's at the best run, by central
-//! differences in the unit box. (Not the output-corrected one: its linear term spreads
-//! the discrepancy between runs over every coordinate they differ in, so a parameter the
-//! model ignores would pick up a slope.) With
+//! The Jacobian of the outputs at the best run is the model's own where its runs measure
+//! it (the polish's finite differences, or a local fit of the loop's runs), else the last
+//! fitted surrogate's ([`super::slopes`]; not the output-corrected surrogate: its linear
+//! term spreads the discrepancy between runs over every coordinate they differ in, so a
+//! parameter the model ignores would pick up a slope). With
 //! `J` over every measured output of every snapshot, residual variance
 //! `s2 = |r|^2 / max(m - d, 1)` at the best run (noise and model error alike, so the
 //! figure is conservative) and `F = J^T J / s2 + I` (the box as a prior: one standard
@@ -14,6 +15,11 @@
 //! parameter the outputs do not move, or one whose effect another parameter's can
 //! replace, gets a large one. The search's regulariser (a domain prior such as the
 //! rise penalty) is left out: the question is what the data say.
+//!
+//! The residual variance counts each output's residuals over the snapshots as fewer
+//! independent ones when they repeat (Kish's design effect, [`design_effect`]): a model
+//! error at a sensor recurs in every snapshot, and three snapshots of it are not three
+//! measurements.
 //!
 //! A small spread is only half of a claim: the best run must also sit where the data
 //! point. The Gauss-Newton step from the best run, `-F^-1 J^T r / s2` (the `shift`), says
@@ -31,7 +37,7 @@ use serde::{Deserialize, Serialize};
 use super::robust::{residuals, RobustFit};
 use super::state::BestPoint;
 use crate::search::{cholesky, cholesky_solve};
-use crate::{Observations, ParamSpace, Surrogate};
+use crate::{Observations, ParamSpace};
 
 /// A parameter counts as identified when one standard deviation is at most this fraction
 /// of its value (or, for a value of zero, of its range).
@@ -44,8 +50,6 @@ const FREE_STD_UNIT: f64 = 0.5;
 /// A parameter whose Gauss-Newton shift exceeds this many standard deviations is not at
 /// the data's optimum, so its value is not claimed.
 pub const CONVERGED_SHIFT_STDS: f64 = 2.0;
-/// Central-difference step in the unit box.
-const STEP_UNIT: f64 = 1e-3;
 
 /// How well the measurements determine one parameter at the best run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -89,51 +93,31 @@ impl ParamUncertainty {
     }
 }
 
-/// The uncertainty of every parameter at `best`; empty when the Jacobian is not finite.
-pub(crate) fn estimate<Su: Surrogate>(
-    surrogate: &Su,
-    obs: &Observations<Su::Scenario>,
+/// The uncertainty of every parameter at `best` from the Jacobian's columns `jac` (one
+/// per parameter, rows as the residuals, unit box; [`super::slopes`]); empty when they
+/// do not match the residuals or are not finite.
+pub(crate) fn estimate<S>(
+    jac: &[Vec<f64>],
+    obs: &Observations<S>,
     space: &ParamSpace,
     best: &BestPoint,
     robust_nu: Option<f64>,
 ) -> Vec<ParamUncertainty> {
     let d = space.dim();
-    let predict = |unit: &[f64]| -> Option<Vec<f64>> {
-        let params = space.from_unit(unit).ok()?;
-        let mut out = Vec::new();
-        for snap in obs.snapshots() {
-            let pred = surrogate.predict(&snap.scenario, &params);
-            for (o, m) in snap.measured.iter().enumerate() {
-                if m.is_some() {
-                    out.push(*pred.get(o)?);
-                }
-            }
-        }
-        Some(out)
-    };
     // Model minus measurement (negation is exact: `y - m` bit for bit).
     let residual: Vec<f64> = residuals(obs, &best.outputs).iter().map(|r| -r).collect();
     let m = residual.len();
-    // Columns of J, one per parameter.
-    let mut jac: Vec<Vec<f64>> = Vec::with_capacity(d);
-    for i in 0..d {
-        let (mut lo, mut hi) = (best.unit.clone(), best.unit.clone());
-        lo[i] = (lo[i] - STEP_UNIT).max(0.0);
-        hi[i] = (hi[i] + STEP_UNIT).min(1.0);
-        let (Some(plo), Some(phi)) = (predict(&lo), predict(&hi)) else {
-            return Vec::new();
-        };
-        let h = hi[i] - lo[i];
-        let col: Vec<f64> = phi.iter().zip(&plo).map(|(a, b)| (a - b) / h).collect();
-        if col.len() != m || col.iter().any(|v| !v.is_finite()) {
-            return Vec::new();
-        }
-        jac.push(col);
+    if jac.len() != d
+        || jac
+            .iter()
+            .any(|c| c.len() != m || c.iter().any(|v| !v.is_finite()))
+    {
+        return Vec::new();
     }
     // Under a Student-t: the information per row is `(nu + 1) / (nu + 3)` over its scale
     // squared, and each residual pulls with its IRLS weight.
     let robust = robust_nu.and_then(|nu| RobustFit::new(nu, &residual));
-    let (s2, pull): (f64, Vec<f64>) = match &robust {
+    let (s2_row, pull): (f64, Vec<f64>) = match &robust {
         None => (
             (residual.iter().map(|r| r * r).sum::<f64>() / m.saturating_sub(d).max(1) as f64)
                 .max(1e-24), // a perfect fit: every parameter the outputs move is pinned down
@@ -147,6 +131,9 @@ pub(crate) fn estimate<Su: Surrogate>(
                 .collect(),
         ),
     };
+    // Residuals of one output over the snapshots are not independent when the model
+    // errs there the same way each time: count them as fewer (the design effect).
+    let s2 = s2_row * design_effect(obs, &residual);
     let mut fisher = vec![0.0; d * d];
     for i in 0..d {
         for j in 0..=i {
@@ -202,10 +189,56 @@ pub(crate) fn estimate<Su: Surrogate>(
         .collect()
 }
 
+/// Kish's design effect `1 + (n0 - 1) rho` of the residuals grouped by output (each
+/// output's residuals over the snapshots are one cluster): `rho` the one-way ANOVA
+/// intra-class correlation, clipped to [0, 1], `n0` the ANOVA's mean cluster size. 1 for
+/// independent residuals (noise), up to the number of snapshots when each output's
+/// residual repeats in every snapshot (a model error the parameters cannot remove), so
+/// that the spread is not claimed as if every snapshot were a fresh measurement of it.
+pub(crate) fn design_effect<S>(obs: &Observations<S>, residual: &[f64]) -> f64 {
+    let n_out = obs.outputs().len();
+    let mut groups: Vec<Vec<f64>> = vec![Vec::new(); n_out];
+    let mut row = 0;
+    for snap in obs.snapshots() {
+        for (o, m) in snap.measured.iter().enumerate() {
+            if m.is_some() {
+                match residual.get(row) {
+                    Some(r) => groups[o].push(*r),
+                    None => return 1.0,
+                }
+                row += 1;
+            }
+        }
+    }
+    groups.retain(|g| !g.is_empty());
+    let n = row as f64;
+    let c = groups.len() as f64;
+    if row != residual.len() || groups.len() < 2 || n <= c {
+        return 1.0;
+    }
+    let grand = residual.iter().sum::<f64>() / n;
+    let (mut ssb, mut ssw, mut sum_n2) = (0.0, 0.0, 0.0);
+    for g in &groups {
+        let k = g.len() as f64;
+        let mean = g.iter().sum::<f64>() / k;
+        ssb += k * (mean - grand).powi(2);
+        ssw += g.iter().map(|r| (r - mean).powi(2)).sum::<f64>();
+        sum_n2 += k * k;
+    }
+    let (msb, msw) = (ssb / (c - 1.0), ssw / (n - c));
+    let n0 = (n - sum_n2 / n) / (c - 1.0);
+    let denom = msb + (n0 - 1.0) * msw;
+    if denom.is_nan() || denom <= 0.0 {
+        return 1.0;
+    }
+    let rho = ((msb - msw) / denom).clamp(0.0, 1.0);
+    1.0 + (n0 - 1.0).max(0.0) * rho
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{FitSummary, OutputInfo, Scale, Snapshot, TrainingSet};
+    use crate::{FitSummary, OutputInfo, Scale, Snapshot, Surrogate, TrainingSet};
 
     /// `y_k = sum_i J_ki * u_i` in the unit box: a surrogate whose slopes are the model's.
     struct Linear {
@@ -268,6 +301,15 @@ mod tests {
         (surrogate, obs, space)
     }
 
+    fn slopes(
+        s: &Linear,
+        obs: &Observations<()>,
+        space: &ParamSpace,
+        unit: [f64; 2],
+    ) -> Vec<Vec<f64>> {
+        super::super::slopes::surrogate_slopes(s, obs, space, &unit).unwrap()
+    }
+
     fn best_at(surrogate: &Linear, unit: [f64; 2]) -> BestPoint {
         BestPoint {
             iteration: 1,
@@ -282,7 +324,13 @@ mod tests {
     #[test]
     fn a_best_run_at_the_data_optimum_is_claimed_with_a_small_shift() {
         let (s, obs, space) = setup([0.6, 0.4]);
-        let u = estimate(&s, &obs, &space, &best_at(&s, [0.6, 0.4]), None);
+        let u = estimate(
+            &slopes(&s, &obs, &space, [0.6, 0.4]),
+            &obs,
+            &space,
+            &best_at(&s, [0.6, 0.4]),
+            None,
+        );
         assert_eq!(u.len(), 2);
         for p in &u {
             let (std, shift) = (p.std.unwrap(), p.shift.unwrap());
@@ -296,7 +344,13 @@ mod tests {
         // Best run 0.1 short in p: the residual is no longer noise, yet the outputs still
         // pin p down to a few percent.
         let (s, obs, space) = setup([0.6, 0.4]);
-        let u = estimate(&s, &obs, &space, &best_at(&s, [0.5, 0.4]), None);
+        let u = estimate(
+            &slopes(&s, &obs, &space, [0.5, 0.4]),
+            &obs,
+            &space,
+            &best_at(&s, [0.5, 0.4]),
+            None,
+        );
         let p = &u[0];
         assert!(p.rel_std.unwrap() <= IDENTIFIED_REL_STD, "{p:?}");
         assert!(!p.identified, "{p:?}");
@@ -304,5 +358,44 @@ mod tests {
         // box prior and the noise).
         assert!((p.value + p.shift.unwrap() - 0.6).abs() < 0.01, "{p:?}");
         assert!(p.shift.unwrap().abs() > CONVERGED_SHIFT_STDS * p.std.unwrap());
+    }
+
+    /// Four outputs over three snapshots with the given residual per (snapshot, output).
+    fn three_snapshots(residual: impl Fn(usize, usize) -> f64) -> (Observations<()>, Vec<f64>) {
+        let outputs = (0..4)
+            .map(|k| OutputInfo {
+                name: format!("s{k}"),
+                group: "all".into(),
+            })
+            .collect();
+        let snaps = (0..3)
+            .map(|t| Snapshot {
+                label: format!("t{t}"),
+                scenario: (),
+                measured: vec![Some(0.0); 4],
+            })
+            .collect();
+        let rows = (0..3)
+            .flat_map(|t| (0..4).map(move |o| (t, o)))
+            .map(|(t, o)| residual(t, o))
+            .collect();
+        (Observations::new(outputs, snaps).unwrap(), rows)
+    }
+
+    #[test]
+    fn the_design_effect_counts_a_repeated_residual_once_and_noise_in_full() {
+        // The same residual at an output in every snapshot: three rows, one measurement.
+        let (obs, r) = three_snapshots(|_, o| [0.5, -1.0, 2.0, 0.1][o]);
+        assert!((design_effect(&obs, &r) - 3.0).abs() < 1e-12);
+        // Residuals that average out within each output: independent rows.
+        let (obs, r) = three_snapshots(|t, o| [1.0, -1.0, 0.0][t] * (1.0 + o as f64));
+        assert_eq!(design_effect(&obs, &r), 1.0);
+        // Half and half: in between.
+        let (obs, r) = three_snapshots(|t, o| [0.5, -1.0, 2.0, 0.1][o] + [0.3, -0.3, 0.0][t]);
+        let deff = design_effect(&obs, &r);
+        assert!(deff > 1.0 && deff < 3.0, "{deff}");
+        // One snapshot: nothing repeats.
+        let (_, obs, _) = setup([0.6, 0.4]);
+        assert_eq!(design_effect(&obs, &[0.3; 40]), 1.0);
     }
 }

@@ -221,6 +221,13 @@ pub fn calibration_html(
         );
     }
     h.push_str("</table>");
+    if let Some(src) = report.uncertainty_slopes {
+        let _ = write!(
+            h,
+            "<p>Spreads linearised with {} at the best run.</p>",
+            src.describe()
+        );
+    }
     h.push_str("<h2>Residuals per sensor</h2><table><tr><th>sensor</th><th>aisle</th>");
     for s in snaps {
         let _ = write!(h, "<th>{} (C)</th>", esc(&s.state.label));

@@ -36,6 +36,9 @@ fn print_uncertainty(report: &Report) {
         100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD,
         kalibre_core::calibrate::CONVERGED_SHIFT_STDS
     );
+    if let Some(src) = report.uncertainty_slopes {
+        println!("  {:<28} {}", "slopes of the spreads", src.describe());
+    }
     if !poor.is_empty() {
         const SHOWN: usize = 8;
         let more = poor.len().saturating_sub(SHOWN);
