@@ -5,7 +5,7 @@
 mod common;
 
 use common::*;
-use kalibre_core::calibrate::UncertaintySlopes;
+use kalibre_core::calibrate::{UncertaintySlopes, REPEATED_RESIDUAL_ICC};
 use kalibre_core::{Calibrator, Report, RunStore, Settings};
 
 fn run(polish: usize, budget: Option<usize>, store: Option<RunStore>) -> (Report, usize) {
@@ -163,4 +163,35 @@ fn the_uncertainty_takes_the_models_own_slopes_where_its_runs_measure_them() {
         report(0).uncertainty_slopes,
         Some(UncertaintySlopes::Surrogate)
     );
+}
+
+#[test]
+fn the_report_says_when_the_residual_repeats_at_the_same_outputs() {
+    let (model, space) = (Poly::new(), space());
+    let icc = |obs: &kalibre_core::Observations<Scen>| {
+        Calibrator::new(&model, QuadSurface::default(), obs, &space)
+            .with_settings(Settings {
+                seed: 5,
+                max_iterations: 2,
+                polish_iterations: 10,
+                ..Settings::default()
+            })
+            .run()
+            .unwrap()
+            .residual_icc
+            .expect("two snapshots")
+    };
+    // Each output off by its own amount in both snapshots: a model error.
+    let repeated = observations_with(&[1.0, 2.0], |id, k, y| {
+        (!(id == 1 && k == 3)).then_some(y + [0.3, -0.2, 0.25, -0.3][k])
+    });
+    let r = icc(&repeated);
+    assert!(r > REPEATED_RESIDUAL_ICC, "{r}");
+    // Errors that change sign between the snapshots: noise.
+    let noisy = observations_with(&[1.0, 2.0], |id, k, y| {
+        let e = if (id + k) % 2 == 0 { 0.05 } else { -0.05 };
+        (!(id == 1 && k == 3)).then_some(y + e)
+    });
+    let r = icc(&noisy);
+    assert!(r < REPEATED_RESIDUAL_ICC, "{r}");
 }

@@ -24,7 +24,8 @@ pub use report::{
 pub use settings::Settings;
 pub use slopes::UncertaintySlopes;
 pub use uncertainty::{
-    ParamUncertainty, CONVERGED_SHIFT_STDS, IDENTIFIED_REL_STD, UNCERTAINTY_MAX_PARAMS,
+    ParamUncertainty, CONVERGED_SHIFT_STDS, IDENTIFIED_REL_STD, REPEATED_RESIDUAL_ICC,
+    UNCERTAINTY_MAX_PARAMS,
 };
 
 use std::time::Instant;
@@ -492,6 +493,9 @@ where
             }
             _ => (Vec::new(), None),
         };
+        let residual_icc = state.best.as_ref().and_then(|b| {
+            uncertainty::residual_icc(obs, &robust::residuals(obs, &b.outputs)).map(|(rho, _)| rho)
+        });
         let best = state.best.ok_or_else(|| {
             Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
         })?;
@@ -522,6 +526,7 @@ where
             },
             uncertainty,
             uncertainty_slopes,
+            residual_icc,
             initial,
             history,
             residuals,

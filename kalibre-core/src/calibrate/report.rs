@@ -282,6 +282,13 @@ pub struct Report {
     /// uncertainty.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty_slopes: Option<super::UncertaintySlopes>,
+    /// Intra-class correlation of the best run's residuals grouped by output over the
+    /// snapshots: near 0 when they are noise, near 1 when each output's residual repeats
+    /// in every snapshot (a model error the parameters cannot absorb; above
+    /// [`super::REPEATED_RESIDUAL_ICC`] reports warn that the values may be biased beyond
+    /// their spreads). Missing with one snapshot and in older reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual_icc: Option<f64>,
     /// The model at the initial values.
     pub initial: Initial,
     /// One record per four-step iteration.

@@ -189,23 +189,31 @@ pub(crate) fn estimate<S>(
         .collect()
 }
 
+/// Above this intra-class correlation most of the best run's residual repeats at the
+/// same outputs in every snapshot: a model error the parameters cannot absorb, which
+/// biases them beyond their spreads. Reports say so.
+pub const REPEATED_RESIDUAL_ICC: f64 = 0.5;
+
 /// Kish's design effect `1 + (n0 - 1) rho` of the residuals grouped by output (each
-/// output's residuals over the snapshots are one cluster): `rho` the one-way ANOVA
-/// intra-class correlation, clipped to [0, 1], `n0` the ANOVA's mean cluster size. 1 for
+/// output's residuals over the snapshots are one cluster; [`residual_icc`]): 1 for
 /// independent residuals (noise), up to the number of snapshots when each output's
 /// residual repeats in every snapshot (a model error the parameters cannot remove), so
 /// that the spread is not claimed as if every snapshot were a fresh measurement of it.
 pub(crate) fn design_effect<S>(obs: &Observations<S>, residual: &[f64]) -> f64 {
+    residual_icc(obs, residual).map_or(1.0, |(rho, n0)| 1.0 + (n0 - 1.0).max(0.0) * rho)
+}
+
+/// The one-way ANOVA intra-class correlation `rho` of the residuals (rows as
+/// [`residuals`]) grouped by output, clipped to [0, 1], and the ANOVA's mean group size
+/// `n0`; `None` with fewer than two outputs, no output measured twice, or no spread.
+pub(crate) fn residual_icc<S>(obs: &Observations<S>, residual: &[f64]) -> Option<(f64, f64)> {
     let n_out = obs.outputs().len();
     let mut groups: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut row = 0;
     for snap in obs.snapshots() {
         for (o, m) in snap.measured.iter().enumerate() {
             if m.is_some() {
-                match residual.get(row) {
-                    Some(r) => groups[o].push(*r),
-                    None => return 1.0,
-                }
+                groups[o].push(*residual.get(row)?);
                 row += 1;
             }
         }
@@ -214,7 +222,7 @@ pub(crate) fn design_effect<S>(obs: &Observations<S>, residual: &[f64]) -> f64 {
     let n = row as f64;
     let c = groups.len() as f64;
     if row != residual.len() || groups.len() < 2 || n <= c {
-        return 1.0;
+        return None;
     }
     let grand = residual.iter().sum::<f64>() / n;
     let (mut ssb, mut ssw, mut sum_n2) = (0.0, 0.0, 0.0);
@@ -229,10 +237,9 @@ pub(crate) fn design_effect<S>(obs: &Observations<S>, residual: &[f64]) -> f64 {
     let n0 = (n - sum_n2 / n) / (c - 1.0);
     let denom = msb + (n0 - 1.0) * msw;
     if denom.is_nan() || denom <= 0.0 {
-        return 1.0;
+        return None;
     }
-    let rho = ((msb - msw) / denom).clamp(0.0, 1.0);
-    1.0 + (n0 - 1.0).max(0.0) * rho
+    Some((((msb - msw) / denom).clamp(0.0, 1.0), n0))
 }
 
 #[cfg(test)]
@@ -387,6 +394,7 @@ mod tests {
         // The same residual at an output in every snapshot: three rows, one measurement.
         let (obs, r) = three_snapshots(|_, o| [0.5, -1.0, 2.0, 0.1][o]);
         assert!((design_effect(&obs, &r) - 3.0).abs() < 1e-12);
+        assert_eq!(residual_icc(&obs, &r), Some((1.0, 3.0)));
         // Residuals that average out within each output: independent rows.
         let (obs, r) = three_snapshots(|t, o| [1.0, -1.0, 0.0][t] * (1.0 + o as f64));
         assert_eq!(design_effect(&obs, &r), 1.0);
@@ -397,5 +405,6 @@ mod tests {
         // One snapshot: nothing repeats.
         let (_, obs, _) = setup([0.6, 0.4]);
         assert_eq!(design_effect(&obs, &[0.3; 40]), 1.0);
+        assert!(residual_icc(&obs, &[0.3; 40]).is_none());
     }
 }

@@ -228,6 +228,19 @@ pub fn calibration_html(
             src.describe()
         );
     }
+    if let Some(icc) = report
+        .residual_icc
+        .filter(|r| *r > kalibre_core::calibrate::REPEATED_RESIDUAL_ICC)
+    {
+        let _ = write!(
+            h,
+            "<p><b>Model error:</b> {:.0}% of the residual repeats at the same sensors in every \
+             snapshot. The model misses something the parameters cannot absorb, and the values \
+             may be off by more than their spreads; <code>kalibre diagnose</code> looks for \
+             what is missing.</p>",
+            100.0 * icc
+        );
+    }
     h.push_str("<h2>Residuals per sensor</h2><table><tr><th>sensor</th><th>aisle</th>");
     for s in snaps {
         let _ = write!(h, "<th>{} (C)</th>", esc(&s.state.label));

@@ -39,6 +39,18 @@ fn print_uncertainty(report: &Report) {
     if let Some(src) = report.uncertainty_slopes {
         println!("  {:<28} {}", "slopes of the spreads", src.describe());
     }
+    if let Some(icc) = report
+        .residual_icc
+        .filter(|r| *r > kalibre_core::calibrate::REPEATED_RESIDUAL_ICC)
+    {
+        println!(
+            "  {:<28} {:.0}% of the residual repeats at the same sensors in every snapshot: \
+             the model misses something the parameters cannot absorb, and the values may be \
+             off by more than their spreads (kalibre diagnose looks for what is missing)",
+            "model error",
+            100.0 * icc
+        );
+    }
     if !poor.is_empty() {
         const SHOWN: usize = 8;
         let more = poor.len().saturating_sub(SHOWN);
