@@ -472,6 +472,10 @@ where
         }
         self.emit(Event::Stopped { reason: stop });
 
+        let repetition = state
+            .best
+            .as_ref()
+            .and_then(|b| uncertainty::repetition(obs, &robust::residuals(obs, &b.outputs)));
         // Only once a fit has run: an unfitted surrogate has no slopes to speak of.
         let (uncertainty, uncertainty_slopes) = match &state.best {
             Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
@@ -484,7 +488,9 @@ where
                     space,
                 ) {
                     Some((jac, source)) => {
-                        let u = uncertainty::estimate(&jac, obs, space, b, st.robust_nu);
+                        let design_effect = repetition.map_or(1.0, |r| r.design_effect());
+                        let u =
+                            uncertainty::estimate(&jac, obs, space, b, st.robust_nu, design_effect);
                         let source = (!u.is_empty()).then_some(source);
                         (u, source)
                     }
@@ -493,9 +499,6 @@ where
             }
             _ => (Vec::new(), None),
         };
-        let residual_icc = state.best.as_ref().and_then(|b| {
-            uncertainty::residual_icc(obs, &robust::residuals(obs, &b.outputs)).map(|(rho, _)| rho)
-        });
         let best = state.best.ok_or_else(|| {
             Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
         })?;
@@ -526,7 +529,7 @@ where
             },
             uncertainty,
             uncertainty_slopes,
-            residual_icc,
+            residual_icc: repetition.map(|r| r.icc),
             initial,
             history,
             residuals,

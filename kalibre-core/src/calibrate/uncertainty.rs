@@ -17,7 +17,7 @@
 //! rise penalty) is left out: the question is what the data say.
 //!
 //! The residual variance counts each output's residuals over the snapshots as fewer
-//! independent ones when they repeat (Kish's design effect, [`design_effect`]): a model
+//! independent ones when they repeat (Kish's design effect, [`Repetition`]): a model
 //! error at a sensor recurs in every snapshot, and three snapshots of it are not three
 //! measurements.
 //!
@@ -94,14 +94,16 @@ impl ParamUncertainty {
 }
 
 /// The uncertainty of every parameter at `best` from the Jacobian's columns `jac` (one
-/// per parameter, rows as the residuals, unit box; [`super::slopes`]); empty when they
-/// do not match the residuals or are not finite.
+/// per parameter, rows as the residuals, unit box; [`super::slopes`]), the residual
+/// variance scaled by `design_effect` ([`Repetition::design_effect`]); empty when the
+/// columns do not match the residuals or are not finite.
 pub(crate) fn estimate<S>(
     jac: &[Vec<f64>],
     obs: &Observations<S>,
     space: &ParamSpace,
     best: &BestPoint,
     robust_nu: Option<f64>,
+    design_effect: f64,
 ) -> Vec<ParamUncertainty> {
     let d = space.dim();
     // Model minus measurement (negation is exact: `y - m` bit for bit).
@@ -133,7 +135,7 @@ pub(crate) fn estimate<S>(
     };
     // Residuals of one output over the snapshots are not independent when the model
     // errs there the same way each time: count them as fewer (the design effect).
-    let s2 = s2_row * design_effect(obs, &residual);
+    let s2 = s2_row * design_effect;
     let mut fisher = vec![0.0; d * d];
     for i in 0..d {
         for j in 0..=i {
@@ -194,19 +196,28 @@ pub(crate) fn estimate<S>(
 /// biases them beyond their spreads. Reports say so.
 pub const REPEATED_RESIDUAL_ICC: f64 = 0.5;
 
-/// Kish's design effect `1 + (n0 - 1) rho` of the residuals grouped by output (each
-/// output's residuals over the snapshots are one cluster; [`residual_icc`]): 1 for
-/// independent residuals (noise), up to the number of snapshots when each output's
-/// residual repeats in every snapshot (a model error the parameters cannot remove), so
-/// that the spread is not claimed as if every snapshot were a fresh measurement of it.
-pub(crate) fn design_effect<S>(obs: &Observations<S>, residual: &[f64]) -> f64 {
-    residual_icc(obs, residual).map_or(1.0, |(rho, n0)| 1.0 + (n0 - 1.0).max(0.0) * rho)
+/// How much of a residual repeats at the same outputs over the snapshots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Repetition {
+    /// One-way ANOVA intra-class correlation of the residuals grouped by output, in [0, 1].
+    pub icc: f64,
+    /// The ANOVA's mean group size (the snapshots per output).
+    pub n0: f64,
 }
 
-/// The one-way ANOVA intra-class correlation `rho` of the residuals (rows as
-/// [`residuals`]) grouped by output, clipped to [0, 1], and the ANOVA's mean group size
-/// `n0`; `None` with fewer than two outputs, no output measured twice, or no spread.
-pub(crate) fn residual_icc<S>(obs: &Observations<S>, residual: &[f64]) -> Option<(f64, f64)> {
+impl Repetition {
+    /// Kish's design effect `1 + (n0 - 1) icc`: 1 for independent residuals (noise), up to
+    /// the number of snapshots when each output's residual repeats in every snapshot (a
+    /// model error the parameters cannot remove), so that the spread is not claimed as if
+    /// every snapshot were a fresh measurement of it.
+    pub fn design_effect(&self) -> f64 {
+        1.0 + (self.n0 - 1.0).max(0.0) * self.icc
+    }
+}
+
+/// The repetition of the residuals (rows as [`residuals`]) grouped by output; `None` with
+/// fewer than two outputs, no output measured twice, or no spread.
+pub(crate) fn repetition<S>(obs: &Observations<S>, residual: &[f64]) -> Option<Repetition> {
     let n_out = obs.outputs().len();
     let mut groups: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut row = 0;
@@ -239,7 +250,10 @@ pub(crate) fn residual_icc<S>(obs: &Observations<S>, residual: &[f64]) -> Option
     if denom.is_nan() || denom <= 0.0 {
         return None;
     }
-    Some((((msb - msw) / denom).clamp(0.0, 1.0), n0))
+    Some(Repetition {
+        icc: ((msb - msw) / denom).clamp(0.0, 1.0),
+        n0,
+    })
 }
 
 #[cfg(test)]
@@ -337,6 +351,7 @@ mod tests {
             &space,
             &best_at(&s, [0.6, 0.4]),
             None,
+            1.0,
         );
         assert_eq!(u.len(), 2);
         for p in &u {
@@ -357,6 +372,7 @@ mod tests {
             &space,
             &best_at(&s, [0.5, 0.4]),
             None,
+            1.0,
         );
         let p = &u[0];
         assert!(p.rel_std.unwrap() <= IDENTIFIED_REL_STD, "{p:?}");
@@ -389,12 +405,16 @@ mod tests {
         (Observations::new(outputs, snaps).unwrap(), rows)
     }
 
+    fn design_effect(obs: &Observations<()>, r: &[f64]) -> f64 {
+        repetition(obs, r).map_or(1.0, |x| x.design_effect())
+    }
+
     #[test]
     fn the_design_effect_counts_a_repeated_residual_once_and_noise_in_full() {
         // The same residual at an output in every snapshot: three rows, one measurement.
         let (obs, r) = three_snapshots(|_, o| [0.5, -1.0, 2.0, 0.1][o]);
         assert!((design_effect(&obs, &r) - 3.0).abs() < 1e-12);
-        assert_eq!(residual_icc(&obs, &r), Some((1.0, 3.0)));
+        assert_eq!(repetition(&obs, &r), Some(Repetition { icc: 1.0, n0: 3.0 }));
         // Residuals that average out within each output: independent rows.
         let (obs, r) = three_snapshots(|t, o| [1.0, -1.0, 0.0][t] * (1.0 + o as f64));
         assert_eq!(design_effect(&obs, &r), 1.0);
@@ -405,6 +425,6 @@ mod tests {
         // One snapshot: nothing repeats.
         let (_, obs, _) = setup([0.6, 0.4]);
         assert_eq!(design_effect(&obs, &[0.3; 40]), 1.0);
-        assert!(residual_icc(&obs, &[0.3; 40]).is_none());
+        assert!(repetition(&obs, &[0.3; 40]).is_none());
     }
 }
