@@ -307,6 +307,31 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert_eq!(n, total - replayed_in_whole);
 }
 
+/// Without the polish, the spreads come from a local fit of the model's own runs (the
+/// loop's runs near the best one spread enough in every direction on this hall), and a
+/// model error that repeats at the same sensors is reported and warned about.
+#[test]
+fn without_the_polish_the_spreads_fit_the_models_runs_and_a_repeated_error_is_flagged() {
+    let out = tmp("no-polish");
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args(["--polish", "0", "--seed", "1", "--threads", "1", "--out"])
+        .arg(&out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["uncertainty_slopes"], "model_runs");
+    // The built-in model against OpenFOAM data: its row-end errors recur in every snapshot.
+    let icc = report["residual_icc"].as_f64().expect("three snapshots");
+    assert!(icc > 0.5, "{icc}");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("a local linear fit of the model's runs"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("repeats at the same sensors"), "{stdout}");
+    let _ = std::fs::remove_dir_all(out);
+}
+
 /// `kalibre diagnose --json` prints the `kalibre.diagnosis/1` schema, and a calibration
 /// of another hall is refused with a clear message.
 #[test]
