@@ -475,7 +475,7 @@ where
         let repetition = state
             .best
             .as_ref()
-            .and_then(|b| uncertainty::repetition(obs, &robust::residuals(obs, &b.outputs)));
+            .and_then(|b| uncertainty::repetition(obs, &b.outputs));
         // Only once a fit has run: an unfitted surrogate has no slopes to speak of.
         let (uncertainty, uncertainty_slopes) = match &state.best {
             Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {

@@ -85,13 +85,11 @@ pub(crate) fn record(
     }
 }
 
-/// The model linearised at a point: the point (unit box), its residuals and the
-/// Jacobian's columns (the model's change in each measured output per unit-box step).
+/// The model linearised at a point: its finite-difference Jacobian and the residuals
+/// there.
 struct Linearisation {
-    unit: Vec<f64>,
+    jacobian: ModelJacobian,
     residuals: Vec<f64>,
-    columns: Vec<Vec<f64>>,
-    complete: bool,
 }
 
 /// The polish stage's context: what it runs and scores with.
@@ -138,7 +136,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             };
             let t_iter = Instant::now();
             let mut model_s = 0.0;
-            let stale = jac.as_ref().is_none_or(|l| l.unit != best.unit);
+            let stale = jac.as_ref().is_none_or(|l| l.jacobian.unit != best.unit);
             if stale {
                 if !self.within_budget(state, (dim + 1) * n_snap) {
                     break;
@@ -188,17 +186,22 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                     state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res);
                 }
                 jac = Some(Linearisation {
-                    unit: u0,
+                    jacobian: ModelJacobian {
+                        unit: u0,
+                        columns: cols,
+                        complete,
+                    },
                     residuals: r0,
-                    columns: cols,
-                    complete,
                 });
             }
             let Some(Linearisation {
-                unit: u0,
+                jacobian:
+                    ModelJacobian {
+                        unit: u0,
+                        columns: cols,
+                        ..
+                    },
                 residuals: r0,
-                columns: cols,
-                ..
             }) = jac.as_ref()
             else {
                 break;
@@ -286,12 +289,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             emit(&rec);
             records.push(rec);
         }
-        let model_jacobian = jac.map(|l| ModelJacobian {
-            unit: l.unit,
-            columns: l.columns,
-            complete: l.complete,
-        });
-        Ok((records, model_jacobian))
+        Ok((records, jac.map(|l| l.jacobian)))
     }
 
     /// The Levenberg-Marquardt step in the unit box: `min |r0 - J d|^2 + lambda sum_j

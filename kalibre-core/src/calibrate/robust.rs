@@ -22,8 +22,12 @@ use crate::Observations;
 /// The scale floor relative to the residuals' RMS (an exact fit has no scale to find).
 const SCALE_FLOOR_REL: f64 = 1e-6;
 
-/// Residuals `measured - predicted` over every measured output of every snapshot.
-pub(crate) fn residuals<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f64> {
+/// Every measured output of every snapshot, in the residuals' row order: `(output
+/// index, measured, predicted)`.
+pub(crate) fn measured_rows<'a, S>(
+    obs: &'a Observations<S>,
+    outputs: &'a [Vec<f64>],
+) -> impl Iterator<Item = (usize, f64, f64)> + 'a {
     obs.snapshots()
         .iter()
         .zip(outputs)
@@ -31,9 +35,14 @@ pub(crate) fn residuals<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f
             snap.measured
                 .iter()
                 .zip(pred)
-                .filter_map(|(m, p)| m.map(|m| m - p))
+                .enumerate()
+                .filter_map(|(o, (m, p))| m.map(|m| (o, m, *p)))
         })
-        .collect()
+}
+
+/// Residuals `measured - predicted` over every measured output of every snapshot.
+pub(crate) fn residuals<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f64> {
+    measured_rows(obs, outputs).map(|(_, m, p)| m - p).collect()
 }
 
 /// The robust likelihood's view of one set of residuals: its scale and row weights.

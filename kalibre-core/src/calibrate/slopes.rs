@@ -13,6 +13,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::robust::measured_rows;
 use super::state::{BestPoint, State};
 use crate::search::{cholesky, cholesky_solve};
 use crate::{Observations, ParamSpace, Surrogate};
@@ -55,7 +56,7 @@ impl UncertaintySlopes {
 }
 
 /// The model linearised by finite differences at `unit`: one column per parameter, the
-/// change of every measured output per unit-box step (rows as [`super::robust::residuals`]).
+/// change of every measured output per unit-box step (rows as [`measured_rows`]).
 pub(crate) struct ModelJacobian {
     pub unit: Vec<f64>,
     pub columns: Vec<Vec<f64>>,
@@ -90,20 +91,6 @@ fn max_distance(a: &[f64], b: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Measured outputs of one point, all snapshots, in residual order.
-fn measured_rows<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f64> {
-    obs.snapshots()
-        .iter()
-        .zip(outputs)
-        .flat_map(|(snap, y)| {
-            snap.measured
-                .iter()
-                .zip(y)
-                .filter_map(|(m, v)| m.map(|_| *v))
-        })
-        .collect()
-}
-
 /// Weighted least squares of every measured output on `[1, u - u_best]` over the runs
 /// that ran at every snapshot, each weighed `exp(-d^2 / 2 w^2)` by its max-norm distance
 /// `d` from the best run. `None` unless the weighted runs count at least `2 (dim + 1)`
@@ -124,7 +111,13 @@ pub(crate) fn local_fit<S>(
             let du: Vec<f64> = u.iter().zip(best_unit).map(|(a, b)| a - b).collect();
             let dist = du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let w = (-0.5 * (dist / LOCAL_FIT_WIDTH).powi(2)).exp();
-            (du, w, measured_rows(obs, outputs))
+            (
+                du,
+                w,
+                measured_rows(obs, outputs)
+                    .map(|(_, _, y)| y)
+                    .collect::<Vec<f64>>(),
+            )
         })
         .filter(|(_, w, _)| *w > 1e-12)
         .collect();

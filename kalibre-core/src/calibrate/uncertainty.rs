@@ -34,7 +34,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::robust::{residuals, RobustFit};
+use super::robust::{measured_rows, residuals, RobustFit};
 use super::state::BestPoint;
 use crate::search::{cholesky, cholesky_solve};
 use crate::{Observations, ParamSpace};
@@ -215,24 +215,19 @@ impl Repetition {
     }
 }
 
-/// The repetition of the residuals (rows as [`residuals`]) grouped by output; `None` with
-/// fewer than two outputs, no output measured twice, or no spread.
-pub(crate) fn repetition<S>(obs: &Observations<S>, residual: &[f64]) -> Option<Repetition> {
-    let n_out = obs.outputs().len();
-    let mut groups: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    let mut row = 0;
-    for snap in obs.snapshots() {
-        for (o, m) in snap.measured.iter().enumerate() {
-            if m.is_some() {
-                groups[o].push(*residual.get(row)?);
-                row += 1;
-            }
-        }
+/// The repetition of the residuals of `outputs` (per snapshot) grouped by output; `None`
+/// with fewer than two outputs, no output measured twice, or no spread.
+pub(crate) fn repetition<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Option<Repetition> {
+    let mut groups: Vec<Vec<f64>> = vec![Vec::new(); obs.outputs().len()];
+    let mut residual = Vec::new();
+    for (o, m, p) in measured_rows(obs, outputs) {
+        groups[o].push(m - p);
+        residual.push(m - p);
     }
     groups.retain(|g| !g.is_empty());
-    let n = row as f64;
+    let n = residual.len() as f64;
     let c = groups.len() as f64;
-    if row != residual.len() || groups.len() < 2 || n <= c {
+    if groups.len() < 2 || n <= c {
         return None;
     }
     let grand = residual.iter().sum::<f64>() / n;
@@ -322,37 +317,29 @@ mod tests {
         (surrogate, obs, space)
     }
 
-    fn slopes(
+    /// The estimate from the surrogate's slopes with the best run at `unit`.
+    fn estimate_at(
         s: &Linear,
         obs: &Observations<()>,
         space: &ParamSpace,
         unit: [f64; 2],
-    ) -> Vec<Vec<f64>> {
-        super::super::slopes::surrogate_slopes(s, obs, space, &unit).unwrap()
-    }
-
-    fn best_at(surrogate: &Linear, unit: [f64; 2]) -> BestPoint {
-        BestPoint {
+    ) -> Vec<ParamUncertainty> {
+        let jac = super::super::slopes::surrogate_slopes(s, obs, space, &unit).unwrap();
+        let best = BestPoint {
             iteration: 1,
             unit: unit.to_vec(),
             params: unit.to_vec(),
             score: 0.0,
             validation: Default::default(),
-            outputs: vec![surrogate.predict(&(), &unit)],
-        }
+            outputs: vec![s.predict(&(), &unit)],
+        };
+        estimate(&jac, obs, space, &best, None, 1.0)
     }
 
     #[test]
     fn a_best_run_at_the_data_optimum_is_claimed_with_a_small_shift() {
         let (s, obs, space) = setup([0.6, 0.4]);
-        let u = estimate(
-            &slopes(&s, &obs, &space, [0.6, 0.4]),
-            &obs,
-            &space,
-            &best_at(&s, [0.6, 0.4]),
-            None,
-            1.0,
-        );
+        let u = estimate_at(&s, &obs, &space, [0.6, 0.4]);
         assert_eq!(u.len(), 2);
         for p in &u {
             let (std, shift) = (p.std.unwrap(), p.shift.unwrap());
@@ -366,14 +353,7 @@ mod tests {
         // Best run 0.1 short in p: the residual is no longer noise, yet the outputs still
         // pin p down to a few percent.
         let (s, obs, space) = setup([0.6, 0.4]);
-        let u = estimate(
-            &slopes(&s, &obs, &space, [0.5, 0.4]),
-            &obs,
-            &space,
-            &best_at(&s, [0.5, 0.4]),
-            None,
-            1.0,
-        );
+        let u = estimate_at(&s, &obs, &space, [0.5, 0.4]);
         let p = &u[0];
         assert!(p.rel_std.unwrap() <= IDENTIFIED_REL_STD, "{p:?}");
         assert!(!p.identified, "{p:?}");
@@ -383,8 +363,11 @@ mod tests {
         assert!(p.shift.unwrap().abs() > CONVERGED_SHIFT_STDS * p.std.unwrap());
     }
 
-    /// Four outputs over three snapshots with the given residual per (snapshot, output).
-    fn three_snapshots(residual: impl Fn(usize, usize) -> f64) -> (Observations<()>, Vec<f64>) {
+    /// Four outputs measured 0 over three snapshots, and predictions per snapshot that
+    /// leave the given residual per (snapshot, output).
+    fn three_snapshots(
+        residual: impl Fn(usize, usize) -> f64,
+    ) -> (Observations<()>, Vec<Vec<f64>>) {
         let outputs = (0..4)
             .map(|k| OutputInfo {
                 name: format!("s{k}"),
@@ -398,14 +381,13 @@ mod tests {
                 measured: vec![Some(0.0); 4],
             })
             .collect();
-        let rows = (0..3)
-            .flat_map(|t| (0..4).map(move |o| (t, o)))
-            .map(|(t, o)| residual(t, o))
+        let predicted = (0..3)
+            .map(|t| (0..4).map(|o| -residual(t, o)).collect())
             .collect();
-        (Observations::new(outputs, snaps).unwrap(), rows)
+        (Observations::new(outputs, snaps).unwrap(), predicted)
     }
 
-    fn design_effect(obs: &Observations<()>, r: &[f64]) -> f64 {
+    fn design_effect(obs: &Observations<()>, r: &[Vec<f64>]) -> f64 {
         repetition(obs, r).map_or(1.0, |x| x.design_effect())
     }
 
@@ -424,7 +406,8 @@ mod tests {
         assert!(deff > 1.0 && deff < 3.0, "{deff}");
         // One snapshot: nothing repeats.
         let (_, obs, _) = setup([0.6, 0.4]);
-        assert_eq!(design_effect(&obs, &[0.3; 40]), 1.0);
-        assert!(repetition(&obs, &[0.3; 40]).is_none());
+        let one = [vec![0.3; 40]];
+        assert_eq!(design_effect(&obs, &one), 1.0);
+        assert!(repetition(&obs, &one).is_none());
     }
 }
