@@ -1,0 +1,148 @@
+//! Tests of the case geometry: cell ranges, patches and gaps on the block mesh.
+
+use super::*;
+use std::path::Path;
+
+fn dev_hall() -> Hall {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean/hall.json");
+    Hall::load(&p).unwrap()
+}
+
+#[test]
+fn dev_hall_has_the_readme_cell_count_and_patches() {
+    let g = CaseGeometry::new(&dev_hall(), 0.2).unwrap();
+    // README: 11,140 cells after cutting racks and the CRAC.
+    assert_eq!(g.fluid_cells, 11_140);
+    assert_eq!(g.servers.len(), 20);
+    // A server half of a 0.6 m wide, 1 m high rack face: 3 x 5 faces.
+    assert!(g
+        .servers
+        .iter()
+        .all(|s| s.intake.faces == 15 && s.exhaust.faces == 15));
+    assert_eq!(g.tiles.iter().map(|t| t.faces).sum::<usize>(), 5 * 12);
+    assert_eq!(g.probes.len(), 24);
+}
+
+fn openings(boxes: &[Aabb]) -> CaseExtras {
+    CaseExtras {
+        openings: boxes.to_vec(),
+        gaps: vec![],
+    }
+}
+
+#[test]
+fn a_gap_takes_its_band_from_the_servers_and_refuses_to_split_one() {
+    let hall = dev_hall();
+    let b4 = hall.racks.iter().position(|r| r.id == "B4").unwrap();
+    // The blanking dataset's slot: z 1.0-1.2, at the edge of the upper server.
+    let slot = RackGap {
+        rack: b4,
+        z_m: Some([1.0, 1.2]),
+    };
+    let extras = CaseExtras {
+        openings: vec![],
+        gaps: vec![slot],
+    };
+    let g = CaseGeometry::with_extras(&hall, 0.2, &extras).unwrap();
+    let gp = &g.gaps[0];
+    assert_eq!((gp.rear.faces, gp.front.faces), (3, 3));
+    assert_eq!(
+        (gp.rear.name.as_str(), gp.front.name.as_str()),
+        ("rec0-out", "rec0-in")
+    );
+    // B4's upper server keeps 3 x 4 faces; every other server its 3 x 5.
+    let faces: Vec<usize> = g.servers.iter().map(|s| s.intake.faces).collect();
+    assert_eq!(faces.iter().filter(|f| **f == 12).count(), 1);
+    assert_eq!(faces.iter().filter(|f| **f == 15).count(), 19);
+    // Without a band: the row above the servers' boundary at z 1.0 m, mid-rack.
+    let whole = CaseExtras {
+        openings: vec![],
+        gaps: vec![RackGap {
+            rack: b4,
+            z_m: None,
+        }],
+    };
+    let g = CaseGeometry::with_extras(&hall, 0.2, &whole).unwrap();
+    assert_eq!(g.gaps[0].rear.cells.lo[2], 5);
+    assert_eq!(g.gaps[0].rear.cells.hi[2], 6);
+    // A band inside a server's span would split it.
+    let split = CaseExtras {
+        openings: vec![],
+        gaps: vec![RackGap {
+            rack: b4,
+            z_m: Some([0.4, 0.6]),
+        }],
+    };
+    let err = CaseGeometry::with_extras(&hall, 0.2, &split)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("splits the server's span"), "{err}");
+}
+
+fn floor_box(x: [f64; 2], y: [f64; 2]) -> Aabb {
+    Aabb {
+        min: [x[0], y[0], 0.0],
+        max: [x[1], y[1], 0.0],
+    }
+}
+
+#[test]
+fn a_bypass_opening_becomes_a_floor_patch_of_its_own() {
+    // The development bypass dataset's cable cutout: x 3.6-4.2, y 4.2-4.6.
+    let cut = floor_box([3.6, 4.2], [4.2, 4.6]);
+    let g = CaseGeometry::with_extras(&dev_hall(), 0.2, &openings(&[cut])).unwrap();
+    assert_eq!(g.openings.len(), 1);
+    let o = &g.openings[0];
+    assert_eq!(
+        (o.name.as_str(), o.axis, o.plane, o.faces),
+        ("byp0", 2, 0, 6)
+    );
+    assert_eq!(o.cells.lo, [18, 21, 0]);
+    assert!(g.patches().any(|p| p.name == "byp0"));
+    // The mesh is the same; only faces change patch.
+    assert_eq!(g.fluid_cells, 11_140);
+}
+
+#[test]
+fn openings_on_tiles_off_the_floor_or_off_the_grid_are_refused() {
+    let hall = dev_hall();
+    let t = &hall.tiles[0];
+    let on_tile = floor_box(
+        [t.position_m[0], t.position_m[0] + 0.2],
+        [t.position_m[1], t.position_m[1] + 0.2],
+    );
+    let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[on_tile]))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("overlaps a tile") && err.contains("tile0"),
+        "{err}"
+    );
+    let cut = floor_box([3.6, 4.2], [4.2, 4.6]);
+    let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[cut, cut]))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("bypass opening 1") && err.contains("another opening"),
+        "{err}"
+    );
+    let mut raised = cut;
+    raised.max[2] = 0.2;
+    let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[raised]))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("not on the floor"), "{err}");
+    let off = floor_box([3.65, 4.2], [4.2, 4.6]);
+    let err = CaseGeometry::with_extras(&hall, 0.2, &openings(&[off]))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("not on the 0.2 m grid"), "{err}");
+}
+
+#[test]
+fn off_grid_geometry_is_refused_with_the_field() {
+    let err = CaseGeometry::new(&dev_hall(), 0.25)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("not on the 0.25 m grid"), "{err}");
+}
