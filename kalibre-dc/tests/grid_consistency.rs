@@ -254,3 +254,54 @@ fn panel_thickness_is_optional_in_files_and_checked() {
     }
     assert!(with.check().is_ok());
 }
+
+/// On grids the layout does not fall on, a tile's snapped footprint can reach a cell of
+/// the rack it abuts (the synthetic `hall-a` at 0.16 m and 0.19 m: "tile 48 lies under a
+/// rack or CRAC" until session 14). The tile then blows through its other cells with its
+/// whole share, and the hall solves with energy and mass balanced.
+#[test]
+fn tiles_abutting_racks_solve_on_grids_their_edges_miss() {
+    let hall = kalibre_dc::synth::generate_hall(&kalibre_dc::synth::SynthOptions::new(
+        kalibre_dc::synth::Preset::HallA,
+        1,
+    ))
+    .unwrap();
+    let state = OperatingState {
+        label: "s".into(),
+        setpoint_c: vec![18.0; hall.cracs.len()],
+        fan_speed: vec![1.0; hall.cracs.len()],
+        power_w: vec![300.0; hall.server_count()],
+    };
+    for cell_m in [0.16, 0.19] {
+        let sim = Simulator::new(&hall, SimConfig::default().with_cell_m(cell_m))
+            .unwrap_or_else(|e| panic!("grid {cell_m} m: {e}"));
+        let alpha = vec![0.15; hall.server_count()];
+        let sol = sim
+            .solve_with_mods(&state, &alpha, &SimMods::default())
+            .unwrap();
+        assert!(
+            sol.energy_balance_error().abs() < 1e-4,
+            "grid {cell_m} m: energy balance off by {:e}",
+            sol.energy_balance_error()
+        );
+        let imbalance = sol.mass_imbalance_m3_s(sim.grid());
+        let worst = imbalance.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(
+            worst < 1e-6,
+            "grid {cell_m} m: cell imbalance {worst:e} m3/s"
+        );
+    }
+}
+
+/// A tile that overlaps a rack's footprint is the hall's error, named by its pointer,
+/// not something a grid may paper over.
+#[test]
+fn a_tile_under_a_rack_is_refused_by_the_hall() {
+    let mut hall = hall();
+    hall.tiles[0].position_m[1] += 0.3; // half of it under rack A01
+    let err = hall.validate("hall.json").unwrap_err().to_string();
+    assert!(
+        err.contains("/tiles/0") && err.contains("lies under rack `A01`"),
+        "{err}"
+    );
+}

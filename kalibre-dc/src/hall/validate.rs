@@ -53,6 +53,7 @@ impl Hall {
             )?;
         }
         self.check_racks(&c, room)?;
+        self.check_tiles_clear(&c, room)?;
         self.check_containment(&c, room)?;
         self.check_sensors(&c)?;
         for (i, e) in self.effects.iter().enumerate() {
@@ -219,6 +220,43 @@ impl Hall {
                         format!(
                             "rack `{}` overlaps CRAC `{}`; expected racks not to overlap a CRAC",
                             r.id, k.id
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// No tile under a rack or CRAC: the simulator drops a tile's cells that a grid snaps
+    /// under a neighbouring rack, so the hall itself must not put it there.
+    fn check_tiles_clear(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
+        let solids = self
+            .racks
+            .iter()
+            .map(|r| ("rack", &r.id, r.position_m, r.size_m))
+            .chain(
+                self.cracs
+                    .iter()
+                    .map(|k| ("CRAC", &k.id, k.position_m, k.size_m)),
+            );
+        for (what, id, position, size) in solids {
+            let solid = Aabb::from_position_size(position, size);
+            for (i, t) in self.tiles.iter().enumerate() {
+                let tile = Aabb {
+                    min: [t.position_m[0], t.position_m[1], 0.0],
+                    max: [
+                        t.position_m[0] + t.size_m[0],
+                        t.position_m[1] + t.size_m[1],
+                        room[2],
+                    ],
+                };
+                if tile.overlaps(&solid, GEOMETRY_TOL_M) {
+                    return Err(c.err(
+                        format!("/tiles/{i}"),
+                        format!(
+                            "tile at {:?} lies under {what} `{id}`; expected tiles clear of racks and CRACs (touching is fine, tolerance 1 mm)",
+                            t.position_m
                         ),
                     ));
                 }

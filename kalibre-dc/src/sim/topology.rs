@@ -130,11 +130,18 @@ impl Topology {
                     0.0,
                 ],
             };
-            let cells = layer_cells(&grid, &b, 0);
-            if cells.iter().any(|&c| solid[c]) {
+            // The hall keeps tiles clear of racks (hall validation); on a grid their edges
+            // do not fall on, a tile's snapped footprint can still reach a cell of the
+            // rack it abuts. That cell is the rack's, and the tile blows through the rest
+            // with its whole share, as a return grille over solid cells does.
+            let cells: Vec<usize> = layer_cells(&grid, &b, 0)
+                .into_iter()
+                .filter(|&c| !solid[c])
+                .collect();
+            if cells.is_empty() {
                 return Err(Error::Simulation(format!(
-                    "tile {ti} at {:?} lies under a rack or CRAC",
-                    t.position_m
+                    "tile {ti} at {:?} lies over solid cells only on a {} m grid",
+                    t.position_m, grid.d[0]
                 )));
             }
             let w = 1.0 / cells.len() as f64;
