@@ -253,6 +253,19 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert_eq!(report["uncertainty_slopes"], "model_finite_differences");
     assert!(String::from_utf8_lossy(&o.stdout).contains("slopes of the spreads"));
     assert!(html.contains("Spreads linearised with the model's finite differences"));
+    // The built-in model ran once per snapshot on two finer grids at the best run; how far
+    // that moves each parameter is reported beside its spread.
+    let checks = report["numerical_checks"].as_array().expect("grid checks");
+    assert_eq!(checks.len(), 2, "{checks:?}");
+    for c in checks {
+        assert!(c["variant"].as_str().unwrap().starts_with("grid "), "{c}");
+        assert!(c["mean_abs_change"].as_f64().unwrap() > 0.0, "{c}");
+    }
+    assert!(uncertainty
+        .iter()
+        .all(|u| u["numerical"].as_f64().is_some()));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("numerics (at the best run)"));
+    assert!(html.contains("move from the model's numerics"));
 
     // Start again, kill once a few runs are journaled, then resume.
     let cut = tmp("cut");

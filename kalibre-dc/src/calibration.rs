@@ -14,7 +14,7 @@ use crate::hall::{AlphaMode, Hall};
 use crate::sim::SimConfig;
 use crate::snapshots::HallSnapshot;
 use crate::surrogate::{PenaltySettings, ThermalGraphSettings};
-use crate::{HallModel, Result};
+use crate::{Error, HallModel, Result};
 
 /// Everything that shapes a hall calibration.
 ///
@@ -29,6 +29,7 @@ use crate::{HallModel, Result};
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 /// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
 /// | `design_within_prior` | false | the initial design spans the alphas whose rises the prior accepts ([`PenaltySettings::plausible_bounds`]) instead of the whole bounds |
+/// | `grid_check` | `[0.75, 0.5]` | cell sizes, relative to `sim.cell_m`, at which the built-in model runs once per snapshot at the best parameters: the alphas' move from the grid alone is their numerical uncertainty (`ParamUncertainty::numerical`), counted when a parameter is called identified; empty: none |
 /// | `polish_max_params` | 64 | the loop's polish stage (`core.polish_iterations`, 8 by default) runs only when there are at most this many parameters: each of its Jacobians costs `params + 1` model runs per snapshot (per-server alpha on a real hall would need thousands); above it the report's settings show `polish_iterations` 0 |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
@@ -52,6 +53,9 @@ pub struct HallCalibrationSettings {
     pub design_within_prior: bool,
     /// Most parameters for which the polish stage runs.
     pub polish_max_params: usize,
+    /// Refined grids (cell size relative to `sim.cell_m`, each in (0, 1)) for the
+    /// numerical uncertainty; built-in model only.
+    pub grid_check: Vec<f64>,
 }
 
 impl HallCalibrationSettings {
@@ -93,6 +97,7 @@ impl Default for HallCalibrationSettings {
             local_recirculation_term: false,
             design_within_prior: false,
             polish_max_params: 64,
+            grid_check: vec![0.75, 0.5],
         }
     }
 }
@@ -152,11 +157,34 @@ pub fn calibrate_hall_with_registry<'o>(
         .filter(|(_, effect)| effect.surrogate_term() == SurrogateTerm::LearnedLinear)
         .flat_map(|(e, _)| layout.effect_range(e))
         .collect();
+    // The same hall on finer grids: the alphas' move between grids is what the model's
+    // discretisation alone does to them (one solve per snapshot each, at the best run).
+    let mut refined = Vec::new();
+    for &factor in &settings.grid_check {
+        if !(factor > 0.0 && factor < 1.0) {
+            return Err(Error::Mismatch(format!(
+                "grid_check: {factor} is not a refinement (a cell size factor in (0, 1))"
+            )));
+        }
+        let cell_m = settings.sim.cell_m * factor;
+        let config = SimConfig {
+            cell_m,
+            ..settings.sim.clone()
+        };
+        // A grid the geometry does not fit (an opening snapped under a rack) is reported
+        // as a failed check; the calibration on the model's own grid stands.
+        let fine = HallModel::with_registry(&hall, config, registry).map_err(|e| e.to_string());
+        refined.push((format!("grid {} m", (cell_m * 1e4).round() / 1e4), fine));
+    }
+    let variants: Vec<(String, std::result::Result<&HallModel, String>)> = refined
+        .iter()
+        .map(|(n, m)| (n.clone(), m.as_ref().map_err(Clone::clone)))
+        .collect();
     let ModelCalibration {
         report,
         penalty_report,
     } = calibrate_with_terms(
-        &hall, snaps, &model, &layout, &learned, settings, journal, observers,
+        &hall, snaps, &model, &layout, &learned, settings, journal, observers, &variants,
     )?;
     Ok(HallCalibration {
         report,

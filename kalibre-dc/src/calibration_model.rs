@@ -51,12 +51,14 @@ where
         settings,
         journal,
         observers,
+        &[],
     )
 }
 
 /// [`calibrate_hall_model`] with an [`EffectLinearTerm`] in the surrogate for each
 /// parameter index in `learned_params` (effect parameters whose effect asks for a
-/// learned linear term), so that the search can move them.
+/// learned linear term), so that the search can move them, and the model's numerical
+/// variants (`Calibrator::with_numerical_variant`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn calibrate_with_terms<'o, M>(
     hall: &Hall,
@@ -67,6 +69,7 @@ pub(crate) fn calibrate_with_terms<'o, M>(
     settings: &HallCalibrationSettings,
     journal: Option<&Path>,
     observers: Vec<Box<dyn Observe + 'o>>,
+    numerical_variants: &[(String, std::result::Result<&M, String>)],
 ) -> Result<ModelCalibration>
 where
     M: Model<Scenario = OperatingState>,
@@ -129,6 +132,14 @@ where
     if settings.design_within_prior {
         let (lower, upper) = settings.penalty.plausible_bounds(layout);
         calibrator = calibrator.with_design_bounds(lower, upper);
+    }
+    for (name, variant) in numerical_variants {
+        calibrator = match variant {
+            Ok(model) => calibrator.with_numerical_variant(name.clone(), *model),
+            Err(reason) => {
+                calibrator.with_unavailable_numerical_variant(name.clone(), reason.clone())
+            }
+        };
     }
     for o in observers {
         calibrator = calibrator.with_observer(move |e: &kalibre_core::Event<'_>| o.observe(e));

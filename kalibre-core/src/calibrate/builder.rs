@@ -33,6 +33,7 @@ where
             observers: Vec::new(),
             settings: Settings::default(),
             design_bounds: None,
+            numerical_variants: Vec::new(),
         }
     }
 }
@@ -120,6 +121,7 @@ where
             observers: self.observers,
             settings: self.settings,
             design_bounds: self.design_bounds,
+            numerical_variants: self.numerical_variants,
         }
     }
 
@@ -127,6 +129,28 @@ where
     /// within the space's bounds) instead of the whole space; checked when the loop starts.
     pub fn with_design_bounds(mut self, lower: Vec<f64>, upper: Vec<f64>) -> Self {
         self.design_bounds = Some((lower, upper));
+        self
+    }
+
+    /// A numerical variant of the model (the same physics on a finer grid, say), run once
+    /// per snapshot at the best parameters: how far its outputs would move the parameters
+    /// is their numerical uncertainty (`ParamUncertainty::numerical`), and the report
+    /// lists what each variant changed (`Report::numerical_checks`). Its runs are not
+    /// journaled.
+    pub fn with_numerical_variant(mut self, name: impl Into<String>, model: &'a M) -> Self {
+        self.numerical_variants.push((name.into(), Ok(model)));
+        self
+    }
+
+    /// A numerical variant that could not be set up (a grid the geometry does not fit,
+    /// say): the report lists it with `reason` as its error, and the calibration stands.
+    pub fn with_unavailable_numerical_variant(
+        mut self,
+        name: impl Into<String>,
+        reason: impl Into<String>,
+    ) -> Self {
+        self.numerical_variants
+            .push((name.into(), Err(reason.into())));
         self
     }
 

@@ -7,6 +7,7 @@ mod builder;
 mod correction;
 mod design;
 mod geometry;
+mod numerical;
 mod polish;
 mod report;
 mod robust;
@@ -17,6 +18,7 @@ mod state;
 mod trust;
 mod uncertainty;
 
+pub use numerical::NumericalCheck;
 pub use report::{
     Best, Errors, Initial, IterationRecord, NamedValues, Report, Residual, RunCounts,
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
@@ -59,6 +61,8 @@ pub struct Calibrator<'a, M: Model, Su, V = ErrorMetrics> {
     observers: Vec<Box<dyn Observe + 'a>>,
     settings: Settings,
     design_bounds: Option<(Vec<f64>, Vec<f64>)>,
+    /// Numerical variants of the model, or why one could not be set up.
+    numerical_variants: Vec<(String, std::result::Result<&'a M, String>)>,
 }
 
 impl<'a, M, Su, V> Calibrator<'a, M, Su, V>
@@ -477,6 +481,14 @@ where
             .as_ref()
             .and_then(|b| uncertainty::repetition(obs, &b.outputs));
         // Only once a fit has run: an unfitted surrogate has no slopes to speak of.
+        // The model's numerical variants, once at the best run (only where spreads are
+        // estimated: they are what the variants' moves are weighed against).
+        let (numerical_checks, variant_outputs) = match &state.best {
+            Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
+                numerical::run_variants(&self.numerical_variants, obs, &b.outputs, &b.params)
+            }
+            _ => (Vec::new(), Vec::new()),
+        };
         let (uncertainty, uncertainty_slopes) = match &state.best {
             Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
                 match slopes::slopes_at(
@@ -489,8 +501,15 @@ where
                 ) {
                     Some((jac, source)) => {
                         let design_effect = repetition.map_or(1.0, |r| r.design_effect());
-                        let u =
-                            uncertainty::estimate(&jac, obs, space, b, st.robust_nu, design_effect);
+                        let u = uncertainty::estimate(
+                            &jac,
+                            obs,
+                            space,
+                            b,
+                            st.robust_nu,
+                            design_effect,
+                            &variant_outputs,
+                        );
                         let source = (!u.is_empty()).then_some(source);
                         (u, source)
                     }
@@ -530,6 +549,7 @@ where
             uncertainty,
             uncertainty_slopes,
             residual_icc: repetition.map(|r| r.icc),
+            numerical_checks,
             initial,
             history,
             residuals,

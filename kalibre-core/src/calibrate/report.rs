@@ -289,6 +289,11 @@ pub struct Report {
     /// their spreads). Missing with one snapshot and in older reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub residual_icc: Option<f64>,
+    /// What each numerical variant of the model changed at the best run
+    /// (`Calibrator::with_numerical_variant`); empty without variants and in older
+    /// reports.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub numerical_checks: Vec<super::NumericalCheck>,
     /// The model at the initial values.
     pub initial: Initial,
     /// One record per four-step iteration.

@@ -31,6 +31,12 @@
 //! the best run's residuals, `F = k J^T J / s^2 + I` with `k = (nu + 1) / (nu + 3)` (the
 //! t's Fisher information about a location), and each residual pulls the shift with its
 //! IRLS weight, `J^T (w r) / s^2`.
+//!
+//! The model's numerics ([`super::numerical`]): each numerical variant's change of the
+//! outputs `delta` moves the parameters by `-F^-1 J^T (w delta) / s2`, as a change of
+//! the residuals would. The largest such move over the variants is the parameter's
+//! `numerical` uncertainty; a parameter is identified only when its spread and that
+//! move, combined in quadrature, stay within [`IDENTIFIED_REL_STD`].
 
 use serde::{Deserialize, Serialize};
 
@@ -68,9 +74,13 @@ pub struct ParamUncertainty {
     /// (physical units, signed; the Gauss-Newton step). Missing in older reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shift: Option<f64>,
-    /// `rel_std` at most [`IDENTIFIED_REL_STD`] (for a zero value: `std` at most that
-    /// fraction of the range) and the shift at most [`CONVERGED_SHIFT_STDS`] standard
-    /// deviations.
+    /// The largest move of the value that the model's numerical variants cause
+    /// (physical units, absolute; [`super::numerical`]); none without variants.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub numerical: Option<f64>,
+    /// `rel_std` combined in quadrature with `numerical / |value|` at most
+    /// [`IDENTIFIED_REL_STD`] (for a zero value: in fractions of the range) and the shift
+    /// at most [`CONVERGED_SHIFT_STDS`] standard deviations.
     pub identified: bool,
 }
 
@@ -81,6 +91,14 @@ impl ParamUncertainty {
         self.shift
             .filter(|_| self.value != 0.0)
             .map(|d| d / self.value.abs())
+    }
+
+    /// `numerical / |value|`: the numerics' move relative to the value; none without
+    /// variants or for a value of zero.
+    pub fn rel_numerical(&self) -> Option<f64> {
+        self.numerical
+            .filter(|_| self.value != 0.0)
+            .map(|n| n / self.value.abs())
     }
 
     /// Whether the best run sits where the linearised data point: the shift within
@@ -95,8 +113,10 @@ impl ParamUncertainty {
 
 /// The uncertainty of every parameter at `best` from the Jacobian's columns `jac` (one
 /// per parameter, rows as the residuals, unit box; [`super::slopes`]), the residual
-/// variance scaled by `design_effect` ([`Repetition::design_effect`]); empty when the
-/// columns do not match the residuals or are not finite.
+/// variance scaled by `design_effect` ([`Repetition::design_effect`]), with the moves
+/// that the numerical variants' outputs `variant_outputs` (each per snapshot, as
+/// `best.outputs`) cause; empty when the columns do not match the residuals or are not
+/// finite.
 pub(crate) fn estimate<S>(
     jac: &[Vec<f64>],
     obs: &Observations<S>,
@@ -104,6 +124,7 @@ pub(crate) fn estimate<S>(
     best: &BestPoint,
     robust_nu: Option<f64>,
     design_effect: f64,
+    variant_outputs: &[Vec<Vec<f64>>],
 ) -> Vec<ParamUncertainty> {
     let d = space.dim();
     // Model minus measurement (negation is exact: `y - m` bit for bit).
@@ -119,20 +140,21 @@ pub(crate) fn estimate<S>(
     // Under a Student-t: the information per row is `(nu + 1) / (nu + 3)` over its scale
     // squared, and each residual pulls with its IRLS weight.
     let robust = robust_nu.and_then(|nu| RobustFit::new(nu, &residual));
-    let (s2_row, pull): (f64, Vec<f64>) = match &robust {
-        None => (
-            (residual.iter().map(|r| r * r).sum::<f64>() / m.saturating_sub(d).max(1) as f64)
-                .max(1e-24), // a perfect fit: every parameter the outputs move is pinned down
-            residual.clone(),
-        ),
-        Some(f) => (
-            f.scale * f.scale / f.information_factor(),
-            residual
-                .iter()
-                .map(|r| f.weight(*r) * r / f.information_factor())
-                .collect(),
-        ),
+    // How strongly each row pulls: 1 under least squares, the IRLS weight over the
+    // t's information factor under a Student-t.
+    let row_pull: Vec<f64> = match &robust {
+        None => vec![1.0; m],
+        Some(f) => residual
+            .iter()
+            .map(|r| f.weight(*r) / f.information_factor())
+            .collect(),
     };
+    let s2_row = match &robust {
+        None => (residual.iter().map(|r| r * r).sum::<f64>() / m.saturating_sub(d).max(1) as f64)
+            .max(1e-24), // a perfect fit: every parameter the outputs move is pinned down
+        Some(f) => f.scale * f.scale / f.information_factor(),
+    };
+    let pull: Vec<f64> = residual.iter().zip(&row_pull).map(|(r, w)| w * r).collect();
     // Residuals of one output over the snapshots are not independent when the model
     // errs there the same way each time: count them as fewer (the design effect).
     let s2 = s2_row * design_effect;
@@ -159,6 +181,34 @@ pub(crate) fn estimate<S>(
         .map(|col| col.iter().zip(&pull).map(|(j, r)| j * r).sum::<f64>() / s2)
         .collect();
     let shift_unit = cholesky_solve(&chol, d, &gradient);
+    // Each variant's change of the outputs moves the parameters as a change of the
+    // residuals would; the largest move (unit box) per parameter counts.
+    let mut numerical_unit: Option<Vec<f64>> = None;
+    for outputs in variant_outputs {
+        let change: Vec<f64> = measured_rows(obs, outputs)
+            .zip(measured_rows(obs, &best.outputs))
+            .map(|((_, _, v), (_, _, b))| v - b)
+            .collect();
+        if change.len() != m || change.iter().any(|c| !c.is_finite()) {
+            continue;
+        }
+        let g: Vec<f64> = jac
+            .iter()
+            .map(|col| {
+                col.iter()
+                    .zip(&change)
+                    .zip(&row_pull)
+                    .map(|((j, c), w)| j * w * c)
+                    .sum::<f64>()
+                    / s2
+            })
+            .collect();
+        let step = cholesky_solve(&chol, d, &g);
+        let acc = numerical_unit.get_or_insert_with(|| vec![0.0; d]);
+        for (a, s) in acc.iter_mut().zip(&step) {
+            *a = a.max(s.abs());
+        }
+    }
     let dphys = space.dphys_dunit(&best.unit);
     let names = space.names();
     (0..d)
@@ -172,9 +222,19 @@ pub(crate) fn estimate<S>(
                 .then(|| std_unit * dphys[i].abs());
             let rel_std = std.filter(|_| value != 0.0).map(|s| s / value.abs());
             let shift = -shift_unit[i] * dphys[i];
+            let num_unit = numerical_unit.as_ref().map_or(0.0, |n| n[i]);
+            let numerical = numerical_unit
+                .as_ref()
+                .map(|n| n[i] * dphys[i].abs())
+                .filter(|n| n.is_finite());
+            let rel_num = if value != 0.0 {
+                numerical.map_or(0.0, |n| n / value.abs())
+            } else {
+                num_unit
+            };
             let narrow = match (rel_std, std) {
-                (Some(r), _) => r <= IDENTIFIED_REL_STD,
-                (None, Some(_)) => std_unit <= IDENTIFIED_REL_STD,
+                (Some(r), _) => r.hypot(rel_num) <= IDENTIFIED_REL_STD,
+                (None, Some(_)) => std_unit.hypot(num_unit) <= IDENTIFIED_REL_STD,
                 _ => false,
             };
             let mut u = ParamUncertainty {
@@ -183,6 +243,7 @@ pub(crate) fn estimate<S>(
                 std,
                 rel_std,
                 shift: shift.is_finite().then_some(shift),
+                numerical,
                 identified: false,
             };
             u.identified = narrow && u.settled();
@@ -333,7 +394,7 @@ mod tests {
             validation: Default::default(),
             outputs: vec![s.predict(&(), &unit)],
         };
-        estimate(&jac, obs, space, &best, None, 1.0)
+        estimate(&jac, obs, space, &best, None, 1.0, &[])
     }
 
     #[test]
@@ -361,6 +422,49 @@ mod tests {
         // box prior and the noise).
         assert!((p.value + p.shift.unwrap() - 0.6).abs() < 0.01, "{p:?}");
         assert!(p.shift.unwrap().abs() > CONVERGED_SHIFT_STDS * p.std.unwrap());
+    }
+
+    #[test]
+    fn a_variant_that_moves_the_outputs_along_a_parameter_moves_it_by_that_much() {
+        // A variant of the model (a finer grid, say) whose outputs at the best run are the
+        // model's at p + 0.05: the numerics move p by 0.05 and q by nothing.
+        let (s, obs, space) = setup([0.6, 0.4]);
+        let unit = [0.6, 0.4];
+        let jac = super::super::slopes::surrogate_slopes(&s, &obs, &space, &unit).unwrap();
+        let best = BestPoint {
+            iteration: 1,
+            unit: unit.to_vec(),
+            params: unit.to_vec(),
+            score: 0.0,
+            validation: Default::default(),
+            outputs: vec![s.predict(&(), &unit)],
+        };
+        let moved = |dp: f64| vec![s.predict(&(), &[unit[0] + dp, unit[1]])];
+        let u = estimate(&jac, &obs, &space, &best, None, 1.0, &[moved(0.05)]);
+        let (p, q) = (&u[0], &u[1]);
+        assert!((p.numerical.unwrap() - 0.05).abs() < 0.002, "{p:?}");
+        assert!(q.numerical.unwrap() < 0.002, "{q:?}");
+        // 0.05 of 0.6 is 8%: with its narrow spread p stays within 10%. Its statistics
+        // and its spread are those without the variant.
+        let plain = estimate(&jac, &obs, &space, &best, None, 1.0, &[]);
+        assert!(p.identified && q.identified, "{u:?}");
+        assert_eq!((p.std, p.shift), (plain[0].std, plain[0].shift));
+        assert_eq!(plain[0].numerical, None);
+        // The largest of two variants counts, and 0.09 of 0.6 (15%) is not claimed.
+        let u = estimate(
+            &jac,
+            &obs,
+            &space,
+            &best,
+            None,
+            1.0,
+            &[moved(0.05), moved(-0.09)],
+        );
+        assert!((u[0].numerical.unwrap() - 0.09).abs() < 0.003, "{:?}", u[0]);
+        assert!(!u[0].identified && u[1].identified, "{u:?}");
+        // A variant whose outputs do not match the measured rows is left out.
+        let u = estimate(&jac, &obs, &space, &best, None, 1.0, &[vec![vec![0.0; 3]]]);
+        assert_eq!(u[0].numerical, None);
     }
 
     /// Four outputs measured 0 over three snapshots, and predictions per snapshot that

@@ -193,7 +193,7 @@ pub fn calibration_html(
     );
     h.push_str(
         "<h2>Parameters</h2><table><tr><th>parameter</th><th>initial</th><th>calibrated</th>\
-         <th>one standard deviation (linearised)</th></tr>",
+         <th>one standard deviation (linearised)</th><th>move from the model's numerics</th></tr>",
     );
     for (name, v) in &report.best.params.0 {
         let init = report.initial.params.get(name);
@@ -213,14 +213,41 @@ pub fn calibration_html(
                 (Some(sd), None) => format!("&plusmn;{sd:.3}"),
             },
         };
+        let numerics = report
+            .uncertainty
+            .iter()
+            .find(|u| u.name == *name)
+            .and_then(|u| match (u.rel_numerical(), u.numerical) {
+                (Some(r), _) => Some(format!("{:.1}%", 100.0 * r)),
+                (None, Some(n)) => Some(format!("{n:.3}")),
+                _ => None,
+            })
+            .unwrap_or_else(|| "-".into());
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{v:.5}</td><td>{spread}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{v:.5}</td><td>{spread}</td><td>{numerics}</td></tr>",
             esc(name),
             init.map_or("-".into(), |i| format!("{i:.5}"))
         );
     }
     h.push_str("</table>");
+    if !report.numerical_checks.is_empty() {
+        let checks: Vec<String> = report
+            .numerical_checks
+            .iter()
+            .map(|c| match (&c.error, c.mean_abs_change) {
+                (Some(e), _) => format!("{}: failed ({})", esc(&c.variant), esc(e)),
+                (None, Some(m)) => format!("{}: the sensors move {m:.3} C", esc(&c.variant)),
+                (None, None) => format!("{}: nothing measured", esc(&c.variant)),
+            })
+            .collect();
+        let _ = write!(
+            h,
+            "<p>The model's numerics, checked once at the best run ({}). A parameter whose              spread and numerics' move together exceed {:.0}% is not called identified: the              grid alone moves it that far.</p>",
+            checks.join("; "),
+            100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD
+        );
+    }
     if let Some(src) = report.uncertainty_slopes {
         let _ = write!(
             h,

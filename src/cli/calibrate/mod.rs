@@ -75,6 +75,15 @@ pub struct CalibrateArgs {
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Built-in model: finer grids (cell size relative to --grid-m, each in (0, 1)) at
+    /// which the model runs once per snapshot at the best parameters. How far the grid
+    /// alone moves each parameter is its numerical uncertainty, reported beside its
+    /// spread and counted when a parameter is called identified.
+    #[arg(long = "grid-check", value_delimiter = ',', default_values_t = [0.75, 0.5])]
+    grid_check: Vec<f64>,
+    /// Skip the finer-grid runs of --grid-check.
+    #[arg(long = "no-grid-check")]
+    no_grid_check: bool,
     /// How alpha is calibrated; default: the hall's `calibrate.alpha`.
     #[arg(long, value_enum)]
     alpha: Option<AlphaArg>,
@@ -261,6 +270,20 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         ..HallCalibrationSettings::default()
     };
     s.surrogate = s.surrogate.with_epochs(args.epochs);
+    if let Some(f) = args
+        .grid_check
+        .iter()
+        .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
+    {
+        return Err(CliError::Input(format!(
+            "--grid-check: {f} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)"
+        )));
+    }
+    s.grid_check = if args.no_grid_check {
+        Vec::new()
+    } else {
+        args.grid_check.clone()
+    };
     Ok(s)
 }
 

@@ -17,25 +17,40 @@ fn print_uncertainty(report: &Report) {
     let poor: Vec<String> = u
         .iter()
         .filter(|p| !p.identified)
-        .map(|p| match (p.rel_std, p.rel_shift()) {
-            (Some(r), Some(d)) if !p.settled() => format!(
-                "{} (+/-{:.0}%, not settled: the data point {:+.0}% away)",
-                p.name,
-                100.0 * r,
-                100.0 * d
-            ),
-            (Some(r), _) => format!("{} (+/-{:.0}%)", p.name, 100.0 * r),
-            (None, _) => format!("{} (free)", p.name),
+        .map(|p| {
+            // The numerics' move, where it is what keeps the value from being claimed.
+            let grid = p
+                .rel_numerical()
+                .filter(|n| *n >= 0.5 * kalibre_core::calibrate::IDENTIFIED_REL_STD)
+                .map_or(String::new(), |n| {
+                    format!(", the model's numerics move it {:.0}%", 100.0 * n)
+                });
+            match (p.rel_std, p.rel_shift()) {
+                (Some(r), Some(d)) if !p.settled() => format!(
+                    "{} (+/-{:.0}%{grid}, not settled: the data point {:+.0}% away)",
+                    p.name,
+                    100.0 * r,
+                    100.0 * d
+                ),
+                (Some(r), _) => format!("{} (+/-{:.0}%{grid})", p.name, 100.0 * r),
+                (None, _) => format!("{} (free)", p.name),
+            }
         })
         .collect();
+    let with_numerics = if u.iter().any(|p| p.numerical.is_some()) {
+        ", with the model's numerics' move,"
+    } else {
+        ""
+    };
     println!(
-        "  {:<28} {} of {} (one standard deviation within {:.0}%, and the data point within {:.0} of them)",
+        "  {:<28} {} of {} (one standard deviation{with_numerics} within {:.0}%, and the data point within {:.0} of them)",
         "parameters identified",
         u.len() - poor.len(),
         u.len(),
         100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD,
         kalibre_core::calibrate::CONVERGED_SHIFT_STDS
     );
+    print_numerical_checks(report);
     if let Some(src) = report.uncertainty_slopes {
         println!("  {:<28} {}", "slopes of the spreads", src.describe());
     }
@@ -65,6 +80,37 @@ fn print_uncertainty(report: &Report) {
             }
         );
     }
+}
+
+/// What the model's numerical variants (finer grids) changed at the best run, and the
+/// largest move of a parameter they cause.
+fn print_numerical_checks(report: &Report) {
+    if report.numerical_checks.is_empty() {
+        return;
+    }
+    let changes: Vec<String> = report
+        .numerical_checks
+        .iter()
+        .map(|c| match (&c.error, c.mean_abs_change) {
+            (Some(e), _) => format!("{}: failed ({e})", c.variant),
+            (None, Some(m)) => format!("{}: sensors {m:.3} C apart", c.variant),
+            (None, None) => format!("{}: nothing measured", c.variant),
+        })
+        .collect();
+    let largest = report
+        .uncertainty
+        .iter()
+        .filter_map(|p| p.rel_numerical().map(|n| (n, &p.name)))
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    println!(
+        "  {:<28} {}{}",
+        "numerics (at the best run)",
+        changes.join("; "),
+        largest.map_or(String::new(), |(n, name)| format!(
+            "; largest move: {name} {:.1}%",
+            100.0 * n
+        ))
+    );
 }
 
 /// The end-of-run summary table.

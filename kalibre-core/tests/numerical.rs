@@ -1,0 +1,150 @@
+//! The model's numerical variants (`Calibrator::with_numerical_variant`): run once per
+//! snapshot at the best parameters, their change of the outputs becomes each parameter's
+//! numerical uncertainty, a failed variant is recorded rather than fatal, and the report
+//! round-trips through JSON.
+
+mod common;
+
+use common::*;
+use kalibre_core::{Calibrator, Model, ModelError, Outputs, Report, Settings};
+
+/// The analytic model with `a` read `da` too high: a variant whose numerics move `a`
+/// alone, by `da`.
+struct Shifted {
+    da: f64,
+}
+
+impl Model for Shifted {
+    type Scenario = Scen;
+    fn fingerprint(&self) -> String {
+        format!("poly-shifted-{}", self.da)
+    }
+    fn evaluate(&self, scenario: &Scen, params: &[f64]) -> Result<Outputs, ModelError> {
+        Ok(poly_outputs(scenario.load, &[params[0] + self.da, params[1]]).into())
+    }
+}
+
+fn calibrate(variants: &[(&str, &Shifted)]) -> Report {
+    let (model, obs, space) = (Shifted { da: 0.0 }, observations(), space());
+    let settings = Settings {
+        seed: 5,
+        max_iterations: 1,
+        polish_iterations: 10,
+        ..Settings::default()
+    };
+    let mut cal =
+        Calibrator::new(&model, QuadSurface::default(), &obs, &space).with_settings(settings);
+    for (name, v) in variants {
+        cal = cal.with_numerical_variant(*name, *v);
+    }
+    cal.run().unwrap()
+}
+
+#[test]
+fn a_variant_that_reads_a_higher_moves_a_by_as_much_and_b_not_at_all() {
+    let plain = calibrate(&[]);
+    assert!(plain.numerical_checks.is_empty());
+    assert!(plain.uncertainty.iter().all(|u| u.numerical.is_none()));
+    assert!(
+        plain.uncertainty.iter().all(|u| u.identified),
+        "{:?}",
+        plain.uncertainty
+    );
+
+    // Reading a 0.1 higher is what a 0.1 lower a gives: a moves by about 0.1 (6% of
+    // 1.7, still identified); 0.3 (18%) is too far to claim a.
+    let small = Shifted { da: 0.1 };
+    let large = Shifted { da: -0.3 };
+    let r = calibrate(&[("small", &small), ("large", &large)]);
+    assert_eq!(
+        r.best.params, plain.best.params,
+        "the variants change no run"
+    );
+    let (a, b) = (&r.uncertainty[0], &r.uncertainty[1]);
+    assert!((a.numerical.unwrap() - 0.3).abs() < 0.03, "{a:?}");
+    assert!(b.numerical.unwrap() < 0.03, "{b:?}");
+    assert!(!a.identified && b.identified, "{:?}", r.uncertainty);
+    let r_small = calibrate(&[("small", &small)]);
+    let a_small = &r_small.uncertainty[0];
+    assert!(
+        (a_small.numerical.unwrap() - 0.1).abs() < 0.01,
+        "{a_small:?}"
+    );
+    assert!(a_small.identified, "{a_small:?}");
+    // What each variant changed, over the measured outputs.
+    assert_eq!(r.numerical_checks.len(), 2);
+    assert_eq!(r.numerical_checks[0].variant, "small");
+    let change = r.numerical_checks[0].mean_abs_change.unwrap();
+    assert!(change > 0.01 && change < 1.0, "{change}");
+    assert!(r.numerical_checks.iter().all(|c| c.error.is_none()));
+
+    // The report round-trips with its checks.
+    let json = serde_json::to_string(&r).unwrap();
+    let back: Report = serde_json::from_str(&json).unwrap();
+    assert_eq!(back.numerical_checks, r.numerical_checks);
+    assert_eq!(back.uncertainty, r.uncertainty);
+}
+
+/// A variant that fails on every run.
+struct Broken;
+
+impl Model for Broken {
+    type Scenario = Scen;
+    fn fingerprint(&self) -> String {
+        "broken".into()
+    }
+    fn evaluate(&self, _: &Scen, _: &[f64]) -> Result<Outputs, ModelError> {
+        Err(ModelError::failed("out of memory on the finer grid"))
+    }
+}
+
+#[test]
+fn a_failed_variant_is_recorded_and_the_calibration_stands() {
+    let (model, obs, space) = (Poly::new(), observations(), space());
+    let settings = Settings {
+        seed: 5,
+        max_iterations: 1,
+        polish_iterations: 10,
+        ..Settings::default()
+    };
+    // `with_numerical_variant` takes the model's own type; a failing one through an enum.
+    enum Either {
+        Good(Poly),
+        Bad(Broken),
+    }
+    impl Model for Either {
+        type Scenario = Scen;
+        fn fingerprint(&self) -> String {
+            match self {
+                Either::Good(m) => m.fingerprint(),
+                Either::Bad(m) => m.fingerprint(),
+            }
+        }
+        fn evaluate(&self, s: &Scen, p: &[f64]) -> Result<Outputs, ModelError> {
+            match self {
+                Either::Good(m) => m.evaluate(s, p),
+                Either::Bad(m) => m.evaluate(s, p),
+            }
+        }
+    }
+    let (good, bad) = (Either::Good(model), Either::Bad(Broken));
+    let r = Calibrator::new(&good, QuadSurface::default(), &obs, &space)
+        .with_settings(settings)
+        .with_numerical_variant("finer grid", &bad)
+        .with_unavailable_numerical_variant("grid 0.16 m", "a tile lies under a rack")
+        .run()
+        .unwrap();
+    assert_eq!(r.numerical_checks.len(), 2);
+    let c = &r.numerical_checks[0];
+    assert_eq!(c.mean_abs_change, None);
+    let e = c.error.as_deref().unwrap();
+    assert!(e.contains("out of memory") && e.contains("snapshot"), "{e}");
+    let c = &r.numerical_checks[1];
+    assert_eq!(c.variant, "grid 0.16 m");
+    assert_eq!(
+        c.error.as_deref(),
+        Some("not set up: a tile lies under a rack")
+    );
+    assert!(r.uncertainty.iter().all(|u| u.numerical.is_none()));
+    assert!(r.best.mae_c < 1e-4);
+}
