@@ -378,13 +378,13 @@ mod tests {
         (surrogate, obs, space)
     }
 
-    /// The estimate from the surrogate's slopes with the best run at `unit`.
-    fn estimate_at(
+    /// The surrogate's slopes and a best run at `unit`.
+    fn linearised_at(
         s: &Linear,
         obs: &Observations<()>,
         space: &ParamSpace,
         unit: [f64; 2],
-    ) -> Vec<ParamUncertainty> {
+    ) -> (Vec<Vec<f64>>, BestPoint) {
         let jac = super::super::slopes::surrogate_slopes(s, obs, space, &unit).unwrap();
         let best = BestPoint {
             iteration: 1,
@@ -394,6 +394,17 @@ mod tests {
             validation: Default::default(),
             outputs: vec![s.predict(&(), &unit)],
         };
+        (jac, best)
+    }
+
+    /// The estimate from the surrogate's slopes with the best run at `unit`.
+    fn estimate_at(
+        s: &Linear,
+        obs: &Observations<()>,
+        space: &ParamSpace,
+        unit: [f64; 2],
+    ) -> Vec<ParamUncertainty> {
+        let (jac, best) = linearised_at(s, obs, space, unit);
         estimate(&jac, obs, space, &best, None, 1.0, &[])
     }
 
@@ -430,15 +441,7 @@ mod tests {
         // model's at p + 0.05: the numerics move p by 0.05 and q by nothing.
         let (s, obs, space) = setup([0.6, 0.4]);
         let unit = [0.6, 0.4];
-        let jac = super::super::slopes::surrogate_slopes(&s, &obs, &space, &unit).unwrap();
-        let best = BestPoint {
-            iteration: 1,
-            unit: unit.to_vec(),
-            params: unit.to_vec(),
-            score: 0.0,
-            validation: Default::default(),
-            outputs: vec![s.predict(&(), &unit)],
-        };
+        let (jac, best) = linearised_at(&s, &obs, &space, unit);
         let moved = |dp: f64| vec![s.predict(&(), &[unit[0] + dp, unit[1]])];
         let u = estimate(&jac, &obs, &space, &best, None, 1.0, &[moved(0.05)]);
         let (p, q) = (&u[0], &u[1]);

@@ -228,20 +228,24 @@ impl Hall {
         Ok(())
     }
 
+    /// Every rack and CRAC as (`"rack"` or `"CRAC"`, id, box): the solids that sensors
+    /// and tiles must keep out of.
+    fn solid_boxes(&self) -> impl Iterator<Item = (&'static str, &str, Aabb)> + '_ {
+        let racks = self.racks.iter().map(|r| {
+            let b = Aabb::from_position_size(r.position_m, r.size_m);
+            ("rack", r.id.as_str(), b)
+        });
+        let cracs = self.cracs.iter().map(|k| {
+            let b = Aabb::from_position_size(k.position_m, k.size_m);
+            ("CRAC", k.id.as_str(), b)
+        });
+        racks.chain(cracs)
+    }
+
     /// No tile under a rack or CRAC: the simulator drops a tile's cells that a grid snaps
     /// under a neighbouring rack, so the hall itself must not put it there.
     fn check_tiles_clear(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
-        let solids = self
-            .racks
-            .iter()
-            .map(|r| ("rack", &r.id, r.position_m, r.size_m))
-            .chain(
-                self.cracs
-                    .iter()
-                    .map(|k| ("CRAC", &k.id, k.position_m, k.size_m)),
-            );
-        for (what, id, position, size) in solids {
-            let solid = Aabb::from_position_size(position, size);
+        for (what, id, solid) in self.solid_boxes() {
             for (i, t) in self.tiles.iter().enumerate() {
                 let tile = Aabb {
                     min: [t.position_m[0], t.position_m[1], 0.0],
@@ -324,17 +328,7 @@ impl Hall {
                     ),
                 ));
             }
-            let solids = self
-                .racks
-                .iter()
-                .map(|r| ("rack", &r.id, r.position_m, r.size_m))
-                .chain(
-                    self.cracs
-                        .iter()
-                        .map(|k| ("CRAC", &k.id, k.position_m, k.size_m)),
-                );
-            for (what, id, pos, size) in solids {
-                let b = Aabb::from_position_size(pos, size);
+            for (what, id, b) in self.solid_boxes() {
                 if b.contains_point_strict(s.position_m, GEOMETRY_TOL_M) {
                     return Err(c.err(
                         p,
