@@ -480,17 +480,20 @@ where
             .best
             .as_ref()
             .and_then(|b| uncertainty::repetition(obs, &b.outputs));
-        // Only once a fit has run: an unfitted surrogate has no slopes to speak of.
-        // The model's numerical variants, once at the best run (only where spreads are
-        // estimated: they are what the variants' moves are weighed against).
-        let (numerical_checks, variant_outputs) = match &state.best {
-            Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
+        // Spreads (and the numerical variants weighed against them) only once a fit has
+        // run: an unfitted surrogate has no slopes to speak of.
+        let linearised_best = state
+            .best
+            .as_ref()
+            .filter(|_| iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS);
+        let (numerical_checks, variant_outputs) = match linearised_best {
+            Some(b) => {
                 numerical::run_variants(&self.numerical_variants, obs, &b.outputs, &b.params)
             }
-            _ => (Vec::new(), Vec::new()),
+            None => (Vec::new(), Vec::new()),
         };
-        let (uncertainty, uncertainty_slopes) = match &state.best {
-            Some(b) if iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS => {
+        let (uncertainty, uncertainty_slopes) = match linearised_best {
+            Some(b) => {
                 match slopes::slopes_at(
                     b,
                     model_jacobian.as_ref(),
@@ -516,7 +519,7 @@ where
                     None => (Vec::new(), None),
                 }
             }
-            _ => (Vec::new(), None),
+            None => (Vec::new(), None),
         };
         let best = state.best.ok_or_else(|| {
             Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())

@@ -14,7 +14,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{Model, Observations};
+use super::robust::measured_rows;
+use crate::{check_outputs, Model, Observations};
 
 /// What one numerical variant of the model gave at the best parameters (`report.json`,
 /// `numerical_checks`).
@@ -32,6 +33,17 @@ pub struct NumericalCheck {
     pub error: Option<String>,
 }
 
+impl NumericalCheck {
+    /// One line for summaries: `grid 0.1 m: the sensors move 0.074 C`, or why it failed.
+    pub fn describe(&self) -> String {
+        match (&self.error, self.mean_abs_change) {
+            (Some(e), _) => format!("{}: failed ({e})", self.variant),
+            (None, Some(m)) => format!("{}: the sensors move {m:.3} C", self.variant),
+            (None, None) => format!("{}: nothing measured", self.variant),
+        }
+    }
+}
+
 /// Runs each variant once per snapshot at `params`: the checks for the report, and the
 /// outputs (per snapshot) of each variant whose every run succeeded.
 pub(crate) fn run_variants<M: Model>(
@@ -40,6 +52,7 @@ pub(crate) fn run_variants<M: Model>(
     best_outputs: &[Vec<f64>],
     params: &[f64],
 ) -> (Vec<NumericalCheck>, Vec<Vec<Vec<f64>>>) {
+    let names: Vec<String> = obs.outputs().iter().map(|o| o.name.clone()).collect();
     let mut checks = Vec::new();
     let mut outputs = Vec::new();
     for (name, model) in variants {
@@ -61,37 +74,21 @@ pub(crate) fn run_variants<M: Model>(
             .map(|snap| {
                 model
                     .evaluate(&snap.scenario, params)
+                    .and_then(|o| check_outputs(o, &names))
+                    .map(|o| o.values)
                     .map_err(|e| format!("snapshot `{}`: {e}", snap.label))
-                    .and_then(|o| {
-                        if o.values.len() == obs.outputs().len()
-                            && o.values.iter().all(|v| v.is_finite())
-                        {
-                            Ok(o.values)
-                        } else {
-                            Err(format!(
-                                "snapshot `{}`: {} outputs, not all finite, where {} were expected",
-                                snap.label,
-                                o.values.len(),
-                                obs.outputs().len()
-                            ))
-                        }
-                    })
             })
             .collect();
         match runs {
             Ok(v) => {
-                let (mut sum, mut n) = (0.0, 0usize);
-                for ((snap, var), base) in obs.snapshots().iter().zip(&v).zip(best_outputs) {
-                    for ((m, a), b) in snap.measured.iter().zip(var).zip(base) {
-                        if m.is_some() {
-                            sum += (a - b).abs();
-                            n += 1;
-                        }
-                    }
-                }
+                let changes: Vec<f64> = measured_rows(obs, &v)
+                    .zip(measured_rows(obs, best_outputs))
+                    .map(|((_, _, a), (_, _, b))| (a - b).abs())
+                    .collect();
                 checks.push(NumericalCheck {
                     variant: name.clone(),
-                    mean_abs_change: (n > 0).then(|| sum / n as f64),
+                    mean_abs_change: (!changes.is_empty())
+                        .then(|| changes.iter().sum::<f64>() / changes.len() as f64),
                     error: None,
                 });
                 outputs.push(v);

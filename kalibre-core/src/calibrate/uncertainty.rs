@@ -154,7 +154,6 @@ pub(crate) fn estimate<S>(
             .max(1e-24), // a perfect fit: every parameter the outputs move is pinned down
         Some(f) => f.scale * f.scale / f.information_factor(),
     };
-    let pull: Vec<f64> = residual.iter().zip(&row_pull).map(|(r, w)| w * r).collect();
     // Residuals of one output over the snapshots are not independent when the model
     // errs there the same way each time: count them as fewer (the design effect).
     let s2 = s2_row * design_effect;
@@ -175,12 +174,24 @@ pub(crate) fn estimate<S>(
     let Some(chol) = cholesky(&fisher, d) else {
         return Vec::new();
     };
+    // `F^-1 J^T (w v) / s2`: how far a change `v` of the residuals moves the parameters
+    // (unit box, up to sign).
+    let step_for = |v: &[f64]| -> Vec<f64> {
+        let g: Vec<f64> = jac
+            .iter()
+            .map(|col| {
+                col.iter()
+                    .zip(v)
+                    .zip(&row_pull)
+                    .map(|((j, x), w)| j * w * x)
+                    .sum::<f64>()
+                    / s2
+            })
+            .collect();
+        cholesky_solve(&chol, d, &g)
+    };
     // The Gauss-Newton step toward where the linearised data point.
-    let gradient: Vec<f64> = jac
-        .iter()
-        .map(|col| col.iter().zip(&pull).map(|(j, r)| j * r).sum::<f64>() / s2)
-        .collect();
-    let shift_unit = cholesky_solve(&chol, d, &gradient);
+    let shift_unit = step_for(&residual);
     // Each variant's change of the outputs moves the parameters as a change of the
     // residuals would; the largest move (unit box) per parameter counts.
     let mut numerical_unit: Option<Vec<f64>> = None;
@@ -192,18 +203,7 @@ pub(crate) fn estimate<S>(
         if change.len() != m || change.iter().any(|c| !c.is_finite()) {
             continue;
         }
-        let g: Vec<f64> = jac
-            .iter()
-            .map(|col| {
-                col.iter()
-                    .zip(&change)
-                    .zip(&row_pull)
-                    .map(|((j, c), w)| j * w * c)
-                    .sum::<f64>()
-                    / s2
-            })
-            .collect();
-        let step = cholesky_solve(&chol, d, &g);
+        let step = step_for(&change);
         let acc = numerical_unit.get_or_insert_with(|| vec![0.0; d]);
         for (a, s) in acc.iter_mut().zip(&step) {
             *a = a.max(s.abs());

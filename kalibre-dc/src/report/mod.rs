@@ -235,15 +235,13 @@ pub fn calibration_html(
         let checks: Vec<String> = report
             .numerical_checks
             .iter()
-            .map(|c| match (&c.error, c.mean_abs_change) {
-                (Some(e), _) => format!("{}: failed ({})", esc(&c.variant), esc(e)),
-                (None, Some(m)) => format!("{}: the sensors move {m:.3} C", esc(&c.variant)),
-                (None, None) => format!("{}: nothing measured", esc(&c.variant)),
-            })
+            .map(|c| esc(&c.describe()))
             .collect();
         let _ = write!(
             h,
-            "<p>The model's numerics, checked once at the best run ({}). A parameter whose              spread and numerics' move together exceed {:.0}% is not called identified: the              grid alone moves it that far.</p>",
+            "<p>The model's numerics, checked once at the best run ({}). A parameter whose \
+             spread and numerics' move together exceed {:.0}% is not called identified: the \
+             grid alone moves it that far.</p>",
             checks.join("; "),
             100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD
         );

@@ -91,11 +91,7 @@ fn print_numerical_checks(report: &Report) {
     let changes: Vec<String> = report
         .numerical_checks
         .iter()
-        .map(|c| match (&c.error, c.mean_abs_change) {
-            (Some(e), _) => format!("{}: failed ({e})", c.variant),
-            (None, Some(m)) => format!("{}: sensors {m:.3} C apart", c.variant),
-            (None, None) => format!("{}: nothing measured", c.variant),
-        })
+        .map(|c| c.describe())
         .collect();
     let largest = report
         .uncertainty
