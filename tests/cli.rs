@@ -266,6 +266,14 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
         .all(|u| u["numerical"].as_f64().is_some()));
     assert!(String::from_utf8_lossy(&o.stdout).contains("numerics (at the best run)"));
     assert!(html.contains("move from the model's numerics"));
+    // The polish weighed each reading by how far the grids move it: every residual
+    // carries its weight, in (0, 1], and the summary says how many counted less.
+    assert_eq!(report["settings"]["numerical_weighting"], true);
+    let residuals = report["residuals"].as_array().unwrap();
+    assert!(residuals
+        .iter()
+        .all(|r| r["weight"].as_f64().is_some_and(|w| w > 0.0 && w <= 1.0)));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("grid weighting (polish)"));
 
     // Start again, kill once a few runs are journaled, then resume.
     let cut = tmp("cut");

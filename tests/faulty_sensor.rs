@@ -14,9 +14,16 @@ use kalibre::dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
 
 const FAULT_C: f64 = 3.0;
 
-fn calibrate(hall: &Hall, snaps: &[HallSnapshot], robust_nu: Option<f64>) -> HallCalibration {
+/// Calibrates under `robust_nu`'s likelihood, with or without the polish's grid weighting.
+fn calibrate(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    robust_nu: Option<f64>,
+    grid_weighting: bool,
+) -> HallCalibration {
     let mut settings = HallCalibrationSettings::default();
     settings.core.robust_nu = robust_nu;
+    settings.core.numerical_weighting = grid_weighting;
     calibrate_hall(hall, snaps, &settings, None, vec![]).expect("calibrate")
 }
 
@@ -43,7 +50,7 @@ fn faulty_sensors_neither_hide_the_offset_nor_set_its_size_under_student_t() {
             snap.sensor_c[i] = snap.sensor_c[i].map(|v| v + FAULT_C);
         }
     }
-    let cal = calibrate(&s.hall, &snaps, None);
+    let cal = calibrate(&s.hall, &snaps, None, true);
     let registry = EffectRegistry::builtin();
     let d = diagnose_hall(
         &s.hall,
@@ -89,10 +96,18 @@ fn faulty_sensors_neither_hide_the_offset_nor_set_its_size_under_student_t() {
             .get("crac_supply_offset/offset_c")
             .expect("offset parameter")
     };
-    let least_squares = offset(&calibrate(&next, &snaps, None));
-    let student_t = offset(&calibrate(&next, &snaps, Some(4.0)));
+    // The likelihoods alone: the grid weighting (on by default) weighs sensors by how far
+    // the grid moves them, which says nothing about a faulty one.
+    let least_squares = offset(&calibrate(&next, &snaps, None, false));
+    let student_t = offset(&calibrate(&next, &snaps, Some(4.0), false));
+    let student_t_weighted = offset(&calibrate(&next, &snaps, Some(4.0), true));
     eprintln!(
-        "recalibrated offset: least squares {least_squares:.3} C, student-t {student_t:.3} C"
+        "recalibrated offset: least squares {least_squares:.3} C, student-t {student_t:.3} C, \
+         student-t with the grid weighting {student_t_weighted:.3} C"
+    );
+    assert!(
+        (student_t_weighted + 1.0).abs() < 0.15,
+        "student-t with the grid weighting {student_t_weighted}"
     );
     assert!(
         (student_t + 1.0).abs() < 0.15,

@@ -98,6 +98,8 @@ pub fn setup(preset: Preset, reference: bool) -> Result<Setup> {
 /// as [`kalibre::dc::calibration::calibrate_hall`] assembles it (the temperature-rise
 /// prior as regulariser, the loop settings of `settings.core` with the penalty's
 /// weight), so a baseline surrogate or searcher runs in the same loop as Kalibre.
+/// Without `settings.grid_check` (the finer grids): the experiments stop before the
+/// polish, where those runs would weigh the sensors, and report no uncertainty.
 pub fn run_loop<'o, Su>(
     setup: &Setup,
     surrogate: Su,

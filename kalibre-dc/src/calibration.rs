@@ -29,7 +29,7 @@ use crate::{Error, HallModel, Result};
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 /// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
 /// | `design_within_prior` | false | the initial design spans the alphas whose rises the prior accepts ([`PenaltySettings::plausible_bounds`]) instead of the whole bounds |
-/// | `grid_check` | `[0.75, 0.5]` | cell sizes, relative to `sim.cell_m`, at which the built-in model runs once per snapshot at the best parameters: the alphas' move from the grid alone is their numerical uncertainty (`ParamUncertainty::numerical`), counted when a parameter is called identified; empty: none |
+/// | `grid_check` | `[0.75, 0.5]` | cell sizes, relative to `sim.cell_m`, at which the built-in model runs once per snapshot at the best parameters: the alphas' move from the grid alone is their numerical uncertainty (`ParamUncertainty::numerical`), counted when a parameter is called identified; with `core.numerical_weighting` (default) the grids run before the polish too, which weighs each sensor by them; empty: none |
 /// | `polish_max_params` | 64 | the loop's polish stage (`core.polish_iterations`, 8 by default) runs only when there are at most this many parameters: each of its Jacobians costs `params + 1` model runs per snapshot (per-server alpha on a real hall would need thousands); above it the report's settings show `polish_iterations` 0 |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
@@ -67,7 +67,9 @@ impl HallCalibrationSettings {
     /// step of 0.03 along the least explored direction instead (all beyond the paper; the
     /// variants are measured in docs/performance.md); then up to 8 Levenberg-Marquardt
     /// steps on the model itself (the built-in simulator is cheap; the surrogate alone
-    /// stalls a few tenths of a degree above what the model can reach).
+    /// stalls a few tenths of a degree above what the model can reach), each sensor
+    /// weighed by how far the grid check moves it (`numerical_weighting`: the grid's own
+    /// error at a few sensors would otherwise set the alphas of the types they see).
     pub fn loop_defaults() -> Settings {
         Settings {
             seed: 1,
@@ -79,6 +81,7 @@ impl HallCalibrationSettings {
             stall_step: Some(0.03),
             trust_region: Some(0.1),
             polish_iterations: 8,
+            numerical_weighting: true,
             ..Settings::default()
         }
     }

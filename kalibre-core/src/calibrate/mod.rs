@@ -39,6 +39,7 @@ use crate::{
     Searcher, Surrogate, SurrogateObjective, TrainingSet, Validation, Validator,
 };
 use design::{derive_seed, Stream};
+use robust::residuals as residuals_of;
 use runner::Runner;
 use state::State;
 
@@ -455,7 +456,27 @@ where
             history.push(record);
         };
         let mut model_jacobian = None;
-        if st.polish_iterations > 0 && stop != StopReason::TargetError {
+        let polishing = st.polish_iterations > 0 && stop != StopReason::TargetError;
+        // With numerical weighting the variants run before the polish, at the loop's best,
+        // so that the polish can weigh each output by how far the numerics move it.
+        let mut pre_polish_variants: Option<numerical::VariantRuns> = None;
+        let numerical_changes = match state.best.as_ref() {
+            Some(b)
+                if polishing && st.numerical_weighting && !self.numerical_variants.is_empty() =>
+            {
+                let (checks, outputs) =
+                    numerical::run_variants(&self.numerical_variants, obs, &b.outputs, &b.params);
+                let changes = numerical::row_changes(obs, &b.outputs, &outputs);
+                pre_polish_variants = Some(numerical::VariantRuns {
+                    unit: b.unit.clone(),
+                    checks,
+                    outputs,
+                });
+                changes
+            }
+            _ => None,
+        };
+        if polishing {
             let polish = polish::Polish {
                 runner: &runner,
                 validator: &self.validator,
@@ -464,6 +485,7 @@ where
                 settings: st,
                 names: &names,
                 t_start,
+                numerical_changes: numerical_changes.as_deref(),
             };
             let observers = &self.observers;
             let (records, jacobian) = polish.run(&mut state, iteration, |record| {
@@ -486,11 +508,23 @@ where
             .best
             .as_ref()
             .filter(|_| iteration > 0 && space.dim() <= UNCERTAINTY_MAX_PARAMS);
-        let (numerical_checks, variant_outputs) = match linearised_best {
-            Some(b) => {
+        let (numerical_checks, variant_outputs) = match (linearised_best, pre_polish_variants) {
+            // The variants already ran at this point (the polish did not move it).
+            (Some(b), Some(v)) if v.unit == b.unit => (v.checks, v.outputs),
+            (Some(b), _) => {
                 numerical::run_variants(&self.numerical_variants, obs, &b.outputs, &b.params)
             }
-            None => (Vec::new(), Vec::new()),
+            (None, _) => (Vec::new(), Vec::new()),
+        };
+        // The weights the polish used, at the reported point: the uncertainty of the
+        // weighted estimate uses them too.
+        let numerical_weights = match linearised_best {
+            Some(b) if numerical_changes.is_some() => {
+                numerical::row_changes(obs, &b.outputs, &variant_outputs).map(|u| {
+                    numerical::row_weights(&residuals_of(obs, &b.outputs), &u, space.dim())
+                })
+            }
+            _ => None,
         };
         let (uncertainty, uncertainty_slopes) = match linearised_best {
             Some(b) => {
@@ -511,7 +545,10 @@ where
                             b,
                             st.robust_nu,
                             design_effect,
-                            &variant_outputs,
+                            numerical::Numerics {
+                                variant_outputs: &variant_outputs,
+                                weights: numerical_weights.as_deref(),
+                            },
                         );
                         let source = (!u.is_empty()).then_some(source);
                         (u, source)
@@ -524,19 +561,7 @@ where
         let best = state.best.ok_or_else(|| {
             Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
         })?;
-        let mut residuals = Vec::new();
-        for (snap, pred) in obs.snapshots().iter().zip(&best.outputs) {
-            for ((info, m), p) in obs.outputs().iter().zip(&snap.measured).zip(pred) {
-                if let Some(m) = m {
-                    residuals.push(Residual {
-                        snapshot: snap.label.clone(),
-                        sensor: info.name.clone(),
-                        measured_c: *m,
-                        predicted_c: *p,
-                    });
-                }
-            }
-        }
+        let residuals = report::residual_rows(obs, &best.outputs, numerical_weights.as_deref());
         Ok(Report {
             schema: REPORT_SCHEMA.into(),
             seed: st.seed,

@@ -44,6 +44,22 @@ impl NumericalCheck {
     }
 }
 
+/// What the variants gave at one point (unit box): the checks for the report and the
+/// outputs (per snapshot) of each variant whose every run succeeded.
+pub(crate) struct VariantRuns {
+    pub unit: Vec<f64>,
+    pub checks: Vec<NumericalCheck>,
+    pub outputs: Vec<Vec<Vec<f64>>>,
+}
+
+/// What the uncertainty weighs with the model's numerics: the variants' outputs at the
+/// best point, and each row's weight when the polish weighed the rows.
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Numerics<'a> {
+    pub variant_outputs: &'a [Vec<Vec<f64>>],
+    pub weights: Option<&'a [f64]>,
+}
+
 /// Runs each variant once per snapshot at `params`: the checks for the report, and the
 /// outputs (per snapshot) of each variant whose every run succeeded.
 pub(crate) fn run_variants<M: Model>(
@@ -101,4 +117,106 @@ pub(crate) fn run_variants<M: Model>(
         }
     }
     (checks, outputs)
+}
+
+/// Per measured row (the residuals' order), the largest change of any variant's output
+/// from `best_outputs`; none without a variant that ran at every snapshot.
+pub(crate) fn row_changes<S>(
+    obs: &Observations<S>,
+    best_outputs: &[Vec<f64>],
+    variant_outputs: &[Vec<Vec<f64>>],
+) -> Option<Vec<f64>> {
+    let mut acc: Option<Vec<f64>> = None;
+    for outputs in variant_outputs {
+        let change: Vec<f64> = measured_rows(obs, outputs)
+            .zip(measured_rows(obs, best_outputs))
+            .map(|((_, _, v), (_, _, b))| (v - b).abs())
+            .collect();
+        if change.iter().any(|c| !c.is_finite()) {
+            continue;
+        }
+        match acc.as_mut() {
+            None => acc = Some(change),
+            Some(a) if a.len() == change.len() => {
+                a.iter_mut().zip(&change).for_each(|(a, c)| *a = a.max(*c));
+            }
+            Some(_) => {}
+        }
+    }
+    acc
+}
+
+/// Generalised least squares with the numerics as a per-row error: row `k` has variance
+/// `s^2 + u_k^2` (`u_k` its numerical change), and `s^2` is the noise variance at which
+/// the weighted squared residuals sum to their degrees of freedom, `m - dim` (a moment
+/// estimate: the noise is what the numerics leave unexplained). Returns the relative
+/// weights `s^2 / (s^2 + u_k^2)`, 1 for a row the numerics do not move.
+pub(crate) fn row_weights(residuals: &[f64], changes: &[f64], dim: usize) -> Vec<f64> {
+    let m = residuals.len();
+    if m == 0 || changes.len() != m {
+        return vec![1.0; m];
+    }
+    let mean_sq = residuals.iter().map(|r| r * r).sum::<f64>() / m as f64;
+    if !(mean_sq > 0.0 && mean_sq.is_finite()) {
+        return vec![1.0; m];
+    }
+    let dof = m.saturating_sub(dim).max(1) as f64;
+    let floor = 1e-6 * mean_sq;
+    let chi2 = |s2: f64| -> f64 {
+        residuals
+            .iter()
+            .zip(changes)
+            .map(|(r, u)| r * r / (s2 + u * u).max(floor))
+            .sum()
+    };
+    // chi2 falls as s^2 grows; at `mean_sq * m / dof` it is at most `dof`.
+    let (mut lo, mut hi) = (0.0, mean_sq * m as f64 / dof);
+    if chi2(lo) <= dof {
+        hi = lo;
+    }
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if chi2(mid) > dof {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let s2 = hi.max(floor);
+    changes.iter().map(|u| s2 / (s2 + u * u)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_the_numerics_do_not_move_weigh_one_and_the_noise_is_recovered() {
+        // 100 rows of +-1 noise; the last 10 also carry a numerical error of 3 that their
+        // changes report.
+        let mut r: Vec<f64> = (0..100)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let mut u = vec![0.0; 100];
+        for k in 90..100 {
+            r[k] += 3.0;
+            u[k] = 3.0;
+        }
+        let w = row_weights(&r, &u, 0);
+        assert!(w[..90].iter().all(|&w| w == 1.0));
+        // s^2 near 1 (the noise): the moved rows weigh about 1 / (1 + 9).
+        for &wk in &w[90..] {
+            assert!(wk > 0.07 && wk < 0.14, "weight {wk}");
+        }
+        // Without numerical changes every row weighs 1.
+        assert!(row_weights(&r, &[0.0; 100], 3).iter().all(|&w| w == 1.0));
+    }
+
+    #[test]
+    fn residuals_the_numerics_fully_explain_leave_only_the_unmoved_rows() {
+        let r = [0.5, -0.5, 2.0, -2.0];
+        let w = row_weights(&r, &[0.0, 0.0, 100.0, 100.0], 2);
+        assert!(w[0] == 1.0 && w[1] == 1.0);
+        assert!(w[2] < 1e-3 && w[3] < 1e-3, "{w:?}");
+    }
 }

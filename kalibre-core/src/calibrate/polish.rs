@@ -90,6 +90,29 @@ pub(crate) fn record(
 struct Linearisation {
     jacobian: ModelJacobian,
     residuals: Vec<f64>,
+    /// With numerical weighting: each row's weight, fitted to these residuals.
+    row_weights: Option<Vec<f64>>,
+}
+
+/// The point the polish linearises at and steps from, with numerical weighting (without
+/// it, the loop's best point is).
+struct Anchor {
+    unit: Vec<f64>,
+    params: Vec<f64>,
+    outputs: Vec<Vec<f64>>,
+    iteration: usize,
+}
+
+/// The score the weighted polish accepts steps by: the validator's MAE with each row
+/// weighed.
+fn weighted_mae(residuals: &[f64], weights: &[f64]) -> f64 {
+    let total: f64 = weights.iter().sum();
+    residuals
+        .iter()
+        .zip(weights)
+        .map(|(r, w)| w * r.abs())
+        .sum::<f64>()
+        / total.max(f64::MIN_POSITIVE)
 }
 
 /// The polish stage's context: what it runs and scores with.
@@ -101,6 +124,9 @@ pub(crate) struct Polish<'p, 'r, M: Model, V> {
     pub settings: &'p Settings,
     pub names: &'p [String],
     pub t_start: Instant,
+    /// With numerical weighting: per measured row, the largest change over the model's
+    /// numerical variants at the loop's best point.
+    pub numerical_changes: Option<&'p [f64]>,
 }
 
 impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
@@ -130,19 +156,34 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
         let mut lambda = LAMBDA_START;
         let mut jac: Option<Linearisation> = None;
         let mut iteration = last_iteration;
+        // With numerical weighting the polish minimises the weighted misfit, which the
+        // loop's best (by MAE) need not: it keeps its own anchor.
+        let mut anchor: Option<Anchor> = self.numerical_changes.and_then(|_| {
+            state.best.as_ref().map(|b| Anchor {
+                unit: b.unit.clone(),
+                params: b.params.clone(),
+                outputs: b.outputs.clone(),
+                iteration: b.iteration,
+            })
+        });
         for _ in 0..self.settings.polish_iterations {
-            let Some(best) = state.best.as_ref() else {
-                break;
+            let (u_at, y_at) = match (&anchor, state.best.as_ref()) {
+                (Some(a), _) => (&a.unit, &a.outputs),
+                (None, Some(b)) => (&b.unit, &b.outputs),
+                (None, None) => break,
             };
             let t_iter = Instant::now();
             let mut model_s = 0.0;
-            let stale = jac.as_ref().is_none_or(|l| l.jacobian.unit != best.unit);
+            let stale = jac.as_ref().is_none_or(|l| &l.jacobian.unit != u_at);
             if stale {
                 if !self.within_budget(state, (dim + 1) * n_snap) {
                     break;
                 }
-                let (u0, y0) = (best.unit.clone(), best.outputs.clone());
+                let (u0, y0) = (u_at.clone(), y_at.clone());
                 let r0 = residuals(obs, &y0);
+                let row_weights = self
+                    .numerical_changes
+                    .map(|u| super::numerical::row_weights(&r0, u, dim));
                 let mut steps = Vec::with_capacity(dim);
                 let mut points = Vec::with_capacity(dim);
                 for i in 0..dim {
@@ -192,6 +233,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                         complete,
                     },
                     residuals: r0,
+                    row_weights,
                 });
             }
             let Some(Linearisation {
@@ -202,6 +244,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                         ..
                     },
                 residuals: r0,
+                row_weights,
             }) = jac.as_ref()
             else {
                 break;
@@ -216,10 +259,22 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 .settings
                 .robust_nu
                 .and_then(|nu| RobustFit::new(nu, r0));
-            let step = match &robust {
+            // Each row's weight: the t's IRLS weight and the numerics' weight.
+            let row_w: Option<Vec<f64>> = match (&robust, row_weights) {
+                (None, None) => None,
+                (r, n) => Some(
+                    (0..r0.len())
+                        .map(|k| {
+                            r.as_ref().map_or(1.0, |f| f.weight(r0[k]))
+                                * n.as_ref().map_or(1.0, |n| n[k])
+                        })
+                        .collect(),
+                ),
+            };
+            let step = match &row_w {
                 None => self.damped_step(u0, r0, cols, lambda),
-                Some(f) => {
-                    let sw: Vec<f64> = r0.iter().map(|r| f.weight(*r).sqrt()).collect();
+                Some(w) => {
+                    let sw: Vec<f64> = w.iter().map(|w| w.sqrt()).collect();
                     let weigh =
                         |v: &[f64]| -> Vec<f64> { v.iter().zip(&sw).map(|(a, w)| a * w).collect() };
                     let cols_w: Vec<Vec<f64>> = cols.iter().map(|c| weigh(c)).collect();
@@ -246,8 +301,32 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 .unwrap_or_default();
             model_s += t.elapsed().as_secs_f64();
             let eval = state.absorb(self.validator, obs, iteration, &unit, &params, results);
-            let improved = state.best.as_ref().map(|b| b.score) < before
-                || before.is_none() && state.best.is_some();
+            let improved = match (anchor.as_mut(), row_weights) {
+                (Some(a), Some(w)) => {
+                    // `absorb` keeps a point's outputs only when every snapshot ran.
+                    let outputs = state
+                        .ok_runs
+                        .last()
+                        .filter(|_| eval.validation.is_some())
+                        .map(|(_, o)| o.clone());
+                    let better = outputs
+                        .filter(|o| weighted_mae(&residuals(obs, o), w) < weighted_mae(r0, w));
+                    let improved = better.is_some();
+                    if let Some(outputs) = better {
+                        *a = Anchor {
+                            unit: unit.clone(),
+                            params: params.clone(),
+                            outputs,
+                            iteration,
+                        };
+                    }
+                    improved
+                }
+                _ => {
+                    state.best.as_ref().map(|b| b.score) < before
+                        || before.is_none() && state.best.is_some()
+                }
+            };
             lambda = if improved {
                 (lambda / 3.0).max(1e-6)
             } else {
@@ -259,10 +338,12 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 for (c, d) in cols.iter().zip(&step) {
                     r.iter_mut().zip(c).for_each(|(ri, ci)| *ri -= ci * d);
                 }
+                let w = |k: usize| row_weights.as_ref().map_or(1.0, |w| w[k]);
                 r.iter()
-                    .map(|v| robust.as_ref().map_or(v * v, |f| f.loss(*v)))
+                    .enumerate()
+                    .map(|(k, v)| w(k) * robust.as_ref().map_or(v * v, |f| f.loss(*v)))
                     .sum::<f64>()
-                    / r.len().max(1) as f64
+                    / (0..r.len()).map(w).sum::<f64>().max(f64::MIN_POSITIVE)
             };
             let rec = record(
                 iteration,
@@ -288,6 +369,16 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             );
             emit(&rec);
             records.push(rec);
+        }
+        if let Some(a) = anchor {
+            state.promote(
+                self.validator,
+                obs,
+                a.iteration,
+                &a.unit,
+                &a.params,
+                a.outputs,
+            );
         }
         Ok((records, jac.map(|l| l.jacobian)))
     }

@@ -228,6 +228,35 @@ pub struct Residual {
     pub measured_c: f64,
     /// Predicted by the best model.
     pub predicted_c: f64,
+    /// With numerical weighting: the weight the polish gave this reading, `s^2 / (s^2 +
+    /// u^2)` (`u` how far the model's numerical variants move it); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weight: Option<f64>,
+}
+
+/// The best run's residual rows: every measured output of every snapshot, with its
+/// numerical weight when the polish weighed them (`weights` in the same row order).
+pub(crate) fn residual_rows<S>(
+    obs: &crate::Observations<S>,
+    outputs: &[Vec<f64>],
+    weights: Option<&[f64]>,
+) -> Vec<Residual> {
+    let mut weights = weights.into_iter().flatten().copied();
+    let mut rows = Vec::new();
+    for (snap, pred) in obs.snapshots().iter().zip(outputs) {
+        for ((info, m), p) in obs.outputs().iter().zip(&snap.measured).zip(pred) {
+            if let Some(m) = m {
+                rows.push(Residual {
+                    snapshot: snap.label.clone(),
+                    sensor: info.name.clone(),
+                    measured_c: *m,
+                    predicted_c: *p,
+                    weight: weights.next(),
+                });
+            }
+        }
+    }
+    rows
 }
 
 /// Why the loop stopped.

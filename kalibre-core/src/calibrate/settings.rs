@@ -26,6 +26,7 @@ use crate::{Error, Result};
 /// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
 /// | `robust_nu` | none | the data term's likelihood: none is the paper's mean squared error; `nu` a Student-t with `nu` degrees of freedom (4 is the usual robust choice), its scale fitted to the residuals, in the polish (reweighted Levenberg-Marquardt) and the uncertainty, so that a few outputs the model cannot match do not set the parameters; the iterations' search keeps the squared error (it finds the basin) | finite, > 0 |
+/// | `numerical_weighting` | false | with numerical variants ([`crate::Calibrator::with_numerical_variant`]) and a polish: the variants run at the loop's best before the polish, and the polish weighs each measured output by `s^2 / (s^2 + u^2)`, `u` its largest change over the variants and `s^2` the noise variance that leaves the weighted residuals their degrees of freedom (generalised least squares with the numerics as a per-output error); the uncertainty uses the same weights | bool |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, > 0 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -78,6 +79,10 @@ pub struct Settings {
     /// the squared error). Missing in older reports: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub robust_nu: Option<f64>,
+    /// Weigh each output in the polish and the uncertainty by how far the model's
+    /// numerical variants leave it trustworthy. Missing in older reports: false.
+    #[serde(default)]
+    pub numerical_weighting: bool,
 }
 
 impl Default for Settings {
@@ -102,6 +107,7 @@ impl Default for Settings {
             trust_region: None,
             polish_iterations: 0,
             robust_nu: None,
+            numerical_weighting: false,
         }
     }
 }

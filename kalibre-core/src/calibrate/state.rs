@@ -97,3 +97,31 @@ impl State {
         }
     }
 }
+
+impl State {
+    /// Makes a point that ran at every snapshot the best one whatever its score: the
+    /// weighted polish's optimum, which minimises a weighted misfit rather than the MAE.
+    pub(crate) fn promote<S, V: Validator>(
+        &mut self,
+        validator: &V,
+        obs: &Observations<S>,
+        iteration: usize,
+        unit: &[f64],
+        params: &[f64],
+        outputs: Vec<Vec<f64>>,
+    ) {
+        if self.best.as_ref().is_some_and(|b| b.unit == unit) {
+            return;
+        }
+        let validation = validator.validate(obs, &outputs);
+        let score = validator.score(&validation);
+        self.best = Some(BestPoint {
+            iteration,
+            unit: unit.to_vec(),
+            params: params.to_vec(),
+            score,
+            validation,
+            outputs,
+        });
+    }
+}

@@ -40,6 +40,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::numerical::Numerics;
 use super::robust::{measured_rows, residuals, RobustFit};
 use super::state::BestPoint;
 use crate::search::{cholesky, cholesky_solve};
@@ -124,8 +125,12 @@ pub(crate) fn estimate<S>(
     best: &BestPoint,
     robust_nu: Option<f64>,
     design_effect: f64,
-    variant_outputs: &[Vec<Vec<f64>>],
+    numerics: Numerics<'_>,
 ) -> Vec<ParamUncertainty> {
+    let Numerics {
+        variant_outputs,
+        weights: numerical_weights,
+    } = numerics;
     let d = space.dim();
     // Model minus measurement (negation is exact: `y - m` bit for bit).
     let residual: Vec<f64> = residuals(obs, &best.outputs).iter().map(|r| -r).collect();
@@ -142,15 +147,26 @@ pub(crate) fn estimate<S>(
     let robust = robust_nu.and_then(|nu| RobustFit::new(nu, &residual));
     // How strongly each row pulls: 1 under least squares, the IRLS weight over the
     // t's information factor under a Student-t.
+    // With numerical weighting, each row's weight (generalised least squares: its
+    // variance is `s^2 / w`) multiplies its pull and its information.
+    let numerical_w: Vec<f64> = numerical_weights
+        .filter(|w| w.len() == m)
+        .map_or_else(|| vec![1.0; m], <[f64]>::to_vec);
     let row_pull: Vec<f64> = match &robust {
-        None => vec![1.0; m],
+        None => numerical_w.clone(),
         Some(f) => residual
             .iter()
-            .map(|r| f.weight(*r) / f.information_factor())
+            .zip(&numerical_w)
+            .map(|(r, w)| w * f.weight(*r) / f.information_factor())
             .collect(),
     };
     let s2_row = match &robust {
-        None => (residual.iter().map(|r| r * r).sum::<f64>() / m.saturating_sub(d).max(1) as f64)
+        None => (residual
+            .iter()
+            .zip(&numerical_w)
+            .map(|(r, w)| w * r * r)
+            .sum::<f64>()
+            / m.saturating_sub(d).max(1) as f64)
             .max(1e-24), // a perfect fit: every parameter the outputs move is pinned down
         Some(f) => f.scale * f.scale / f.information_factor(),
     };
@@ -160,7 +176,13 @@ pub(crate) fn estimate<S>(
     let mut fisher = vec![0.0; d * d];
     for i in 0..d {
         for j in 0..=i {
-            let v = jac[i].iter().zip(&jac[j]).map(|(a, b)| a * b).sum::<f64>() / s2;
+            let v = jac[i]
+                .iter()
+                .zip(&jac[j])
+                .zip(&numerical_w)
+                .map(|((a, b), w)| w * a * b)
+                .sum::<f64>()
+                / s2;
             fisher[i * d + j] = v;
             fisher[j * d + i] = v;
         }
@@ -317,6 +339,14 @@ mod tests {
     use super::*;
     use crate::{FitSummary, OutputInfo, Scale, Snapshot, Surrogate, TrainingSet};
 
+    /// The numerics of variants alone (no row weights).
+    fn only(variant_outputs: &[Vec<Vec<f64>>]) -> Numerics<'_> {
+        Numerics {
+            variant_outputs,
+            weights: None,
+        }
+    }
+
     /// `y_k = sum_i J_ki * u_i` in the unit box: a surrogate whose slopes are the model's.
     struct Linear {
         jac: Vec<[f64; 2]>,
@@ -405,7 +435,7 @@ mod tests {
         unit: [f64; 2],
     ) -> Vec<ParamUncertainty> {
         let (jac, best) = linearised_at(s, obs, space, unit);
-        estimate(&jac, obs, space, &best, None, 1.0, &[])
+        estimate(&jac, obs, space, &best, None, 1.0, Numerics::default())
     }
 
     #[test]
@@ -443,13 +473,13 @@ mod tests {
         let unit = [0.6, 0.4];
         let (jac, best) = linearised_at(&s, &obs, &space, unit);
         let moved = |dp: f64| vec![s.predict(&(), &[unit[0] + dp, unit[1]])];
-        let u = estimate(&jac, &obs, &space, &best, None, 1.0, &[moved(0.05)]);
+        let u = estimate(&jac, &obs, &space, &best, None, 1.0, only(&[moved(0.05)]));
         let (p, q) = (&u[0], &u[1]);
         assert!((p.numerical.unwrap() - 0.05).abs() < 0.002, "{p:?}");
         assert!(q.numerical.unwrap() < 0.002, "{q:?}");
         // 0.05 of 0.6 is 8%: with its narrow spread p stays within 10%. Its statistics
         // and its spread are those without the variant.
-        let plain = estimate(&jac, &obs, &space, &best, None, 1.0, &[]);
+        let plain = estimate(&jac, &obs, &space, &best, None, 1.0, Numerics::default());
         assert!(p.identified && q.identified, "{u:?}");
         assert_eq!((p.std, p.shift), (plain[0].std, plain[0].shift));
         assert_eq!(plain[0].numerical, None);
@@ -461,12 +491,20 @@ mod tests {
             &best,
             None,
             1.0,
-            &[moved(0.05), moved(-0.09)],
+            only(&[moved(0.05), moved(-0.09)]),
         );
         assert!((u[0].numerical.unwrap() - 0.09).abs() < 0.003, "{:?}", u[0]);
         assert!(!u[0].identified && u[1].identified, "{u:?}");
         // A variant whose outputs do not match the measured rows is left out.
-        let u = estimate(&jac, &obs, &space, &best, None, 1.0, &[vec![vec![0.0; 3]]]);
+        let u = estimate(
+            &jac,
+            &obs,
+            &space,
+            &best,
+            None,
+            1.0,
+            only(&[vec![vec![0.0; 3]]]),
+        );
         assert_eq!(u[0].numerical, None);
     }
 

@@ -114,8 +114,13 @@ pub fn parity_svg(hall: &Hall, report: &Report) -> String {
             3.5,
             colour,
             &format!(
-                "{} @ {}: measured {:.2}, model {:.2}",
-                r.sensor, r.snapshot, r.measured_c, r.predicted_c
+                "{} @ {}: measured {:.2}, model {:.2}{}",
+                r.sensor,
+                r.snapshot,
+                r.measured_c,
+                r.predicted_c,
+                r.weight
+                    .map_or(String::new(), |w| format!(", grid weight {w:.2}"))
             ),
         );
     }
@@ -302,8 +307,18 @@ pub fn calibration_html(
 
 /// How the calibration weighed residuals, in words.
 pub fn likelihood_text(report: &Report) -> String {
-    match report.settings.robust_nu {
+    let base = match report.settings.robust_nu {
         None => "least squares (the paper's mean squared error)".to_string(),
         Some(nu) => format!("Student-t, nu {nu} (in the polish and the uncertainty)"),
+    };
+    let weights: Vec<f64> = report.residuals.iter().filter_map(|r| r.weight).collect();
+    if weights.is_empty() {
+        return base;
     }
+    format!(
+        "{base}; in the polish each reading weighed by how far the finer grids move it \
+         ({} of {} below 0.5)",
+        weights.iter().filter(|w| **w < 0.5).count(),
+        weights.len()
+    )
 }

@@ -84,6 +84,12 @@ pub struct CalibrateArgs {
     /// Skip the finer-grid runs of --grid-check.
     #[arg(long = "no-grid-check")]
     no_grid_check: bool,
+    /// Do not weigh the sensors by the grid check in the polish: by default the grids run
+    /// before the polish too, and a sensor the grid moves by u counts s^2 / (s^2 + u^2)
+    /// (s: the noise the grid leaves unexplained), so the grid's error at a few sensors
+    /// does not set the alphas.
+    #[arg(long = "no-grid-weighting")]
+    no_grid_weighting: bool,
     /// How alpha is calibrated; default: the hall's `calibrate.alpha`.
     #[arg(long, value_enum)]
     alpha: Option<AlphaArg>,
@@ -247,6 +253,7 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
             ModelArg::Openfoam | ModelArg::Command => 0,
         }),
         robust_nu: args.likelihood.robust_nu(args.nu)?,
+        numerical_weighting: !args.no_grid_weighting,
         ..HallCalibrationSettings::loop_defaults()
     };
     core.check().map_err(|e| match e {

@@ -107,6 +107,25 @@ fn print_numerical_checks(report: &Report) {
             100.0 * n
         ))
     );
+    let weighed: Vec<(&str, &str, f64)> = report
+        .residuals
+        .iter()
+        .filter_map(|r| {
+            r.weight
+                .map(|w| (r.sensor.as_str(), r.snapshot.as_str(), w))
+        })
+        .collect();
+    if let Some(lowest) = weighed.iter().min_by(|a, b| a.2.total_cmp(&b.2)) {
+        println!(
+            "  {:<28} {} of {} readings count less than half (the grid moves them more than the noise); lowest: {} in {} ({:.2})",
+            "grid weighting (polish)",
+            weighed.iter().filter(|w| w.2 < 0.5).count(),
+            weighed.len(),
+            lowest.0,
+            lowest.1,
+            lowest.2
+        );
+    }
 }
 
 /// The end-of-run summary table.
