@@ -345,6 +345,18 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                     .sum::<f64>()
                     / (0..r.len()).map(w).sum::<f64>().max(f64::MIN_POSITIVE)
             };
+            // The weighted optimum so far is the calibration's answer so far: the history's
+            // "best" follows it rather than the lowest plain MAE among the polish's runs.
+            if let Some(a) = &anchor {
+                state.promote(
+                    self.validator,
+                    obs,
+                    a.iteration,
+                    &a.unit,
+                    &a.params,
+                    a.outputs.clone(),
+                );
+            }
             let rec = record(
                 iteration,
                 state,
