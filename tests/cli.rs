@@ -274,6 +274,7 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
         .iter()
         .all(|r| r["weight"].as_f64().is_some_and(|w| w > 0.0 && w <= 1.0)));
     assert!(String::from_utf8_lossy(&o.stdout).contains("grid weighting (polish)"));
+    assert!(html.contains("weighed by how far the finer grids move it"));
 
     // Start again, kill once a few runs are journaled, then resume.
     let cut = tmp("cut");

@@ -170,7 +170,10 @@ pub fn calibration_html(
         snaps.len(),
         hall.sensors.len(),
         report.stop_reason,
-        likelihood_text(report)
+        match grid_weighting_text(report) {
+            Some(w) => format!("{}; {w}", likelihood_text(report)),
+            None => likelihood_text(report),
+        }
     );
     if prior.binds {
         let _ = write!(
@@ -307,18 +310,22 @@ pub fn calibration_html(
 
 /// How the calibration weighed residuals, in words.
 pub fn likelihood_text(report: &Report) -> String {
-    let base = match report.settings.robust_nu {
+    match report.settings.robust_nu {
         None => "least squares (the paper's mean squared error)".to_string(),
         Some(nu) => format!("Student-t, nu {nu} (in the polish and the uncertainty)"),
-    };
-    let weights: Vec<f64> = report.residuals.iter().filter_map(|r| r.weight).collect();
-    if weights.is_empty() {
-        return base;
     }
-    format!(
-        "{base}; in the polish each reading weighed by how far the finer grids move it \
-         ({} of {} below 0.5)",
-        weights.iter().filter(|w| **w < 0.5).count(),
-        weights.len()
-    )
+}
+
+/// How the polish weighed the readings by the model's finer grids, in words; none when
+/// it did not.
+pub fn grid_weighting_text(report: &Report) -> Option<String> {
+    let weights: Vec<f64> = report.residuals.iter().filter_map(|r| r.weight).collect();
+    (!weights.is_empty()).then(|| {
+        format!(
+            "in the polish each reading weighed by how far the finer grids move it ({} of {} \
+             below 0.5)",
+            weights.iter().filter(|w| **w < 0.5).count(),
+            weights.len()
+        )
+    })
 }
