@@ -44,6 +44,18 @@ impl NumericalCheck {
     }
 }
 
+/// Per measured row (the residuals' order), a variant's output minus the best run's.
+pub(crate) fn output_change<S>(
+    obs: &Observations<S>,
+    variant_outputs: &[Vec<f64>],
+    best_outputs: &[Vec<f64>],
+) -> Vec<f64> {
+    measured_rows(obs, variant_outputs)
+        .zip(measured_rows(obs, best_outputs))
+        .map(|((_, _, v), (_, _, b))| v - b)
+        .collect()
+}
+
 /// What the variants gave at one point (unit box): the checks for the report and the
 /// outputs (per snapshot) of each variant whose every run succeeded.
 pub(crate) struct VariantRuns {
@@ -97,9 +109,9 @@ pub(crate) fn run_variants<M: Model>(
             .collect();
         match runs {
             Ok(v) => {
-                let changes: Vec<f64> = measured_rows(obs, &v)
-                    .zip(measured_rows(obs, best_outputs))
-                    .map(|((_, _, a), (_, _, b))| (a - b).abs())
+                let changes: Vec<f64> = output_change(obs, &v, best_outputs)
+                    .iter()
+                    .map(|c| c.abs())
                     .collect();
                 checks.push(NumericalCheck {
                     variant: name.clone(),
@@ -128,9 +140,9 @@ pub(crate) fn row_changes<S>(
 ) -> Option<Vec<f64>> {
     let mut acc: Option<Vec<f64>> = None;
     for outputs in variant_outputs {
-        let change: Vec<f64> = measured_rows(obs, outputs)
-            .zip(measured_rows(obs, best_outputs))
-            .map(|((_, _, v), (_, _, b))| (v - b).abs())
+        let change: Vec<f64> = output_change(obs, outputs, best_outputs)
+            .iter()
+            .map(|c| c.abs())
             .collect();
         if change.iter().any(|c| !c.is_finite()) {
             continue;

@@ -103,6 +103,20 @@ struct Anchor {
     iteration: usize,
 }
 
+impl Anchor {
+    /// Makes this point the loop's best: the weighted optimum is the calibration's answer.
+    fn make_best<S, V: Validator>(&self, state: &mut State, validator: &V, obs: &Observations<S>) {
+        state.promote(
+            validator,
+            obs,
+            self.iteration,
+            &self.unit,
+            &self.params,
+            self.outputs.clone(),
+        );
+    }
+}
+
 /// The score the weighted polish accepts steps by: the validator's MAE with each row
 /// weighed.
 fn weighted_mae(residuals: &[f64], weights: &[f64]) -> f64 {
@@ -348,14 +362,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             // The weighted optimum so far is the calibration's answer so far: the history's
             // "best" follows it rather than the lowest plain MAE among the polish's runs.
             if let Some(a) = &anchor {
-                state.promote(
-                    self.validator,
-                    obs,
-                    a.iteration,
-                    &a.unit,
-                    &a.params,
-                    a.outputs.clone(),
-                );
+                a.make_best(state, self.validator, obs);
             }
             let rec = record(
                 iteration,
@@ -382,15 +389,8 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             emit(&rec);
             records.push(rec);
         }
-        if let Some(a) = anchor {
-            state.promote(
-                self.validator,
-                obs,
-                a.iteration,
-                &a.unit,
-                &a.params,
-                a.outputs,
-            );
+        if let Some(a) = &anchor {
+            a.make_best(state, self.validator, obs);
         }
         Ok((records, jac.map(|l| l.jacobian)))
     }

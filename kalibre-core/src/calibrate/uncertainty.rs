@@ -40,7 +40,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::numerical::Numerics;
+use super::numerical::{output_change, Numerics};
 use super::robust::{measured_rows, residuals, RobustFit};
 use super::state::BestPoint;
 use crate::search::{cholesky, cholesky_solve};
@@ -218,10 +218,7 @@ pub(crate) fn estimate<S>(
     // residuals would; the largest move (unit box) per parameter counts.
     let mut numerical_unit: Option<Vec<f64>> = None;
     for outputs in variant_outputs {
-        let change: Vec<f64> = measured_rows(obs, outputs)
-            .zip(measured_rows(obs, &best.outputs))
-            .map(|((_, _, v), (_, _, b))| v - b)
-            .collect();
+        let change = output_change(obs, outputs, &best.outputs);
         if change.len() != m || change.iter().any(|c| !c.is_finite()) {
             continue;
         }
