@@ -135,8 +135,10 @@ where
     /// A numerical variant of the model (the same physics on a finer grid, say), run once
     /// per snapshot at the best parameters: how far its outputs would move the parameters
     /// is their numerical uncertainty (`ParamUncertainty::numerical`), and the report
-    /// lists what each variant changed (`Report::numerical_checks`). Its runs are not
-    /// journaled.
+    /// lists what each variant changed (`Report::numerical_checks`). With
+    /// `Settings::numerical_weighting` and a polish, the variants also run at the loop's
+    /// best before the polish, which then weighs each output by how far they move it.
+    /// Its runs are not journaled.
     pub fn with_numerical_variant(mut self, name: impl Into<String>, model: &'a M) -> Self {
         self.numerical_variants.push((name.into(), Ok(model)));
         self
