@@ -94,29 +94,6 @@ struct Linearisation {
     row_weights: Option<Vec<f64>>,
 }
 
-/// The point the polish linearises at and steps from, with numerical weighting (without
-/// it, the loop's best point is).
-struct Anchor {
-    unit: Vec<f64>,
-    params: Vec<f64>,
-    outputs: Vec<Vec<f64>>,
-    iteration: usize,
-}
-
-impl Anchor {
-    /// Makes this point the loop's best: the weighted optimum is the calibration's answer.
-    fn make_best<S, V: Validator>(&self, state: &mut State, validator: &V, obs: &Observations<S>) {
-        state.promote(
-            validator,
-            obs,
-            self.iteration,
-            &self.unit,
-            &self.params,
-            self.outputs.clone(),
-        );
-    }
-}
-
 /// The score the weighted polish accepts steps by: the validator's MAE with each row
 /// weighed.
 fn weighted_mae(residuals: &[f64], weights: &[f64]) -> f64 {
@@ -171,29 +148,21 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
         let mut jac: Option<Linearisation> = None;
         let mut iteration = last_iteration;
         // With numerical weighting the polish minimises the weighted misfit, which the
-        // loop's best (by MAE) need not: it keeps its own anchor.
-        let mut anchor: Option<Anchor> = self.numerical_changes.and_then(|_| {
-            state.best.as_ref().map(|b| Anchor {
-                unit: b.unit.clone(),
-                params: b.params.clone(),
-                outputs: b.outputs.clone(),
-                iteration: b.iteration,
-            })
-        });
+        // lowest plain MAE need not: the best point is the weighted optimum, and only an
+        // accepted step moves it.
+        state.best_held = self.numerical_changes.is_some();
         for _ in 0..self.settings.polish_iterations {
-            let (u_at, y_at) = match (&anchor, state.best.as_ref()) {
-                (Some(a), _) => (&a.unit, &a.outputs),
-                (None, Some(b)) => (&b.unit, &b.outputs),
-                (None, None) => break,
+            let Some(best) = state.best.as_ref() else {
+                break;
             };
             let t_iter = Instant::now();
             let mut model_s = 0.0;
-            let stale = jac.as_ref().is_none_or(|l| &l.jacobian.unit != u_at);
+            let stale = jac.as_ref().is_none_or(|l| l.jacobian.unit != best.unit);
             if stale {
                 if !self.within_budget(state, (dim + 1) * n_snap) {
                     break;
                 }
-                let (u0, y0) = (u_at.clone(), y_at.clone());
+                let (u0, y0) = (best.unit.clone(), best.outputs.clone());
                 let r0 = residuals(obs, &y0);
                 let row_weights = self
                     .numerical_changes
@@ -315,28 +284,22 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 .unwrap_or_default();
             model_s += t.elapsed().as_secs_f64();
             let eval = state.absorb(self.validator, obs, iteration, &unit, &params, results);
-            let improved = match (anchor.as_mut(), row_weights) {
-                (Some(a), Some(w)) => {
+            let improved = match row_weights {
+                Some(w) => {
                     // `absorb` keeps a point's outputs only when every snapshot ran.
-                    let outputs = state
+                    let better = state
                         .ok_runs
                         .last()
                         .filter(|_| eval.validation.is_some())
-                        .map(|(_, o)| o.clone());
-                    let better = outputs
+                        .map(|(_, o)| o.clone())
                         .filter(|o| weighted_mae(&residuals(obs, o), w) < weighted_mae(r0, w));
                     let improved = better.is_some();
                     if let Some(outputs) = better {
-                        *a = Anchor {
-                            unit: unit.clone(),
-                            params: params.clone(),
-                            outputs,
-                            iteration,
-                        };
+                        state.promote(self.validator, obs, iteration, &unit, &params, outputs);
                     }
                     improved
                 }
-                _ => {
+                None => {
                     state.best.as_ref().map(|b| b.score) < before
                         || before.is_none() && state.best.is_some()
                 }
@@ -359,11 +322,6 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                     .sum::<f64>()
                     / (0..r.len()).map(w).sum::<f64>().max(f64::MIN_POSITIVE)
             };
-            // The weighted optimum so far is the calibration's answer so far: the history's
-            // "best" follows it rather than the lowest plain MAE among the polish's runs.
-            if let Some(a) = &anchor {
-                a.make_best(state, self.validator, obs);
-            }
             let rec = record(
                 iteration,
                 state,
@@ -389,9 +347,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             emit(&rec);
             records.push(rec);
         }
-        if let Some(a) = &anchor {
-            a.make_best(state, self.validator, obs);
-        }
+        state.best_held = false;
         Ok((records, jac.map(|l| l.jacobian)))
     }
 

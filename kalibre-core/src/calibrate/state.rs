@@ -32,6 +32,9 @@ pub(crate) struct State {
     pub(crate) failed_units: Vec<Vec<f64>>,
     pub(crate) best: Option<BestPoint>,
     pub(crate) counts: RunCounts,
+    /// While set, `absorb` books runs but leaves the best point to [`State::promote`]:
+    /// the weighted polish's optimum is not the lowest MAE.
+    pub(crate) best_held: bool,
 }
 
 impl State {
@@ -80,7 +83,10 @@ impl State {
         self.ok_runs.push((params.to_vec(), outputs.clone()));
         let validation = validator.validate(obs, &outputs);
         let score = validator.score(&validation);
-        if score.is_finite() && self.best.as_ref().is_none_or(|b| score < b.score) {
+        if !self.best_held
+            && score.is_finite()
+            && self.best.as_ref().is_none_or(|b| score < b.score)
+        {
             self.best = Some(BestPoint {
                 iteration,
                 unit: unit.to_vec(),
@@ -96,9 +102,7 @@ impl State {
             ok_runs,
         }
     }
-}
 
-impl State {
     /// Makes a point that ran at every snapshot the best one whatever its score: the
     /// weighted polish's optimum, which minimises a weighted misfit rather than the MAE.
     pub(crate) fn promote<S, V: Validator>(

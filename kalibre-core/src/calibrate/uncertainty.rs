@@ -470,7 +470,10 @@ mod tests {
         let unit = [0.6, 0.4];
         let (jac, best) = linearised_at(&s, &obs, &space, unit);
         let moved = |dp: f64| vec![s.predict(&(), &[unit[0] + dp, unit[1]])];
-        let u = estimate(&jac, &obs, &space, &best, None, 1.0, only(&[moved(0.05)]));
+        let with_variants = |variant_outputs: &[Vec<Vec<f64>>]| {
+            estimate(&jac, &obs, &space, &best, None, 1.0, only(variant_outputs))
+        };
+        let u = with_variants(&[moved(0.05)]);
         let (p, q) = (&u[0], &u[1]);
         assert!((p.numerical.unwrap() - 0.05).abs() < 0.002, "{p:?}");
         assert!(q.numerical.unwrap() < 0.002, "{q:?}");
@@ -481,27 +484,11 @@ mod tests {
         assert_eq!((p.std, p.shift), (plain[0].std, plain[0].shift));
         assert_eq!(plain[0].numerical, None);
         // The largest of two variants counts, and 0.09 of 0.6 (15%) is not claimed.
-        let u = estimate(
-            &jac,
-            &obs,
-            &space,
-            &best,
-            None,
-            1.0,
-            only(&[moved(0.05), moved(-0.09)]),
-        );
+        let u = with_variants(&[moved(0.05), moved(-0.09)]);
         assert!((u[0].numerical.unwrap() - 0.09).abs() < 0.003, "{:?}", u[0]);
         assert!(!u[0].identified && u[1].identified, "{u:?}");
         // A variant whose outputs do not match the measured rows is left out.
-        let u = estimate(
-            &jac,
-            &obs,
-            &space,
-            &best,
-            None,
-            1.0,
-            only(&[vec![vec![0.0; 3]]]),
-        );
+        let u = with_variants(&[vec![vec![0.0; 3]]]);
         assert_eq!(u[0].numerical, None);
     }
 
