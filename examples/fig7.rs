@@ -15,7 +15,7 @@
 #[path = "experiments/mod.rs"]
 mod experiments;
 
-use experiments::fig7::{markdown, run_fig7, svg, AlphaDraw, Fig7Config, Fig7Result};
+use experiments::fig7::{markdown, run_fig7, svg, AlphaDraw, AlphaGrain, Fig7Config, Fig7Result};
 use experiments::{parse_args, write_file, write_json};
 
 fn main() {
@@ -31,10 +31,19 @@ fn main() {
     } else {
         AlphaDraw::Linear
     };
-    let args = parse_args(
-        raw.into_iter()
-            .filter(|a| a != "--log-box" && a != "--rise-box"),
-    )
+    let grain = if raw.iter().any(|a| a == "--per-server") {
+        AlphaGrain::Server
+    } else if raw.iter().any(|a| a == "--per-rack") {
+        AlphaGrain::Rack
+    } else {
+        AlphaGrain::Type
+    };
+    let args = parse_args(raw.into_iter().filter(|a| {
+        !matches!(
+            a.as_str(),
+            "--log-box" | "--rise-box" | "--per-rack" | "--per-server"
+        )
+    }))
     .unwrap_or_else(|e| {
         eprintln!("{e}");
         std::process::exit(2)
@@ -45,6 +54,7 @@ fn main() {
         Fig7Config::full()
     };
     cfg.draw = draw;
+    cfg.grain = grain;
     if let Some(n) = args.seeds {
         cfg.seeds = n;
     }
@@ -56,7 +66,7 @@ fn main() {
         std::process::exit(1)
     });
     let md = markdown(&r);
-    let stem = draw.stem();
+    let stem = format!("{}{}", draw.stem(), grain.suffix());
     let written = write_json(&args.out_dir, &format!("{stem}.json"), &r)
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.md"), &md))
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.svg"), &svg(&r)));

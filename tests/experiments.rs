@@ -175,6 +175,79 @@ fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
 }
 
 #[test]
+fn fig7_per_rack_draw_gives_each_rack_one_alpha_and_the_graph_learns_it() {
+    let setup = experiments::setup(Preset::Demo, false).unwrap();
+    let mut hall = setup.hall.clone();
+    hall.calibrate.alpha = kalibre::dc::hall::AlphaMode::PerServer;
+    let layout = kalibre::dc::ParamLayout::new(&hall, &[]).unwrap();
+    let rack_of: Vec<usize> = hall.servers().map(|s| s.rack_index).collect();
+    let draw = |grain| {
+        let cfg = fig7::Fig7Config {
+            grain,
+            samples: 5,
+            draw: fig7::AlphaDraw::Rise,
+            ..fig7::Fig7Config::quick()
+        };
+        let mut rng = rand::SeedableRng::seed_from_u64(1);
+        fig7::draw_alphas(&cfg, layout.space(), &rack_of, &mut rng).unwrap()
+    };
+    let same_rack = |a: usize, b: usize| rack_of[a] == rack_of[b];
+    for (grain, shared_in_rack) in [
+        (fig7::AlphaGrain::Rack, true),
+        (fig7::AlphaGrain::Server, false),
+    ] {
+        for x in draw(grain) {
+            assert_eq!(x.len(), rack_of.len());
+            for i in 1..x.len() {
+                if same_rack(i - 1, i) {
+                    assert_eq!(x[i - 1] == x[i], shared_in_rack, "{grain:?}, servers {i}");
+                } else {
+                    assert_ne!(x[i - 1], x[i], "{grain:?}: racks draw apart");
+                }
+            }
+        }
+    }
+    // A per-rack draw on a per-type layout is refused, not guessed.
+    let cfg = fig7::Fig7Config {
+        grain: fig7::AlphaGrain::Rack,
+        ..fig7::Fig7Config::quick()
+    };
+    let mut rng = rand::SeedableRng::seed_from_u64(1);
+    assert!(fig7::draw_alphas(&cfg, setup.model.layout().space(), &rack_of, &mut rng).is_err());
+
+    let r = fig7::run_fig7(
+        &fig7::Fig7Config {
+            draw: fig7::AlphaDraw::Rise,
+            ..cfg
+        },
+        &quiet,
+    )
+    .unwrap();
+    assert_eq!(r.params, rack_of.len());
+    // The fixed-adjacency graph knows which racks feed which sensor: with half the
+    // training set it beats predicting the training mean.
+    let fixed_at_50 = &r.curves[0].points[3];
+    assert!(
+        fixed_at_50.mae_c.mean < r.mean_predictor_mae_c,
+        "{} vs {}",
+        fixed_at_50.mae_c.mean,
+        r.mean_predictor_mae_c
+    );
+    // The overall MAE lies between the two aisles' (a mean over both).
+    let (cold, hot) = (
+        fixed_at_50.cold_mae_c.as_ref().unwrap().mean,
+        fixed_at_50.hot_mae_c.as_ref().unwrap().mean,
+    );
+    let all = fixed_at_50.mae_c.mean;
+    assert!(
+        cold.min(hot) <= all + 1e-12 && all <= cold.max(hot) + 1e-12,
+        "{cold} {all} {hot}"
+    );
+    let md = fig7::markdown(&r);
+    assert!(md.contains("one draw per rack") && md.contains("By aisle, cold / hot"));
+}
+
+#[test]
 fn fig8_quick_records_every_iteration_of_both_searchers() {
     let cfg = fig8::Fig8Config::quick();
     let r = fig8::run_fig8(&cfg, &quiet).unwrap();

@@ -11,11 +11,14 @@
 use std::time::Instant;
 
 use kalibre::baselines::{InputLevel, Mlp, MlpSettings};
-use kalibre::core::{Model, Sample, Surrogate, TrainingSet};
+use kalibre::core::{Model, ParamSpace, Sample, Surrogate, TrainingSet};
 use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::hall::AlphaMode;
+use kalibre::dc::sim::SimConfig;
 use kalibre::dc::snapshots::OperatingState;
 use kalibre::dc::surrogate::PenaltySettings;
 use kalibre::dc::synth::Preset;
+use kalibre::dc::HallModel;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -79,6 +82,39 @@ impl AlphaDraw {
     }
 }
 
+/// Which alphas are drawn independently.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlphaGrain {
+    /// One alpha per server type (the calibration's parameters: 11 on `hall-a`).
+    #[default]
+    Type,
+    /// One alpha per rack, shared by its servers.
+    Rack,
+    /// One alpha per server: the paper's `alpha = (alpha_1, ..., alpha_m)` over its `m`
+    /// servers, "each of its elements sampled randomly and uniformly".
+    Server,
+}
+
+impl AlphaGrain {
+    /// Suffix of this grain's file stem.
+    pub fn suffix(self) -> &'static str {
+        match self {
+            AlphaGrain::Type => "",
+            AlphaGrain::Rack => "-per-rack",
+            AlphaGrain::Server => "-per-server",
+        }
+    }
+    /// One phrase for the table's caption.
+    pub fn describe(self) -> &'static str {
+        match self {
+            AlphaGrain::Type => "one draw per server type",
+            AlphaGrain::Rack => "one draw per rack",
+            AlphaGrain::Server => "one draw per server",
+        }
+    }
+}
+
 /// What to run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Fig7Config {
@@ -95,6 +131,9 @@ pub struct Fig7Config {
     /// How alpha is drawn.
     #[serde(default)]
     pub draw: AlphaDraw,
+    /// Which alphas are drawn independently.
+    #[serde(default)]
+    pub grain: AlphaGrain,
 }
 
 impl Fig7Config {
@@ -105,6 +144,7 @@ impl Fig7Config {
             samples: 213,
             seeds: 3,
             draw: AlphaDraw::Linear,
+            grain: AlphaGrain::Type,
         }
     }
     /// Seconds-long: 40 runs of `demo`, 1 seed.
@@ -114,6 +154,43 @@ impl Fig7Config {
             samples: 40,
             seeds: 1,
             draw: AlphaDraw::Linear,
+            grain: AlphaGrain::Type,
+        }
+    }
+}
+
+/// Test MAE over all sensors and per aisle (C).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AisleMae {
+    /// Over every test run and sensor.
+    pub all_c: f64,
+    /// Over the cold-aisle sensors; none without any.
+    pub cold_c: Option<f64>,
+    /// Over the hot-aisle sensors; none without any.
+    pub hot_c: Option<f64>,
+}
+
+impl AisleMae {
+    /// The MAE of `(predicted, measured)` pairs of output vectors; `hot[k]` says whether
+    /// output `k` is a hot-aisle sensor.
+    pub fn of<'a>(pairs: impl Iterator<Item = (Vec<f64>, &'a [f64])>, hot: &[bool]) -> Self {
+        let mut sum = 0.0;
+        let mut n = 0usize;
+        let mut by_aisle = [(0.0, 0usize); 2];
+        for (predicted, measured) in pairs {
+            for ((a, b), &h) in predicted.iter().zip(measured).zip(hot) {
+                let e = (a - b).abs();
+                sum += e;
+                n += 1;
+                by_aisle[h as usize].0 += e;
+                by_aisle[h as usize].1 += 1;
+            }
+        }
+        let mean = |(s, n): (f64, usize)| (n > 0).then(|| s / n as f64);
+        AisleMae {
+            all_c: sum / n as f64,
+            cold_c: mean(by_aisle[0]),
+            hot_c: mean(by_aisle[1]),
         }
     }
 }
@@ -129,6 +206,13 @@ pub struct Point {
     pub per_seed_mae_c: Vec<f64>,
     /// Test MAE over seeds (C).
     pub mae_c: Stats,
+    /// Test MAE over the cold-aisle sensors, over seeds (C); absent in results written
+    /// before session 16.
+    #[serde(default)]
+    pub cold_mae_c: Option<Stats>,
+    /// Test MAE over the hot-aisle sensors, over seeds (C).
+    #[serde(default)]
+    pub hot_mae_c: Option<Stats>,
     /// Fit wall time over seeds, seconds.
     pub fit_s: Stats,
 }
@@ -158,6 +242,10 @@ pub struct Fig7Result {
     /// Test MAE of predicting every sensor's training mean (C): the bar a surrogate
     /// must clear to have learned anything.
     pub mean_predictor_mae_c: f64,
+    /// The same over the cold-aisle and over the hot-aisle sensors (C); absent in results
+    /// written before session 16.
+    #[serde(default)]
+    pub mean_predictor_by_aisle_c: Option<[Option<f64>; 2]>,
     /// Wall time of the model runs, seconds.
     pub runs_s: f64,
     /// Curves in [`SURROGATES`] order.
@@ -175,30 +263,31 @@ fn surrogate_mae(
     train: &[Sample],
     test: &[Sample],
     seed: u64,
-) -> Result<(f64, f64)> {
+    grain: AlphaGrain,
+) -> Result<(AisleMae, f64)> {
     let settings = HallCalibrationSettings::default();
     let data = TrainingSet {
         scenarios: std::slice::from_ref(state),
         samples: train,
     };
     let t = Instant::now();
+    let hot = s.hot_sensors();
     let score = |p: &dyn Fn(&[f64]) -> Vec<f64>| {
-        let mut sum = 0.0;
-        let mut n = 0usize;
-        for x in test {
-            for (a, b) in p(&x.params).iter().zip(&x.outputs) {
-                sum += (a - b).abs();
-                n += 1;
-            }
-        }
-        sum / n as f64
+        let pairs = test.iter().map(|x| (p(&x.params), x.outputs.as_slice()));
+        AisleMae::of(pairs, &hot)
     };
     let mae = match name {
         "vanilla MLP" => {
             let mut m = Mlp::new(
                 &s.hall,
                 s.model.layout().clone(),
-                MlpSettings::default().with_inputs(InputLevel::Rack),
+                // Every alpha drawn reaches the MLP: per rack for the rack and type draws
+                // (the paper's 518 inputs on its hall A), per server for the server draw.
+                MlpSettings::default().with_inputs(if grain == AlphaGrain::Server {
+                    InputLevel::Server
+                } else {
+                    InputLevel::Rack
+                }),
             )?;
             m.fit(data, seed)?;
             score(&|p| m.predict(state, p))
@@ -219,38 +308,73 @@ fn surrogate_mae(
     Ok((mae, t.elapsed().as_secs_f64()))
 }
 
-/// Runs the experiment; `progress` receives a line per finished step.
-pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result> {
-    let s = setup(cfg.preset, false)?;
-    let space = s.model.layout().space();
-    let state = s.snaps[0].state.clone();
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(DATA_SEED);
+/// The `cfg.samples` parameter points (unit box) of the runs. `rack_of[i]` is the rack of
+/// server `i`; with [`AlphaGrain::Rack`] the space must hold one alpha per server, in
+/// hall order, and servers of one rack take one draw.
+pub fn draw_alphas(
+    cfg: &Fig7Config,
+    space: &ParamSpace,
+    rack_of: &[usize],
+    rng: &mut Xoshiro256PlusPlus,
+) -> Result<Vec<Vec<f64>>> {
+    if cfg.grain == AlphaGrain::Rack && rack_of.len() != space.dim() {
+        return Err(format!(
+            "a per-rack draw needs one alpha per server: {} servers, {} parameters",
+            rack_of.len(),
+            space.dim()
+        )
+        .into());
+    }
+    let racks = rack_of.iter().max().map_or(0, |r| r + 1);
     let rise = PenaltySettings::default();
-    let points: Vec<Vec<f64>> = (0..cfg.samples)
+    (0..cfg.samples)
         .map(|_| -> Result<Vec<f64>> {
-            let x: Vec<f64> = match cfg.draw {
-                AlphaDraw::Log => {
-                    return Ok((0..space.dim()).map(|_| rng.random::<f64>()).collect())
+            // Per parameter, its uniform number: its own, or its rack's.
+            let u: Vec<f64> = match cfg.grain {
+                AlphaGrain::Type | AlphaGrain::Server => {
+                    (0..space.dim()).map(|_| rng.random::<f64>()).collect()
                 }
+                AlphaGrain::Rack => {
+                    let per_rack: Vec<f64> = (0..racks).map(|_| rng.random::<f64>()).collect();
+                    rack_of.iter().map(|&r| per_rack[r]).collect()
+                }
+            };
+            let x: Vec<f64> = match cfg.draw {
+                AlphaDraw::Log => return Ok(u),
                 // Uniform in physical units, expressed in the unit box for `from_unit`.
                 AlphaDraw::Linear => space
                     .params()
                     .iter()
-                    .map(|p| p.lower + rng.random::<f64>() * (p.upper - p.lower))
+                    .zip(&u)
+                    .map(|(p, u)| p.lower + u * (p.upper - p.lower))
                     .collect(),
                 AlphaDraw::Rise => space
                     .params()
                     .iter()
-                    .map(|p| {
-                        let rise_k =
-                            rise.lower_c + rng.random::<f64>() * (rise.upper_c - rise.lower_c);
+                    .zip(&u)
+                    .map(|(p, u)| {
+                        let rise_k = rise.lower_c + u * (rise.upper_c - rise.lower_c);
                         (rise.rise_coefficient() / rise_k).clamp(p.lower, p.upper)
                     })
                     .collect(),
             };
             Ok(space.to_unit(&x)?)
         })
-        .collect::<Result<_>>()?;
+        .collect()
+}
+
+/// Runs the experiment; `progress` receives a line per finished step.
+pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result> {
+    let mut s = setup(cfg.preset, false)?;
+    if cfg.grain != AlphaGrain::Type {
+        s.hall.calibrate.alpha = AlphaMode::PerServer;
+        s.model = HallModel::new(&s.hall, SimConfig::default())?;
+    }
+    let space = s.model.layout().space();
+    let state = s.snaps[0].state.clone();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(DATA_SEED);
+    let rack_of: Vec<usize> = s.hall.servers().map(|r| r.rack_index).collect();
+    let points = draw_alphas(cfg, space, &rack_of, &mut rng)?;
     let t = Instant::now();
     // Runs in parallel, collected in draw order.
     let runs: Vec<Option<Sample>> = points
@@ -287,11 +411,10 @@ pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result>
     let mean: Vec<f64> = (0..n_out)
         .map(|k| train_all.iter().map(|x| x.outputs[k]).sum::<f64>() / train_all.len() as f64)
         .collect();
-    let mean_predictor_mae_c = test
-        .iter()
-        .flat_map(|x| x.outputs.iter().zip(&mean).map(|(a, b)| (a - b).abs()))
-        .sum::<f64>()
-        / (test.len() * n_out) as f64;
+    let mean_predictor = AisleMae::of(
+        test.iter().map(|x| (mean.clone(), x.outputs.as_slice())),
+        &s.hot_sensors(),
+    );
     let mut curves = Vec::new();
     for name in SURROGATES {
         let mut pts = Vec::new();
@@ -299,12 +422,16 @@ pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result>
             let n = ((frac * train_all.len() as f64).round() as usize).max(2);
             let mut maes = Vec::new();
             let mut fits = Vec::new();
+            let (mut colds, mut hots) = (Vec::new(), Vec::new());
             for seed in 1..=cfg.seeds as u64 {
                 let mut idx: Vec<usize> = (0..train_all.len()).collect();
                 idx.shuffle(&mut Xoshiro256PlusPlus::seed_from_u64(seed));
                 let subset: Vec<Sample> = idx[..n].iter().map(|&i| train_all[i].clone()).collect();
-                let (mae, fit_s) = surrogate_mae(name, &s, &state, &subset, &test, seed)?;
-                maes.push(mae);
+                let (mae, fit_s) =
+                    surrogate_mae(name, &s, &state, &subset, &test, seed, cfg.grain)?;
+                maes.push(mae.all_c);
+                colds.extend(mae.cold_c);
+                hots.extend(mae.hot_c);
                 fits.push(fit_s);
             }
             progress(&format!(
@@ -316,6 +443,8 @@ pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result>
                 fraction: frac,
                 train_samples: n,
                 mae_c: Stats::of(&maes).expect("a seed"),
+                cold_mae_c: Stats::of(&colds),
+                hot_mae_c: Stats::of(&hots),
                 fit_s: Stats::of(&fits).expect("a seed"),
                 per_seed_mae_c: maes,
             });
@@ -332,7 +461,8 @@ pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result>
         failed_runs,
         train: train_all.len(),
         test: test.len(),
-        mean_predictor_mae_c,
+        mean_predictor_mae_c: mean_predictor.all_c,
+        mean_predictor_by_aisle_c: Some([mean_predictor.cold_c, mean_predictor.hot_c]),
         runs_s,
         curves,
         fixed_over_mlp_at_5pct: ratio,
@@ -349,8 +479,8 @@ pub fn svg(r: &Fig7Result) -> String {
             "Fig. 7 ({}, {} runs, 8:2 split; {})",
             r.config.preset,
             r.config.samples,
-            r.config.draw.describe()
-        ),
+            r.config.draw.describe(),
+        ) + &grain_caption(r.config.grain),
         x_label: "share of the training set (%)".into(),
         y_label: "test MAE (C)".into(),
         log_y: false,
@@ -384,6 +514,15 @@ pub fn svg(r: &Fig7Result) -> String {
     panels(&[chart])
 }
 
+/// ", one draw per rack" for the rack and server draws; nothing for the type draw, whose
+/// captions predate the choice.
+fn grain_caption(grain: AlphaGrain) -> String {
+    match grain {
+        AlphaGrain::Type => String::new(),
+        g => format!(", {}", g.describe()),
+    }
+}
+
 /// The figure's numbers as a markdown table.
 pub fn markdown(r: &Fig7Result) -> String {
     let mut s = String::from("| surrogate |");
@@ -410,12 +549,35 @@ pub fn markdown(r: &Fig7Result) -> String {
         "\nTest MAE (C), mean ± sd over {} seeds; {}; {} training / {} test runs; predicting the training mean: {:.2} C. \
          Fixed adjacency over MLP at 5%: {:.2} (target <= 0.5: {}).\n",
         r.config.seeds,
-        r.config.draw.describe(),
+        r.config.draw.describe() + &grain_caption(r.config.grain),
         r.train,
         r.test,
         r.mean_predictor_mae_c,
         r.fixed_over_mlp_at_5pct,
         if r.target_met { "met" } else { "NOT met" }
     ));
+    if let Some([Some(cold), Some(hot)]) = r.mean_predictor_by_aisle_c {
+        s.push_str("\nBy aisle, cold / hot (C, means over seeds):\n\n| surrogate |");
+        for p in &r.curves[0].points {
+            s.push_str(&format!(" {:.0}% |", 100.0 * p.fraction));
+        }
+        s.push('\n');
+        s.push_str(&sep);
+        s.push('\n');
+        for c in &r.curves {
+            s.push_str(&format!("| {} |", c.surrogate));
+            for p in &c.points {
+                match (&p.cold_mae_c, &p.hot_mae_c) {
+                    (Some(c), Some(h)) => s.push_str(&format!(" {:.2} / {:.2} |", c.mean, h.mean)),
+                    _ => s.push_str(" - |"),
+                }
+            }
+            s.push('\n');
+        }
+        s.push_str(&format!(
+            "| training mean | {} |\n",
+            vec![format!("{cold:.2} / {hot:.2}"); r.curves[0].points.len()].join(" | ")
+        ));
+    }
     s
 }
