@@ -9,6 +9,9 @@
 //! Alpha is drawn uniformly in cfm/W; `--log-box` draws it uniformly on the log scale;
 //! `--rise-box` draws each server type's temperature rise uniformly in the default rise
 //! prior's range (5-20 K), the plausible band the calibration searches.
+//! One alpha is drawn per server type; `--per-rack` draws one per rack and `--per-server`
+//! one per server (the paper's alpha vector), with the model and the graph taking one
+//! alpha per server. Files get `-per-rack` / `-per-server` after the draw's name.
 //! `--quick`: 40 runs of `demo`, 1 seed. Prints the table and writes `fig7.json`,
 //! `fig7.md` and `fig7.svg`.
 
