@@ -6,11 +6,13 @@
 //! ```sh
 //! cargo run --release --example table4 -- [--quick] [--out-dir docs/results] \
 //!     [--seeds 3] [--presets hall-a:3,hall-b:1] [--approaches kalibre,mlp,es,manual] \
-//!     [--mlp-seeds 1] [--budgets mlp=60,es=150]
+//!     [--mlp-seeds 1] [--budgets mlp=60,es=150] [--paper-loop]
 //! cargo run --release --example table4 -- --out-dir DIR --combine a/table4.json b/table4.json
 //! ```
 //!
-//! `--approaches` runs a subset of the rows (default all). `--combine` merges separate
+//! `--approaches` runs a subset of the rows (default all). `--paper-loop` runs the loop
+//! rows (Kalibre and the MLP) in the paper's Algorithm 1 instead of kalibre's loop (as
+//! `fig8 --paper-loop`) and writes `table4-paper-loop.*`. `--combine` merges separate
 //! invocations (run side by side, or some approaches each) into one table, by hall and
 //! by approach: a later file's row replaces an earlier one's, the targets are recomputed,
 //! and halls measured differently (initial MAE or model-at-truth MAE differ) are refused.
@@ -53,6 +55,8 @@ fn main() {
         .map(|v| Approach::parse_list(&v).unwrap_or_else(|e| fail(2, &e)))
         .unwrap_or_else(|| Approach::ALL.to_vec());
     let overrides = take_flag(&mut raw, "--budgets");
+    // `--paper-loop`: the loop rows run the paper's Algorithm 1 instead of kalibre's loop.
+    let paper_loop = take_switch(&mut raw, "--paper-loop");
     let args = parse_args(raw).unwrap_or_else(|e| fail(2, &e));
     if !combine_files.is_empty() {
         let tables = combine(&combine_files).unwrap_or_else(|e| fail(1, &e.to_string()));
@@ -79,15 +83,40 @@ fn main() {
     let mut tables: Vec<HallTable> = Vec::new();
     for (preset, seeds) in halls {
         let seeds = seeds.unwrap_or(default_seeds);
-        let t = run_hall(preset, seeds, budgets, &approaches, !args.quick, &|l| {
-            eprintln!("{l}")
-        })
+        let t = run_hall(
+            preset,
+            seeds,
+            budgets,
+            &approaches,
+            !args.quick,
+            paper_loop,
+            &|l| eprintln!("{l}"),
+        )
         .unwrap_or_else(|e| fail(1, &format!("table4 on {preset}: {e}")));
         tables.push(t);
         write_tables(&args.out_dir, &tables, args.quick);
     }
     println!("{}", markdown(&tables));
-    println!("wrote {}/table4.json and table4.md", args.out_dir.display());
+    println!(
+        "wrote {dir}/{stem}.json and {dir}/{stem}.md",
+        dir = args.out_dir.display(),
+        stem = stem(&tables)
+    );
+}
+
+fn stem(tables: &[HallTable]) -> &'static str {
+    if tables.iter().any(|t| t.paper_loop) {
+        "table4-paper-loop"
+    } else {
+        "table4"
+    }
+}
+
+/// Removes `flag` from `raw` and says whether it was there.
+fn take_switch(raw: &mut Vec<String>, flag: &str) -> bool {
+    let before = raw.len();
+    raw.retain(|a| a != flag);
+    raw.len() != before
 }
 
 /// Removes `flag VALUE` from `raw` and returns the value (exits when it is missing).
@@ -106,10 +135,13 @@ fn fail(code: i32, message: &str) -> ! {
     std::process::exit(code)
 }
 
+/// Writes `table4.json` and `.md`, or `table4-paper-loop.*` when a hall's loop rows ran
+/// the paper's loop.
 fn write_tables(dir: &std::path::Path, tables: &[HallTable], quick: bool) {
     let doc = json!({ "experiment": "table4", "quick": quick, "halls": tables });
-    let written = write_json(dir, "table4.json", &doc)
-        .and_then(|_| write_file(dir, "table4.md", &markdown(tables)));
+    let stem = stem(tables);
+    let written = write_json(dir, &format!("{stem}.json"), &doc)
+        .and_then(|_| write_file(dir, &format!("{stem}.md"), &markdown(tables)));
     if let Err(e) = written {
         fail(1, &e.to_string());
     }

@@ -27,6 +27,7 @@ fn table4_quick_every_approach_improves_and_files_are_written() {
         table4::Budgets::quick(),
         &table4::Approach::ALL,
         false,
+        false,
         &quiet,
     )
     .unwrap();
@@ -308,10 +309,49 @@ fn bad_arguments_are_named() {
 }
 
 #[test]
+fn table4_paper_loop_runs_the_loop_rows_in_algorithm_1() {
+    let run = |paper_loop| {
+        table4::run_hall(
+            Preset::Demo,
+            1,
+            table4::Budgets::quick(),
+            &[table4::Approach::Kalibre],
+            false,
+            paper_loop,
+            &quiet,
+        )
+        .unwrap()
+    };
+    let (ours, paper) = (run(false), run(true));
+    assert!(paper.paper_loop && !ours.paper_loop);
+    let (a, b) = (&ours.rows[0].runs[0], &paper.rows[0].runs[0]);
+    assert_eq!(
+        a.initial_mae_c, b.initial_mae_c,
+        "same measurements and model"
+    );
+    assert!(
+        b.lowest_mae_c < b.initial_mae_c,
+        "the paper's loop improves too"
+    );
+    // Another loop: the trajectories differ.
+    assert_ne!(a.mae_after_10_c, b.mae_after_10_c);
+    assert!(table4::markdown(std::slice::from_ref(&paper)).contains("in the paper's loop"));
+}
+
+#[test]
 fn table4_combine_merges_approaches_and_refuses_other_measurements() {
     use table4::Approach;
     let run = |a: &[Approach]| {
-        table4::run_hall(Preset::Demo, 1, table4::Budgets::quick(), a, false, &quiet).unwrap()
+        table4::run_hall(
+            Preset::Demo,
+            1,
+            table4::Budgets::quick(),
+            a,
+            false,
+            false,
+            &quiet,
+        )
+        .unwrap()
     };
     let (es, manual) = (run(&[Approach::Es]), run(&[Approach::Manual]));
     assert_eq!(es.rows.len(), 1);
@@ -342,6 +382,17 @@ fn table4_combine_merges_approaches_and_refuses_other_measurements() {
         .to_string();
     assert!(
         err.contains("initial MAE") && err.contains("other.json"),
+        "{err}"
+    );
+    // A table of the paper's loop is not merged into one of kalibre's.
+    let mut paper = es.clone();
+    paper.paper_loop = true;
+    let bad = write("paper.json", &paper);
+    let err = table4::combine(&[files[0].clone(), bad])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("paper's loop") && err.contains("paper.json"),
         "{err}"
     );
     assert_eq!(

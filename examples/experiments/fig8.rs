@@ -11,12 +11,11 @@ use std::sync::Mutex;
 use kalibre::core::search::{Adam, Objective, ProjectedGradient};
 use kalibre::core::{Event, SearchOutcome, Searcher};
 use kalibre::dc::calibration::HallCalibrationSettings;
-use kalibre::dc::surrogate::PenaltySettings;
 use kalibre::dc::synth::Preset;
 use serde::{Deserialize, Serialize};
 
 use super::chart::{panels, LineChart, Series};
-use super::{kalibre_surrogate, run_loop, setup, Result, Stats};
+use super::{kalibre_surrogate, run_loop, setup, use_paper_loop, Result, Stats};
 
 /// What to run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -146,19 +145,7 @@ fn one_run(
     st.core.seed = seed;
     st.core.max_iterations = cfg.iterations;
     if cfg.paper_loop {
-        // Algorithm 1 as the paper gives it: the whole box, the surrogate as fitted, every
-        // run weighted alike (a repeated proposal still moves on rather than stopping).
-        // Its searcher is DE then Adam, without kalibre's local phase.
-        st.core.trust_region = None;
-        st.core.output_correction = false;
-        st.core.linear_correction = false;
-        st.core.stall_step = None;
-        st.core.focus = None;
-        st.penalty = PenaltySettings::paper();
-        st.searcher = st
-            .searcher
-            .clone()
-            .with_local(ProjectedGradient::with_steps(0)?);
+        use_paper_loop(&mut st)?;
     }
     let seen: Mutex<Vec<IterationTrace>> = Mutex::new(Vec::new());
     let record = |e: &Event<'_>| match e {

@@ -12,12 +12,15 @@ pub mod table4;
 
 use std::path::{Path, PathBuf};
 
+use kalibre::core::search::ProjectedGradient;
 use kalibre::core::{Calibrator, Event, Observations, Report, RunStore, Searcher, Surrogate};
 use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::hall::Hall;
 use kalibre::dc::sim::SimConfig;
 use kalibre::dc::snapshots::{self, HallSnapshot, OperatingState};
-use kalibre::dc::surrogate::{FlowBalance, FlowBalanceTerm, TemperatureRisePenalty, ThermalGraph};
+use kalibre::dc::surrogate::{
+    FlowBalance, FlowBalanceTerm, PenaltySettings, TemperatureRisePenalty, ThermalGraph,
+};
 use kalibre::dc::synth::{self, Preset, SynthOptions};
 use kalibre::dc::HallModel;
 use serde::{Deserialize, Serialize};
@@ -92,6 +95,23 @@ pub fn setup(preset: Preset, reference: bool) -> Result<Setup> {
         synth_s,
         true_alpha_type: s.truth.alpha_type_cfm_per_w,
     })
+}
+
+/// The paper's Algorithm 1 in place of kalibre's loop: the whole box, the surrogate as
+/// fitted, every run weighted alike (a repeated proposal still moves on rather than
+/// stopping), the paper's rise prior, and DE then Adam without kalibre's local phase.
+pub fn use_paper_loop(st: &mut HallCalibrationSettings) -> Result<()> {
+    st.core.trust_region = None;
+    st.core.output_correction = false;
+    st.core.linear_correction = false;
+    st.core.stall_step = None;
+    st.core.focus = None;
+    st.penalty = PenaltySettings::paper();
+    st.searcher = st
+        .searcher
+        .clone()
+        .with_local(ProjectedGradient::with_steps(0)?);
+    Ok(())
 }
 
 /// Runs the four-step loop on `setup` with `surrogate` and `searcher`, assembled exactly

@@ -27,7 +27,9 @@ pub use combine::combine;
 #[allow(unused_imports)]
 pub use markdown::markdown;
 
-use super::{best_at, kalibre_surrogate, loop_history, run_loop, setup, Result, Setup, Stats};
+use super::{
+    best_at, kalibre_surrogate, loop_history, run_loop, setup, use_paper_loop, Result, Setup, Stats,
+};
 
 /// The MAE the "model runs to reach" column counts to (C), as in the issue.
 pub const REACH_MAE_C: f64 = 1.0;
@@ -354,6 +356,10 @@ pub struct HallTable {
     pub seeds: usize,
     /// Budgets used.
     pub budgets: Budgets,
+    /// Whether the loop rows ran the paper's Algorithm 1 ([`super::use_paper_loop`])
+    /// instead of kalibre's loop.
+    #[serde(default)]
+    pub paper_loop: bool,
     /// MAE at the initial alphas (C).
     pub initial_mae_c: f64,
     /// MAE of the model at the true alphas (C), when measured.
@@ -366,14 +372,16 @@ pub struct HallTable {
     pub targets: Targets,
 }
 
-/// Runs `approaches` on `preset` with seeds `1..=seeds`. `progress` receives one line
-/// per finished run.
+/// Runs `approaches` on `preset` with seeds `1..=seeds`; with `paper_loop`, Kalibre and
+/// the MLP run the paper's Algorithm 1 instead of kalibre's loop (the ES and the manual
+/// procedure run no loop). `progress` receives one line per finished run.
 pub fn run_hall(
     preset: Preset,
     seeds: usize,
     budgets: Budgets,
     approaches: &[Approach],
     reference: bool,
+    paper_loop: bool,
     progress: &dyn Fn(&str),
 ) -> Result<HallTable> {
     if approaches.is_empty() || seeds == 0 {
@@ -386,6 +394,9 @@ pub fn run_hall(
     // what the surrogate does (it is measured in docs/performance.md).
     let mut settings = HallCalibrationSettings::default();
     settings.core.polish_iterations = 0;
+    if paper_loop {
+        use_paper_loop(&mut settings)?;
+    }
     let wanted = |a: Approach| approaches.contains(&a);
     let mut runs: Vec<(Approach, Vec<ApproachRun>)> = Approach::ALL
         .into_iter()
@@ -441,6 +452,7 @@ pub fn run_hall(
         ),
         seeds,
         budgets,
+        paper_loop,
         initial_mae_c: rows[0].runs[0].initial_mae_c,
         model_at_truth_mae_c: s.model_at_truth_mae_c,
         noise_only_mae_c: s.noise_only_mae_c,

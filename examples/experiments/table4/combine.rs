@@ -69,6 +69,9 @@ pub fn combine(files: &[std::path::PathBuf]) -> Result<Vec<HallTable>> {
 
 /// Why two tables of one hall are not on the same measurements and model, if they are not.
 fn same_measurements(a: &HallTable, b: &HallTable) -> std::result::Result<(), String> {
+    if a.paper_loop != b.paper_loop {
+        return Err("one ran the paper's loop and the other kalibre's".into());
+    }
     if a.size != b.size {
         return Err(format!(
             "sizes (servers, sensors, parameters, snapshots) differ: {:?} vs {:?}",

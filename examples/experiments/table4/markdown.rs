@@ -59,8 +59,13 @@ pub fn markdown(tables: &[HallTable]) -> String {
             .map(Approach::key)
             .collect();
         s.push_str(&format!(
-            "- {}: initial MAE {:.2} C; model at truth {}; Kalibre best after 10 iterations: {}; fewest model runs to lowest: {}; ES/Kalibre runs to 1.0 C: {}; MLP/Kalibre: {}{}\n",
+            "- {}{}: initial MAE {:.2} C; model at truth {}; Kalibre best after 10 iterations: {}; fewest model runs to lowest: {}; ES/Kalibre runs to 1.0 C: {}; MLP/Kalibre: {}{}\n",
             t.preset,
+            if t.paper_loop {
+                " (loop rows in the paper's loop)"
+            } else {
+                ""
+            },
             t.initial_mae_c,
             t.model_at_truth_mae_c.map_or("n/a".into(), |v| format!("{v:.2} C")),
             met(g.best_after_10),
