@@ -373,28 +373,22 @@ fn table4_combine_merges_approaches_and_refuses_other_measurements() {
     let names: Vec<&str> = merged[0].rows.iter().map(|r| r.approach.as_str()).collect();
     assert_eq!(names, [Approach::Es.title(), Approach::Manual.title()]);
     assert_eq!(merged[0].rows[1].lowest_mae_c.mean, 0.125);
-    // Different measurements (another initial MAE) are refused, naming both files.
-    let mut other = es.clone();
-    other.initial_mae_c += 0.01;
-    let bad = write("other.json", &other);
-    let err = table4::combine(&[files[0].clone(), bad])
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("initial MAE") && err.contains("other.json"),
-        "{err}"
-    );
-    // A table of the paper's loop is not merged into one of kalibre's.
-    let mut paper = es.clone();
-    paper.paper_loop = true;
-    let bad = write("paper.json", &paper);
-    let err = table4::combine(&[files[0].clone(), bad])
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("paper's loop") && err.contains("paper.json"),
-        "{err}"
-    );
+    // Tables not on the same footing are refused, naming the file: other measurements
+    // (another initial MAE), or the paper's loop against kalibre's.
+    let refused = |name: &str, change: &dyn Fn(&mut table4::HallTable)| {
+        let mut other = es.clone();
+        change(&mut other);
+        let bad = write(name, &other);
+        let err = table4::combine(&[files[0].clone(), bad])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(name), "{err}");
+        err
+    };
+    let err = refused("other.json", &|t| t.initial_mae_c += 0.01);
+    assert!(err.contains("initial MAE"), "{err}");
+    let err = refused("paper.json", &|t| t.paper_loop = true);
+    assert!(err.contains("paper's loop"), "{err}");
     assert_eq!(
         Approach::parse_list("manual, kalibre,manual").unwrap(),
         [Approach::Kalibre, Approach::Manual]

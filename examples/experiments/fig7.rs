@@ -523,28 +523,36 @@ fn grain_caption(grain: AlphaGrain) -> String {
     }
 }
 
-/// The figure's numbers as a markdown table.
-pub fn markdown(r: &Fig7Result) -> String {
+/// A markdown table with one row per curve and one column per share: `head` labels a
+/// share's column, `cell` writes a point.
+fn curve_table(
+    r: &Fig7Result,
+    head: impl Fn(&Point) -> String,
+    cell: impl Fn(&Point) -> String,
+) -> String {
+    let points = &r.curves[0].points;
     let mut s = String::from("| surrogate |");
-    let mut sep = String::from("|---|");
-    for p in &r.curves[0].points {
-        s.push_str(&format!(
-            " {:.0}% ({} samples) |",
-            100.0 * p.fraction,
-            p.train_samples
-        ));
-        sep.push_str("---|");
+    for p in points {
+        s.push_str(&format!(" {} |", head(p)));
     }
-    s.push('\n');
-    s.push_str(&sep);
-    s.push('\n');
+    s.push_str(&format!("\n|---|{}\n", "---|".repeat(points.len())));
     for c in &r.curves {
         s.push_str(&format!("| {} |", c.surrogate));
         for p in &c.points {
-            s.push_str(&format!(" {} |", p.mae_c.show(2)));
+            s.push_str(&format!(" {} |", cell(p)));
         }
         s.push('\n');
     }
+    s
+}
+
+/// The figure's numbers as a markdown table.
+pub fn markdown(r: &Fig7Result) -> String {
+    let mut s = curve_table(
+        r,
+        |p| format!("{:.0}% ({} samples)", 100.0 * p.fraction, p.train_samples),
+        |p| p.mae_c.show(2),
+    );
     s.push_str(&format!(
         "\nTest MAE (C), mean ± sd over {} seeds; {}; {} training / {} test runs; predicting the training mean: {:.2} C. \
          Fixed adjacency over MLP at 5%: {:.2} (target <= 0.5: {}).\n",
@@ -557,23 +565,15 @@ pub fn markdown(r: &Fig7Result) -> String {
         if r.target_met { "met" } else { "NOT met" }
     ));
     if let Some([Some(cold), Some(hot)]) = r.mean_predictor_by_aisle_c {
-        s.push_str("\nBy aisle, cold / hot (C, means over seeds):\n\n| surrogate |");
-        for p in &r.curves[0].points {
-            s.push_str(&format!(" {:.0}% |", 100.0 * p.fraction));
-        }
-        s.push('\n');
-        s.push_str(&sep);
-        s.push('\n');
-        for c in &r.curves {
-            s.push_str(&format!("| {} |", c.surrogate));
-            for p in &c.points {
-                match (&p.cold_mae_c, &p.hot_mae_c) {
-                    (Some(c), Some(h)) => s.push_str(&format!(" {:.2} / {:.2} |", c.mean, h.mean)),
-                    _ => s.push_str(" - |"),
-                }
-            }
-            s.push('\n');
-        }
+        s.push_str("\nBy aisle, cold / hot (C, means over seeds):\n\n");
+        s.push_str(&curve_table(
+            r,
+            |p| format!("{:.0}%", 100.0 * p.fraction),
+            |p| match (&p.cold_mae_c, &p.hot_mae_c) {
+                (Some(c), Some(h)) => format!("{:.2} / {:.2}", c.mean, h.mean),
+                _ => "-".into(),
+            },
+        ));
         s.push_str(&format!(
             "| training mean | {} |\n",
             vec![format!("{cold:.2} / {hot:.2}"); r.curves[0].points.len()].join(" | ")
