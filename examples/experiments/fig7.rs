@@ -14,11 +14,9 @@ use kalibre::baselines::{InputLevel, Mlp, MlpSettings};
 use kalibre::core::{Model, ParamSpace, Sample, Surrogate, TrainingSet};
 use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::hall::AlphaMode;
-use kalibre::dc::sim::SimConfig;
 use kalibre::dc::snapshots::OperatingState;
 use kalibre::dc::surrogate::PenaltySettings;
 use kalibre::dc::synth::Preset;
-use kalibre::dc::HallModel;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -26,7 +24,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::chart::{panels, LineChart, Series};
-use super::{kalibre_surrogate, setup, Result, Setup, Stats};
+use super::{kalibre_surrogate, setup_with_alpha, Result, Setup, Stats};
 
 /// Seed of the parameter draws and of the train/test split (fixed: every surrogate and
 /// seed sees the same runs).
@@ -365,11 +363,9 @@ pub fn draw_alphas(
 
 /// Runs the experiment; `progress` receives a line per finished step.
 pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result> {
-    let mut s = setup(cfg.preset, false)?;
-    if cfg.grain != AlphaGrain::Type {
-        s.hall.calibrate.alpha = AlphaMode::PerServer;
-        s.model = HallModel::new(&s.hall, SimConfig::default())?;
-    }
+    // The rack and server draws need one alpha per server in the model and the graph.
+    let per_server = (cfg.grain != AlphaGrain::Type).then_some(AlphaMode::PerServer);
+    let s = setup_with_alpha(cfg.preset, false, per_server)?;
     let space = s.model.layout().space();
     let state = s.snaps[0].state.clone();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(DATA_SEED);

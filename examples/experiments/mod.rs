@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use kalibre::core::search::ProjectedGradient;
 use kalibre::core::{Calibrator, Event, Observations, Report, RunStore, Searcher, Surrogate};
 use kalibre::dc::calibration::HallCalibrationSettings;
-use kalibre::dc::hall::Hall;
+use kalibre::dc::hall::{AlphaMode, Hall};
 use kalibre::dc::sim::SimConfig;
 use kalibre::dc::snapshots::{self, HallSnapshot, OperatingState};
 use kalibre::dc::surrogate::{
@@ -74,12 +74,24 @@ impl Setup {
 /// Synthesises `preset` (seed 1, 3 snapshots, noise 0.2 C) and builds its model.
 /// `reference` also runs the model at the truth (a few extra runs) for context.
 pub fn setup(preset: Preset, reference: bool) -> Result<Setup> {
+    setup_with_alpha(preset, reference, None)
+}
+
+/// [`setup`], with the hall's alpha calibrated per `alpha` instead of the preset's mode.
+pub fn setup_with_alpha(
+    preset: Preset,
+    reference: bool,
+    alpha: Option<AlphaMode>,
+) -> Result<Setup> {
     let t = std::time::Instant::now();
     let opts = SynthOptions::new(preset, SYNTH_SEED)
         .with_snapshots(SNAPSHOTS)
         .with_noise_c(NOISE_C)
         .with_reference_runs(reference);
-    let s = synth::generate(&opts)?;
+    let mut s = synth::generate(&opts)?;
+    if let Some(mode) = alpha {
+        s.hall.calibrate.alpha = mode;
+    }
     let synth_s = t.elapsed().as_secs_f64();
     let obs = snapshots::to_observations(&s.hall, &s.snapshots)?;
     let model = HallModel::new(&s.hall, SimConfig::default())?;
