@@ -12,6 +12,8 @@
 //! One alpha is drawn per server type; `--per-rack` draws one per rack and `--per-server`
 //! one per server (the paper's alpha vector), with the model and the graph taking one
 //! alpha per server. Files get `-per-rack` / `-per-server` after the draw's name.
+//! `--sharp-adjacency` gives both graphs server-sensor edges `1 / d^4` with the height
+//! difference halved (`examples/fig7_edges.rs`); files get `-sharp` at the end.
 //! `--quick`: 40 runs of `demo`, 1 seed. Prints the table and writes `fig7.json`,
 //! `fig7.md` and `fig7.svg`.
 
@@ -41,10 +43,11 @@ fn main() {
     } else {
         AlphaGrain::Type
     };
+    let raw_sharp = raw.iter().any(|a| a == "--sharp-adjacency");
     let args = parse_args(raw.into_iter().filter(|a| {
         !matches!(
             a.as_str(),
-            "--log-box" | "--rise-box" | "--per-rack" | "--per-server"
+            "--log-box" | "--rise-box" | "--per-rack" | "--per-server" | "--sharp-adjacency"
         )
     }))
     .unwrap_or_else(|e| {
@@ -58,6 +61,7 @@ fn main() {
     };
     cfg.draw = draw;
     cfg.grain = grain;
+    cfg.sharp_adjacency = raw_sharp;
     if let Some(n) = args.seeds {
         cfg.seeds = n;
     }
@@ -69,7 +73,8 @@ fn main() {
         std::process::exit(1)
     });
     let md = markdown(&r);
-    let stem = format!("{}{}", draw.stem(), grain.suffix());
+    let sharp = if cfg.sharp_adjacency { "-sharp" } else { "" };
+    let stem = format!("{}{}{sharp}", draw.stem(), grain.suffix());
     let written = write_json(&args.out_dir, &format!("{stem}.json"), &r)
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.md"), &md))
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.svg"), &svg(&r)));

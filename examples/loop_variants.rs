@@ -29,6 +29,15 @@ const VARIANTS: &[(&str, &str)] = &[
     ),
     ("wide-adjacency", "server-sensor cut 0.3 instead of 0.6"),
     (
+        "sharp-adjacency",
+        "server-sensor weight 1/d^4 with the height difference halved",
+    ),
+    ("power-4-adjacency", "server-sensor weight 1/d^4"),
+    (
+        "vertical-0.5-adjacency",
+        "server-sensor distance with the height difference halved",
+    ),
+    (
         "paper-prior",
         "temperature-rise prior [5, 15] K instead of [5, 20] K",
     ),
@@ -92,6 +101,12 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
     match name {
         "default" => {}
         "wide-adjacency" => s.surrogate.adjacency.server_threshold = 0.3,
+        "sharp-adjacency" => {
+            s.surrogate.adjacency.server_distance_power = 4.0;
+            s.surrogate.adjacency.server_vertical_scale = 0.5;
+        }
+        "power-4-adjacency" => s.surrogate.adjacency.server_distance_power = 4.0,
+        "vertical-0.5-adjacency" => s.surrogate.adjacency.server_vertical_scale = 0.5,
         "paper-prior" => s.penalty = PenaltySettings::paper(),
         "no-prior" => s.penalty.weight = 0.0,
         "no-geometry-steps" => s.core.stall_step = None,

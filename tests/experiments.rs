@@ -173,6 +173,30 @@ fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
     let back: fig7::Fig7Result = serde_json::from_str(&serde_json::to_string(&r).unwrap()).unwrap();
     assert_eq!(back.config.draw, fig7::AlphaDraw::Rise);
     assert!(fig7::markdown(&r).contains("temperature rise uniform in [5, 20] K"));
+
+    // Sharper server-sensor edges change both graphs and leave the MLP as it was.
+    let sharp = fig7::run_fig7(
+        &fig7::Fig7Config {
+            sharp_adjacency: true,
+            ..cfg
+        },
+        &quiet,
+    )
+    .unwrap();
+    let curve = |r: &fig7::Fig7Result, i: usize| -> Vec<f64> {
+        r.curves[i].points.iter().map(|p| p.mae_c.mean).collect()
+    };
+    assert_eq!(r.curves[2].surrogate, "vanilla MLP");
+    assert_eq!(curve(&sharp, 2), curve(&r, 2));
+    for graph in [0, 1] {
+        assert_ne!(
+            curve(&sharp, graph),
+            curve(&r, graph),
+            "{}",
+            r.curves[graph].surrogate
+        );
+    }
+    assert!(fig7::markdown(&sharp).contains("1/d^4 with the height difference halved"));
 }
 
 #[test]

@@ -132,6 +132,10 @@ pub struct Fig7Config {
     /// Which alphas are drawn independently.
     #[serde(default)]
     pub grain: AlphaGrain,
+    /// Both graphs' server-sensor edges `1 / d^4` with the height difference halved
+    /// (`docs/experiments.md`, Fig. 7, session 17), instead of the default `1 / d`.
+    #[serde(default)]
+    pub sharp_adjacency: bool,
 }
 
 impl Fig7Config {
@@ -143,6 +147,7 @@ impl Fig7Config {
             seeds: 3,
             draw: AlphaDraw::Linear,
             grain: AlphaGrain::Type,
+            sharp_adjacency: false,
         }
     }
     /// Seconds-long: 40 runs of `demo`, 1 seed.
@@ -153,6 +158,7 @@ impl Fig7Config {
             seeds: 1,
             draw: AlphaDraw::Linear,
             grain: AlphaGrain::Type,
+            sharp_adjacency: false,
         }
     }
 }
@@ -261,9 +267,17 @@ fn surrogate_mae(
     train: &[Sample],
     test: &[Sample],
     seed: u64,
-    grain: AlphaGrain,
+    cfg: &Fig7Config,
 ) -> Result<(AisleMae, f64)> {
-    let settings = HallCalibrationSettings::default();
+    let grain = cfg.grain;
+    let mut settings = HallCalibrationSettings::default();
+    if cfg.sharp_adjacency {
+        settings.surrogate.adjacency = settings
+            .surrogate
+            .adjacency
+            .with_server_distance_power(4.0)
+            .with_server_vertical_scale(0.5);
+    }
     let data = TrainingSet {
         scenarios: std::slice::from_ref(state),
         samples: train,
@@ -423,8 +437,7 @@ pub fn run_fig7(cfg: &Fig7Config, progress: &dyn Fn(&str)) -> Result<Fig7Result>
                 let mut idx: Vec<usize> = (0..train_all.len()).collect();
                 idx.shuffle(&mut Xoshiro256PlusPlus::seed_from_u64(seed));
                 let subset: Vec<Sample> = idx[..n].iter().map(|&i| train_all[i].clone()).collect();
-                let (mae, fit_s) =
-                    surrogate_mae(name, &s, &state, &subset, &test, seed, cfg.grain)?;
+                let (mae, fit_s) = surrogate_mae(name, &s, &state, &subset, &test, seed, cfg)?;
                 maes.push(mae.all_c);
                 colds.extend(mae.cold_c);
                 hots.extend(mae.hot_c);
@@ -553,7 +566,13 @@ pub fn markdown(r: &Fig7Result) -> String {
         "\nTest MAE (C), mean ± sd over {} seeds; {}; {} training / {} test runs; predicting the training mean: {:.2} C. \
          Fixed adjacency over MLP at 5%: {:.2} (target <= 0.5: {}).\n",
         r.config.seeds,
-        r.config.draw.describe() + &grain_caption(r.config.grain),
+        r.config.draw.describe()
+            + &grain_caption(r.config.grain)
+            + if r.config.sharp_adjacency {
+                "; server-sensor edges 1/d^4 with the height difference halved"
+            } else {
+                ""
+            },
         r.train,
         r.test,
         r.mean_predictor_mae_c,

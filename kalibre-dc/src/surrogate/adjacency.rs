@@ -14,6 +14,11 @@
 //! threshold are cut (absent from the CSR, i.e. zero): a CRAC with no edge to a sensor takes
 //! no part in that sensor's softmax. Cold-aisle sensors have no `Wss` row: their output uses
 //! the cooling block only.
+//!
+//! For `Wss`, [`AdjacencySettings::server_vertical_scale`] multiplies the height difference
+//! inside `d`, and the kept entries weigh `r^server_distance_power` before the row rescale
+//! (the cut still compares `r`, so the power keeps the same servers). The defaults, 1 and
+//! 1, are the paper's rule; `examples/fig7_edges.rs` measures others.
 
 use crate::hall::{distance, Aabb, Aisle, Hall};
 use crate::{Error, Result};
@@ -74,6 +79,8 @@ impl Csr {
 /// | `crac_threshold` | 0.3 | relative weight below which a CRAC-sensor edge is cut | `[0, 1]` |
 /// | `server_threshold` | 0.6 | relative weight below which a server-sensor edge is cut | `[0, 1]` |
 /// | `min_distance_m` | 0.5 | distance floor in the reciprocal (m) | `> 0` |
+/// | `server_distance_power` | 1 | server-sensor weight `1 / d^p` (the cut compares `1 / d`, so it keeps the same servers at any power) | `> 0` |
+/// | `server_vertical_scale` | 1 | factor on the height difference in the server-sensor distance | `> 0` |
 ///
 /// With the defaults a hot-aisle sensor keeps the servers within about 1.7 times the
 /// distance of the nearest one (at least 0.83 m), typically the servers whose exhausts face
@@ -88,6 +95,10 @@ pub struct AdjacencySettings {
     pub server_threshold: f64,
     /// Distance floor (m).
     pub min_distance_m: f64,
+    /// Power of the server-sensor reciprocal distance.
+    pub server_distance_power: f64,
+    /// Factor on the height difference in the server-sensor distance.
+    pub server_vertical_scale: f64,
 }
 
 impl Default for AdjacencySettings {
@@ -96,6 +107,8 @@ impl Default for AdjacencySettings {
             crac_threshold: 0.3,
             server_threshold: 0.6,
             min_distance_m: 0.5,
+            server_distance_power: 1.0,
+            server_vertical_scale: 1.0,
         }
     }
 }
@@ -119,6 +132,18 @@ impl AdjacencySettings {
         self
     }
 
+    /// Sets the power of the server-sensor reciprocal distance.
+    pub fn with_server_distance_power(mut self, p: f64) -> Self {
+        self.server_distance_power = p;
+        self
+    }
+
+    /// Sets the factor on the height difference in the server-sensor distance.
+    pub fn with_server_vertical_scale(mut self, s: f64) -> Self {
+        self.server_vertical_scale = s;
+        self
+    }
+
     /// Validates the settings.
     pub fn check(self) -> Result<Self> {
         for (name, t) in [
@@ -129,11 +154,17 @@ impl AdjacencySettings {
                 return Err(setting(name, format!("must lie in [0, 1], got {t}")));
             }
         }
-        if !(self.min_distance_m.is_finite() && self.min_distance_m > 0.0) {
-            return Err(setting(
-                "min_distance_m",
-                format!("must be positive and finite, got {}", self.min_distance_m),
-            ));
+        for (name, v) in [
+            ("min_distance_m", self.min_distance_m),
+            ("server_distance_power", self.server_distance_power),
+            ("server_vertical_scale", self.server_vertical_scale),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(setting(
+                    name,
+                    format!("must be positive and finite, got {v}"),
+                ));
+            }
         }
         Ok(self)
     }
@@ -187,8 +218,16 @@ impl Adjacency {
             let r: Vec<f64> = crac_centres.iter().map(|&c| recip(c, p)).collect();
             cs.push_row(relative_cut(&r, settings.crac_threshold));
             if sensor.aisle == Aisle::Hot && !exhausts.is_empty() {
-                let r: Vec<f64> = exhausts.iter().map(|&e| recip(e, p)).collect();
+                let vz = settings.server_vertical_scale;
+                let r: Vec<f64> = exhausts
+                    .iter()
+                    .map(|&e| recip([e[0], e[1], p[2] + vz * (e[2] - p[2])], p))
+                    .collect();
                 let mut row = relative_cut(&r, settings.server_threshold);
+                let power = settings.server_distance_power;
+                for e in &mut row {
+                    e.1 = e.1.powf(power);
+                }
                 let sum: f64 = row.iter().map(|e| e.1).sum();
                 for e in &mut row {
                     e.1 /= sum;

@@ -59,3 +59,62 @@ fn adjacency_is_sparse_cut_and_normalised_at_hall_a_size() {
     let tight = Adjacency::from_hall(&h, &settings.with_server_threshold(0.9)).unwrap();
     assert!(tight.ss.nnz() < adj.ss.nnz());
 }
+
+#[test]
+fn sharper_edges_keep_the_same_servers_and_weigh_them_by_the_scaled_distance() {
+    let h = hall(HALL_A, AlphaMode::PerServer);
+    let base = AdjacencySettings::default();
+    let adj = Adjacency::from_hall(&h, &base).unwrap();
+    // Power 1 and height factor 1 are the default rule, bit for bit.
+    let same = base
+        .with_server_distance_power(1.0)
+        .with_server_vertical_scale(1.0);
+    assert_eq!(Adjacency::from_hall(&h, &same).unwrap(), adj);
+
+    let (power, vertical) = (4.0, 0.5);
+    let sharp = base.with_server_distance_power(power);
+    let sharp_adj = Adjacency::from_hall(&h, &sharp).unwrap();
+    // The cut compares reciprocal distances, so a power keeps the same servers.
+    assert_eq!(sharp_adj.ss.col, adj.ss.col);
+    assert_eq!(sharp_adj.ss.row_ptr, adj.ss.row_ptr);
+    let exhausts: Vec<[f64; 3]> = h.servers().map(|s| s.exhaust_centre()).collect();
+    let flat = Adjacency::from_hall(&h, &sharp.with_server_vertical_scale(vertical)).unwrap();
+    for (k, sensor) in h.sensors.iter().enumerate() {
+        let p = sensor.position_m;
+        for (adj, scale) in [(&sharp_adj, 1.0), (&flat, vertical)] {
+            let range = adj.ss.range(k);
+            if range.is_empty() {
+                continue;
+            }
+            // Each weight is (1 / d)^4 over the row's sum, d with the height difference
+            // scaled.
+            let recip = |j: usize| {
+                let e = exhausts[j];
+                let d2 =
+                    (e[0] - p[0]).powi(2) + (e[1] - p[1]).powi(2) + (scale * (e[2] - p[2])).powi(2);
+                1.0 / d2.sqrt().max(base.min_distance_m)
+            };
+            let cols = &adj.ss.col[range.clone()];
+            let sum: f64 = cols.iter().map(|&j| recip(j as usize).powf(power)).sum();
+            for (&j, &w) in cols.iter().zip(&adj.ss.val[range]) {
+                let expected = recip(j as usize).powf(power) / sum;
+                assert!((w - expected).abs() < 1e-12, "sensor {k}, server {j}");
+            }
+        }
+    }
+    // The nearest server of a row gets more of its weight at a higher power.
+    let k = (0..h.sensors.len())
+        .find(|&k| !adj.ss.range(k).is_empty())
+        .unwrap();
+    let top = |a: &Adjacency| a.ss.val[a.ss.range(k)].iter().copied().fold(0.0, f64::max);
+    assert!(top(&sharp_adj) > top(&adj));
+    // Bad values are refused by name.
+    for bad in [
+        base.with_server_distance_power(0.0),
+        base.with_server_distance_power(f64::NAN),
+        base.with_server_vertical_scale(-1.0),
+    ] {
+        let e = Adjacency::from_hall(&h, &bad).unwrap_err().to_string();
+        assert!(e.contains("server_"), "{e}");
+    }
+}
