@@ -34,6 +34,10 @@ const VARIANTS: &[(&str, &str)] = &[
     ),
     ("power-4-adjacency", "server-sensor weight 1/d^4"),
     (
+        "mild-adjacency",
+        "server-sensor weight 1/d^2 with the height difference halved",
+    ),
+    (
         "vertical-0.5-adjacency",
         "server-sensor distance with the height difference halved",
     ),
@@ -106,6 +110,10 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
             s.surrogate.adjacency.server_vertical_scale = 0.5;
         }
         "power-4-adjacency" => s.surrogate.adjacency.server_distance_power = 4.0,
+        "mild-adjacency" => {
+            s.surrogate.adjacency.server_distance_power = 2.0;
+            s.surrogate.adjacency.server_vertical_scale = 0.5;
+        }
         "vertical-0.5-adjacency" => s.surrogate.adjacency.server_vertical_scale = 0.5,
         "paper-prior" => s.penalty = PenaltySettings::paper(),
         "no-prior" => s.penalty.weight = 0.0,
