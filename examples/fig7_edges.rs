@@ -79,22 +79,7 @@ impl Fit {
         for (p, row) in a.iter_mut().enumerate() {
             row[p] += 1e-3 * n;
         }
-        // Gaussian elimination: the matrix is symmetric positive definite (ridge).
-        for c in 0..d {
-            for r in c + 1..d {
-                let f = a[r][c] / a[c][c];
-                let pivot = a[c].clone();
-                for (v, p) in a[r].iter_mut().zip(&pivot).skip(c) {
-                    *v -= f * p;
-                }
-                b[r] -= f * b[c];
-            }
-        }
-        let mut weight = vec![0.0; d];
-        for c in (0..d).rev() {
-            let s: f64 = (c + 1..d).map(|j| a[c][j] * weight[j]).sum();
-            weight[c] = (b[c] - s) / a[c][c];
-        }
+        let weight = experiments::solve_spd(a, b);
         Fit {
             mean,
             scale,
@@ -147,14 +132,12 @@ fn main() {
             .position(|a| a == flag)
             .and_then(|i| args.get(i + 1))
     };
-    let preset = match value("--preset").map(String::as_str) {
-        None | Some("hall-a") => Preset::HallA,
-        Some("hall-b") => Preset::HallB,
-        Some(other) => {
-            eprintln!("--preset: expected hall-a or hall-b, got `{other}`");
+    let preset: Preset = value("--preset")
+        .map_or(Ok(Preset::HallA), |p| p.parse())
+        .unwrap_or_else(|e| {
+            eprintln!("--preset: {e}");
             std::process::exit(2)
-        }
-    };
+        });
     let per_rack = args.iter().any(|a| a == "--per-rack");
     let out = value("--out").map(std::path::PathBuf::from);
 

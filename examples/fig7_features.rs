@@ -43,27 +43,6 @@ const TEST_FROM: usize = 100;
 /// Per sample and sensor: paper block, mixing block, recirculation, bypass.
 type Features = Vec<Vec<[f64; 4]>>;
 
-/// Solves `a x = b` (small, symmetric positive definite: Gaussian elimination).
-fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
-    let d = b.len();
-    for c in 0..d {
-        for r in c + 1..d {
-            let f = a[r][c] / a[c][c];
-            let pivot_row = a[c].clone();
-            for (x, p) in a[r].iter_mut().zip(&pivot_row).skip(c) {
-                *x -= f * p;
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = vec![0.0; d];
-    for c in (0..d).rev() {
-        let s: f64 = (c + 1..d).map(|j| a[c][j] * x[j]).sum();
-        x[c] = (b[c] - s) / a[c][c];
-    }
-    x
-}
-
 /// Ridge least squares of `y` on standardised `cols` (plus an intercept) over the first
 /// `n` samples; test MAE over samples `TEST_FROM..`. `floor` per column.
 fn fit_and_score(cols: &[Vec<f64>], floors: &[f64], y: &[f64], n: usize) -> (f64, usize) {
@@ -97,7 +76,7 @@ fn fit_and_score(cols: &[Vec<f64>], floors: &[f64], y: &[f64], n: usize) -> (f64
     for (p, row) in a.iter_mut().enumerate() {
         row[p] += 1e-3 * n as f64;
     }
-    let w = solve(a, b);
+    let w = experiments::solve_spd(a, b);
     let err: f64 = (TEST_FROM..y.len())
         .map(|i| (ybar + (0..d).map(|p| w[p] * z(i, p)).sum::<f64>() - y[i]).abs())
         .sum();

@@ -392,3 +392,25 @@ pub fn loop_history(report: &Report) -> Vec<(usize, usize, f64)> {
     }
     h
 }
+
+/// Solves `a x = b` for a small symmetric positive definite `a` (Gaussian elimination
+/// without pivoting): the per-sensor normal equations of the analysis examples.
+pub fn solve_spd(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
+    let d = b.len();
+    for c in 0..d {
+        for r in c + 1..d {
+            let f = a[r][c] / a[c][c];
+            let pivot_row = a[c].clone();
+            for (x, p) in a[r].iter_mut().zip(&pivot_row).skip(c) {
+                *x -= f * p;
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = vec![0.0; d];
+    for c in (0..d).rev() {
+        let s: f64 = (c + 1..d).map(|j| a[c][j] * x[j]).sum();
+        x[c] = (b[c] - s) / a[c][c];
+    }
+    x
+}
