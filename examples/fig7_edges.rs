@@ -22,6 +22,7 @@
 #[path = "experiments/mod.rs"]
 mod experiments;
 
+use experiments::fig7::{draw_alphas, AlphaDraw, AlphaGrain, Fig7Config};
 use kalibre::core::Model;
 use kalibre::dc::hall::AlphaMode;
 use kalibre::dc::surrogate::{
@@ -29,7 +30,7 @@ use kalibre::dc::surrogate::{
     PenaltySettings, SurrogateTerm,
 };
 use kalibre::dc::synth::Preset;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 use serde_json::json;
@@ -147,27 +148,31 @@ fn main() {
     let state = s.snaps[0].state.clone();
     let rise = PenaltySettings::default();
     let rack_of: Vec<usize> = s.hall.servers().map(|r| r.rack_index).collect();
-    let draws = if per_rack {
-        s.hall.racks.len()
-    } else {
-        layout.space().dim()
+    // Fig. 7's own rise-box draw, at this example's run count and seed.
+    let draw = Fig7Config {
+        samples: RUNS,
+        draw: AlphaDraw::Rise,
+        grain: if per_rack {
+            AlphaGrain::Rack
+        } else {
+            AlphaGrain::Type
+        },
+        ..Fig7Config::full()
     };
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(7);
-    let params: Vec<Vec<f64>> = (0..RUNS)
-        .map(|_| {
-            let drawn: Vec<f64> = (0..draws)
-                .map(|_| {
-                    let u: f64 = rng.random();
-                    rise.rise_coefficient() / (rise.lower_c + u * (rise.upper_c - rise.lower_c))
-                })
-                .collect();
-            if per_rack {
-                rack_of.iter().map(|&r| drawn[r]).collect()
-            } else {
-                drawn
-            }
-        })
-        .collect();
+    let space = layout.space();
+    let params: Vec<Vec<f64>> = draw_alphas(
+        &draw,
+        space,
+        &rack_of,
+        &mut Xoshiro256PlusPlus::seed_from_u64(7),
+    )
+    .and_then(|points| {
+        points
+            .iter()
+            .map(|u| space.from_unit(u).map_err(Into::into))
+            .collect()
+    })
+    .expect("the rise-box draw");
     let outputs: Vec<Vec<f64>> = params
         .par_iter()
         .map(|p| s.model.evaluate(&state, p).expect("a run").values)
