@@ -425,3 +425,22 @@ fn table4_combine_merges_approaches_and_refuses_other_measurements() {
     assert!(table4::Budgets::full().with_overrides("es=0").is_err());
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn ratio_interval_is_a_seeded_percentile_bootstrap() {
+    use experiments::ratio_interval;
+    // Constant samples: every resample gives the ratio itself.
+    assert_eq!(ratio_interval(&[30.0; 4], &[15.0; 16]), Some((2.0, 2.0)));
+    // Two values: resampled means 18, 31.5 or 45 with chances 1/4, 1/2, 1/4, so the
+    // 2.5 % and 97.5 % points are the extremes.
+    assert_eq!(ratio_interval(&[18.0, 45.0], &[15.0; 3]), Some((1.2, 3.0)));
+    // Varied samples: the interval holds the ratio of means and repeats exactly.
+    let mlp = [27.0, 18.0, 30.0, 18.0, 33.0, 30.0, 45.0, 18.0];
+    let kalibre = [15.0, 15.0, 18.0, 15.0];
+    let (lo, hi) = ratio_interval(&mlp, &kalibre).unwrap();
+    let point = (mlp.iter().sum::<f64>() / 8.0) / (kalibre.iter().sum::<f64>() / 4.0);
+    assert!(lo < point && point < hi, "{lo} {point} {hi}");
+    assert_eq!(ratio_interval(&mlp, &kalibre), Some((lo, hi)));
+    assert_eq!(ratio_interval(&[], &kalibre), None);
+    assert_eq!(ratio_interval(&mlp, &[0.0]), None);
+}

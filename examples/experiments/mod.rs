@@ -282,6 +282,41 @@ impl Stats {
     }
 }
 
+/// Resamples behind [`ratio_interval`].
+pub const BOOTSTRAP_RESAMPLES: usize = 10_000;
+const BOOTSTRAP_SEED: u64 = 2020;
+
+/// A 95 % percentile bootstrap interval for `mean(num) / mean(den)` over seeds: each
+/// sample is resampled on its own, with replacement ([`BOOTSTRAP_RESAMPLES`] times, seeded,
+/// so the same values give the same interval). The two are independent runs of two
+/// approaches, so seeds are not paired. `None` when a sample is empty or a resampled
+/// denominator is not positive.
+pub fn ratio_interval(num: &[f64], den: &[f64]) -> Option<(f64, f64)> {
+    use rand::{Rng, SeedableRng};
+    if num.is_empty() || den.is_empty() {
+        return None;
+    }
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(BOOTSTRAP_SEED);
+    let mut resample_mean = |v: &[f64]| {
+        (0..v.len())
+            .map(|_| v[rng.random_range(0..v.len())])
+            .sum::<f64>()
+            / v.len() as f64
+    };
+    let mut ratios = Vec::with_capacity(BOOTSTRAP_RESAMPLES);
+    for _ in 0..BOOTSTRAP_RESAMPLES {
+        let n = resample_mean(num);
+        let d = resample_mean(den);
+        if !(d > 0.0 && n.is_finite()) {
+            return None;
+        }
+        ratios.push(n / d);
+    }
+    ratios.sort_by(f64::total_cmp);
+    let at = |q: f64| ratios[((q * (BOOTSTRAP_RESAMPLES - 1) as f64).round()) as usize];
+    Some((at(0.025), at(0.975)))
+}
+
 /// Shows an optional summary, `n/a` when absent.
 pub fn show_opt(s: &Option<Stats>, digits: usize) -> String {
     s.as_ref().map_or_else(|| "n/a".into(), |s| s.show(digits))

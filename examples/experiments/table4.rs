@@ -313,14 +313,19 @@ impl ApproachRow {
         }
     }
 
+    /// Model runs to 1.0 C per seed, counting a seed that never got there with all its
+    /// runs.
+    pub fn runs_to_1c_per_seed(&self) -> Vec<f64> {
+        self.runs
+            .iter()
+            .map(|r| r.model_runs_to_1c.unwrap_or(r.model_runs) as f64)
+            .collect()
+    }
+
     /// Mean model runs to 1.0 C, counting a seed that never got there with all its runs
     /// (then a lower bound: the flag is true).
     pub fn runs_to_1c_bound(&self) -> (f64, bool) {
-        let v: Vec<f64> = self
-            .runs
-            .iter()
-            .map(|r| r.model_runs_to_1c.unwrap_or(r.model_runs) as f64)
-            .collect();
+        let v = self.runs_to_1c_per_seed();
         (
             v.iter().sum::<f64>() / v.len() as f64,
             self.reached_1c < self.runs.len(),
@@ -343,6 +348,12 @@ pub struct Targets {
     pub es_ratio_met: Option<bool>,
     /// MLP ratio at least 2.
     pub mlp_ratio_met: Option<bool>,
+    /// 95 % bootstrap interval of the ES ratio over seeds ([`super::ratio_interval`]).
+    #[serde(default)]
+    pub es_ratio_interval: Option<(f64, f64)>,
+    /// 95 % bootstrap interval of the MLP ratio over seeds.
+    #[serde(default)]
+    pub mlp_ratio_interval: Option<(f64, f64)>,
 }
 
 /// Table 4 on one hall.
@@ -573,6 +584,11 @@ fn targets(rows: &[ApproachRow]) -> Targets {
         let o = find(a)?;
         kal_runs.map(|kr| o.runs_to_1c_bound().0 / kr)
     };
+    let interval = |a: Approach| {
+        let o = find(a)?;
+        kal_runs?;
+        super::ratio_interval(&o.runs_to_1c_per_seed(), &k.runs_to_1c_per_seed())
+    };
     let es = ratio(Approach::Es);
     let mlp = ratio(Approach::Mlp);
     Targets {
@@ -582,5 +598,7 @@ fn targets(rows: &[ApproachRow]) -> Targets {
         mlp_over_kalibre_runs_to_1c: mlp,
         es_ratio_met: es.map(|r| r >= 5.0),
         mlp_ratio_met: mlp.map(|r| r >= 2.0),
+        es_ratio_interval: interval(Approach::Es),
+        mlp_ratio_interval: interval(Approach::Mlp),
     }
 }

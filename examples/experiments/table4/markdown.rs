@@ -43,9 +43,16 @@ pub fn markdown(tables: &[HallTable]) -> String {
             None if !kalibre => "n/a (no Kalibre row)".into(),
             None => "n/a (no other row)".into(),
         };
-        let ratio = |a: Approach, r: Option<f64>, m: Option<bool>, need: f64| match (r, m) {
+        let ratio = |a: Approach,
+                     r: Option<f64>,
+                     m: Option<bool>,
+                     interval: Option<(f64, f64)>,
+                     need: f64| match (r, m) {
             (Some(r), Some(m)) => format!(
-                "{r:.1}x (need >= {need}x: {})",
+                "{r:.1}x{} (need >= {need}x: {})",
+                interval.map_or(String::new(), |(lo, hi)| format!(
+                    ", 95 % bootstrap interval over seeds {lo:.1}-{hi:.1}x"
+                )),
                 if m { "met" } else { "NOT met" }
             ),
             _ if !kalibre || !has(a) => {
@@ -70,8 +77,20 @@ pub fn markdown(tables: &[HallTable]) -> String {
             t.model_at_truth_mae_c.map_or("n/a".into(), |v| format!("{v:.2} C")),
             met(g.best_after_10),
             met(g.fewest_runs_to_lowest),
-            ratio(Approach::Es, g.es_over_kalibre_runs_to_1c, g.es_ratio_met, 5.0),
-            ratio(Approach::Mlp, g.mlp_over_kalibre_runs_to_1c, g.mlp_ratio_met, 2.0),
+            ratio(
+                Approach::Es,
+                g.es_over_kalibre_runs_to_1c,
+                g.es_ratio_met,
+                g.es_ratio_interval,
+                5.0
+            ),
+            ratio(
+                Approach::Mlp,
+                g.mlp_over_kalibre_runs_to_1c,
+                g.mlp_ratio_met,
+                g.mlp_ratio_interval,
+                2.0
+            ),
             if missing.is_empty() {
                 String::new()
             } else {
