@@ -14,6 +14,8 @@
 //! alpha per server. Files get `-per-rack` / `-per-server` after the draw's name.
 //! `--sharp-adjacency` gives both graphs server-sensor edges `1 / d^4` with the height
 //! difference halved (`examples/fig7_edges.rs`); files get `-sharp` at the end.
+//! `--local-recirculation` gives both graphs the whole-hall local recirculation term on
+//! their cold-aisle sensors; files get `-local` at the end.
 //! `--quick`: 40 runs of `demo`, 1 seed. Prints the table and writes `fig7.json`,
 //! `fig7.md` and `fig7.svg`.
 
@@ -44,10 +46,16 @@ fn main() {
         AlphaGrain::Type
     };
     let raw_sharp = raw.iter().any(|a| a == "--sharp-adjacency");
+    let raw_local = raw.iter().any(|a| a == "--local-recirculation");
     let args = parse_args(raw.into_iter().filter(|a| {
         !matches!(
             a.as_str(),
-            "--log-box" | "--rise-box" | "--per-rack" | "--per-server" | "--sharp-adjacency"
+            "--log-box"
+                | "--rise-box"
+                | "--per-rack"
+                | "--per-server"
+                | "--sharp-adjacency"
+                | "--local-recirculation"
         )
     }))
     .unwrap_or_else(|e| {
@@ -62,6 +70,7 @@ fn main() {
     cfg.draw = draw;
     cfg.grain = grain;
     cfg.sharp_adjacency = raw_sharp;
+    cfg.local_recirculation = raw_local;
     if let Some(n) = args.seeds {
         cfg.seeds = n;
     }
@@ -74,7 +83,12 @@ fn main() {
     });
     let md = markdown(&r);
     let sharp = if cfg.sharp_adjacency { "-sharp" } else { "" };
-    let stem = format!("{}{}{sharp}", draw.stem(), grain.suffix());
+    let local = if cfg.local_recirculation {
+        "-local"
+    } else {
+        ""
+    };
+    let stem = format!("{}{}{sharp}{local}", draw.stem(), grain.suffix());
     let written = write_json(&args.out_dir, &format!("{stem}.json"), &r)
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.md"), &md))
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.svg"), &svg(&r)));

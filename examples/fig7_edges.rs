@@ -16,7 +16,8 @@
 //!   with `Wss` built by [`Adjacency::from_hall`] under each edge rule: the default, other
 //!   cuts, powers of the reciprocal distance, and the height difference scaled.
 //! - **Cold aisle:** the hall-wide recirculation and bypass features, the local
-//!   recirculation term, and linear fits on the 11 per-type rises (and alphas): what a
+//!   recirculation term (its first, 3 m form and its default, whole-hall form), and
+//!   linear fits on the 11 per-type rises (and alphas): what a
 //!   per-sensor form that is linear in such features can reach.
 
 #[path = "experiments/mod.rs"]
@@ -26,8 +27,8 @@ use experiments::fig7::{draw_alphas, AlphaDraw, AlphaGrain, Fig7Config};
 use kalibre::core::Model;
 use kalibre::dc::hall::AlphaMode;
 use kalibre::dc::surrogate::{
-    Adjacency, AdjacencySettings, FlowBalance, FlowBalanceTerm, LocalRecirculationTerm,
-    PenaltySettings, SurrogateTerm,
+    Adjacency, AdjacencySettings, FlowBalance, FlowBalanceTerm, LocalRecirculationSettings,
+    LocalRecirculationTerm, PenaltySettings, SurrogateTerm, LOCAL_RADIUS_M,
 };
 use kalibre::dc::synth::Preset;
 use rand::SeedableRng;
@@ -237,6 +238,16 @@ fn main() {
             FlowBalance::Recirculation,
         )),
         Box::new(FlowBalanceTerm::new(&s.hall, &layout, FlowBalance::Bypass)),
+        // The local term's first form (3 m, every sensor) and its default form (the
+        // whole hall weighed by 1/d, cold-aisle sensors only).
+        Box::new(
+            LocalRecirculationTerm::with_settings(
+                &s.hall,
+                &layout,
+                LocalRecirculationSettings::within(LOCAL_RADIUS_M),
+            )
+            .expect("the 3 m reach"),
+        ),
         Box::new(LocalRecirculationTerm::new(&s.hall, &layout)),
     ];
     let term_features: Vec<Vec<Vec<f64>>> = params
@@ -271,6 +282,22 @@ fn main() {
         "cold",
         "hall-wide + local recirculation".into(),
         score(&cold, &outputs, &with_local),
+    );
+    let whole_hall = |i: usize, k: usize| vec![term_features[i][3][k]];
+    let with_whole_hall = |i: usize, k: usize| {
+        let mut v = hall_wide(i, k);
+        v.push(term_features[i][3][k]);
+        v
+    };
+    print(
+        "cold",
+        "whole-hall local recirculation alone".into(),
+        score(&cold, &outputs, &whole_hall),
+    );
+    print(
+        "cold",
+        "hall-wide + whole-hall local recirculation".into(),
+        score(&cold, &outputs, &with_whole_hall),
     );
     if !per_rack {
         // One rise and one alpha per type: 22 features, linear.

@@ -27,8 +27,8 @@ mod experiments;
 use kalibre::core::{Model, Sample, Surrogate, TrainingSet};
 use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::surrogate::{
-    Adjacency, AdjacencySettings, FlowBalance, FlowBalanceTerm, LocalRecirculationTerm,
-    PenaltySettings, SurrogateTerm,
+    Adjacency, AdjacencySettings, FlowBalance, FlowBalanceTerm, LocalRecirculationSettings,
+    LocalRecirculationTerm, PenaltySettings, SurrogateTerm, LOCAL_RADIUS_M,
 };
 use kalibre::dc::synth::Preset;
 use rand::{Rng, SeedableRng};
@@ -225,7 +225,15 @@ fn main() {
             }
             let mut g = experiments::kalibre_surrogate(&s, &st).expect("graph");
             if variant.contains("local") {
-                g = g.with_term(Box::new(LocalRecirculationTerm::new(&s.hall, &layout)));
+                // The term's first form (3 m, every sensor), as these results were made.
+                g = g.with_term(Box::new(
+                    LocalRecirculationTerm::with_settings(
+                        &s.hall,
+                        &layout,
+                        LocalRecirculationSettings::within(LOCAL_RADIUS_M),
+                    )
+                    .expect("the 3 m reach"),
+                ));
             }
             let train: Vec<Sample> = (0..n)
                 .map(|i| Sample {

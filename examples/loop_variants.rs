@@ -17,7 +17,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
-use kalibre::dc::surrogate::PenaltySettings;
+use kalibre::dc::surrogate::{LocalRecirculationSettings, PenaltySettings, LOCAL_RADIUS_M};
 use kalibre::dc::synth::{self, Preset, SynthOptions};
 use serde_json::json;
 
@@ -56,7 +56,11 @@ const VARIANTS: &[(&str, &str)] = &[
     ),
     (
         "local-recirculation",
-        "the local recirculation term added to the surrogate",
+        "the local recirculation term added to the surrogate: cold-aisle sensors, the whole hall weighed by 1/d (session 18)",
+    ),
+    (
+        "local-recirculation-3m",
+        "the local recirculation term's first form added: every sensor, servers and openings within 3 m",
     ),
     (
         "trainable-adjacency",
@@ -119,7 +123,12 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         "no-prior" => s.penalty.weight = 0.0,
         "no-geometry-steps" => s.core.stall_step = None,
         "trust-region-0.3" => s.core.trust_region = Some(0.3),
-        "local-recirculation" => s.local_recirculation_term = true,
+        "local-recirculation" => {
+            s.local_recirculation = Some(LocalRecirculationSettings::default())
+        }
+        "local-recirculation-3m" => {
+            s.local_recirculation = Some(LocalRecirculationSettings::within(LOCAL_RADIUS_M))
+        }
         "focus-0.5" => s.core.focus = Some(0.5),
         "focus-2" => s.core.focus = Some(2.0),
         "geometry-step-0.01" => s.core.stall_step = Some(0.01),

@@ -197,6 +197,43 @@ fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
         );
     }
     assert!(fig7::markdown(&sharp).contains("1/d^4 with the height difference halved"));
+
+    // The local recirculation term changes both graphs' cold-aisle predictions only.
+    let local = fig7::run_fig7(
+        &fig7::Fig7Config {
+            local_recirculation: true,
+            ..cfg
+        },
+        &quiet,
+    )
+    .unwrap();
+    assert_eq!(curve(&local, 2), curve(&r, 2));
+    for graph in [0, 1] {
+        let hot = |r: &fig7::Fig7Result| -> Vec<f64> {
+            r.curves[graph]
+                .points
+                .iter()
+                .map(|p| p.hot_mae_c.as_ref().unwrap().mean)
+                .collect()
+        };
+        let cold = |r: &fig7::Fig7Result| -> Vec<f64> {
+            r.curves[graph]
+                .points
+                .iter()
+                .map(|p| p.cold_mae_c.as_ref().unwrap().mean)
+                .collect()
+        };
+        assert_ne!(cold(&local), cold(&r), "{}", r.curves[graph].surrogate);
+        // Hot-aisle sensors take a zero feature: the same up to rounding.
+        for (a, b) in hot(&local).iter().zip(hot(&r)) {
+            assert!(
+                (a - b).abs() <= 1e-6 * b,
+                "{}: {a} vs {b}",
+                r.curves[graph].surrogate
+            );
+        }
+    }
+    assert!(fig7::markdown(&local).contains("whole-hall local recirculation term"));
 }
 
 #[test]

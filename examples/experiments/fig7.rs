@@ -15,6 +15,7 @@ use kalibre::core::{Model, ParamSpace, Sample, Surrogate, TrainingSet};
 use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::hall::AlphaMode;
 use kalibre::dc::snapshots::OperatingState;
+use kalibre::dc::surrogate::LocalRecirculationSettings;
 use kalibre::dc::surrogate::PenaltySettings;
 use kalibre::dc::synth::Preset;
 use rand::seq::SliceRandom;
@@ -136,6 +137,10 @@ pub struct Fig7Config {
     /// (`docs/experiments.md`, Fig. 7, session 17), instead of the default `1 / d`.
     #[serde(default)]
     pub sharp_adjacency: bool,
+    /// Both graphs take the local recirculation term on their cold-aisle sensors
+    /// (`LocalRecirculationSettings::default`: the whole hall weighed by 1/d; session 18).
+    #[serde(default)]
+    pub local_recirculation: bool,
 }
 
 impl Fig7Config {
@@ -148,6 +153,7 @@ impl Fig7Config {
             draw: AlphaDraw::Linear,
             grain: AlphaGrain::Type,
             sharp_adjacency: false,
+            local_recirculation: false,
         }
     }
     /// Seconds-long: 40 runs of `demo`, 1 seed.
@@ -159,6 +165,7 @@ impl Fig7Config {
             draw: AlphaDraw::Linear,
             grain: AlphaGrain::Type,
             sharp_adjacency: false,
+            local_recirculation: false,
         }
     }
 }
@@ -271,6 +278,9 @@ fn surrogate_mae(
 ) -> Result<(AisleMae, f64)> {
     let grain = cfg.grain;
     let mut settings = HallCalibrationSettings::default();
+    if cfg.local_recirculation {
+        settings.local_recirculation = Some(LocalRecirculationSettings::default());
+    }
     if cfg.sharp_adjacency {
         settings.surrogate.adjacency = settings
             .surrogate
@@ -570,6 +580,11 @@ pub fn markdown(r: &Fig7Result) -> String {
             + &grain_caption(r.config.grain)
             + if r.config.sharp_adjacency {
                 "; server-sensor edges 1/d^4 with the height difference halved"
+            } else {
+                ""
+            }
+            + if r.config.local_recirculation {
+                "; the whole-hall local recirculation term on the cold-aisle sensors"
             } else {
                 ""
             },

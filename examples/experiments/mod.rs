@@ -18,9 +18,7 @@ use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::hall::{AlphaMode, Hall};
 use kalibre::dc::sim::SimConfig;
 use kalibre::dc::snapshots::{self, HallSnapshot, OperatingState};
-use kalibre::dc::surrogate::{
-    FlowBalance, FlowBalanceTerm, PenaltySettings, TemperatureRisePenalty, ThermalGraph,
-};
+use kalibre::dc::surrogate::{PenaltySettings, TemperatureRisePenalty, ThermalGraph};
 use kalibre::dc::synth::{self, Preset, SynthOptions};
 use kalibre::dc::HallModel;
 use serde::{Deserialize, Serialize};
@@ -174,19 +172,17 @@ where
 }
 
 /// Kalibre's thermal graph as `calibrate_hall` builds it: the paper's cooling and heating
-/// blocks plus the recirculation and bypass terms.
+/// blocks plus the recirculation and bypass terms (and the local recirculation term when
+/// the settings ask for it).
 pub fn kalibre_surrogate(
     setup: &Setup,
     settings: &HallCalibrationSettings,
 ) -> Result<ThermalGraph> {
-    let layout = setup.model.layout();
-    let mut g = ThermalGraph::new(&setup.hall, layout.clone(), settings.surrogate)?;
-    if settings.flow_balance_terms {
-        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
-            g = g.with_term(Box::new(FlowBalanceTerm::new(&setup.hall, layout, kind)));
-        }
-    }
-    Ok(g)
+    Ok(kalibre::dc::calibration_model::hall_surrogate(
+        &setup.hall,
+        setup.model.layout(),
+        settings,
+    )?)
 }
 
 /// Serialises a preset by its CLI name.

@@ -13,7 +13,7 @@ use crate::effects::{EffectRegistry, SurrogateTerm};
 use crate::hall::{AlphaMode, Hall};
 use crate::sim::SimConfig;
 use crate::snapshots::HallSnapshot;
-use crate::surrogate::{PenaltySettings, ThermalGraphSettings};
+use crate::surrogate::{LocalRecirculationSettings, PenaltySettings, ThermalGraphSettings};
 use crate::{Error, HallModel, Result};
 
 /// Everything that shapes a hall calibration.
@@ -27,7 +27,7 @@ use crate::{Error, HallModel, Result};
 /// | `penalty` | [`PenaltySettings::default`] | rise range [5, 20] C (the paper: [5, 15]), weight 1 |
 /// | `searcher` | [`Hybrid::default`] | DE (population 10, crossover 0.6, 100 generations), then Adam |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
-/// | `local_recirculation_term` | false | add a per-sensor local draw-against-supply recirculation term (measured: mixed, see docs/performance.md) |
+/// | `local_recirculation` | none | add the local draw-against-supply recirculation term with these settings ([`LocalRecirculationSettings`]; measured: a better fit to random runs, a slightly worse loop on hall-b, see docs/experiments.md) |
 /// | `design_within_prior` | false | the initial design spans the alphas whose rises the prior accepts ([`PenaltySettings::plausible_bounds`]) instead of the whole bounds |
 /// | `grid_check` | `[0.75, 0.5]` | cell sizes, relative to `sim.cell_m`, at which the built-in model runs once per snapshot at the best parameters: the alphas' move from the grid alone is their numerical uncertainty (`ParamUncertainty::numerical`), counted when a parameter is called identified; with `core.numerical_weighting` (default) the grids run before the polish too, which weighs each sensor by them; empty: none |
 /// | `polish_max_params` | 64 | the loop's polish stage (`core.polish_iterations`, 8 by default) runs only when there are at most this many parameters: each of its Jacobians costs `params + 1` model runs per snapshot (per-server alpha on a real hall would need thousands); above it the report's settings show `polish_iterations` 0 |
@@ -47,8 +47,9 @@ pub struct HallCalibrationSettings {
     pub searcher: Hybrid,
     /// Add the mass-balance terms (recirculation, bypass) to the paper's thermal graph.
     pub flow_balance_terms: bool,
-    /// Add the local recirculation term (local draw against local supply per sensor).
-    pub local_recirculation_term: bool,
+    /// Add the local recirculation term (local draw against local supply per sensor)
+    /// with these settings.
+    pub local_recirculation: Option<LocalRecirculationSettings>,
     /// The initial design spans the prior's plausible alphas rather than the bounds.
     pub design_within_prior: bool,
     /// Most parameters for which the polish stage runs.
@@ -97,7 +98,7 @@ impl Default for HallCalibrationSettings {
             penalty: PenaltySettings::default(),
             searcher: Hybrid::default(),
             flow_balance_terms: true,
-            local_recirculation_term: false,
+            local_recirculation: None,
             design_within_prior: false,
             polish_max_params: 64,
             grid_check: vec![0.75, 0.5],

@@ -16,6 +16,28 @@ use crate::surrogate::{
 };
 use crate::{Error, ParamLayout, Result};
 
+/// The thermal graph every hall calibration searches on: the paper's cooling and heating
+/// blocks, plus the mass-balance terms (`settings.flow_balance_terms`) and the local
+/// recirculation term (`settings.local_recirculation`) when asked for.
+pub fn hall_surrogate(
+    hall: &Hall,
+    layout: &ParamLayout,
+    settings: &HallCalibrationSettings,
+) -> Result<ThermalGraph> {
+    let mut surrogate = ThermalGraph::new(hall, layout.clone(), settings.surrogate)?;
+    if settings.flow_balance_terms {
+        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
+            surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(hall, layout, kind)));
+        }
+    }
+    if let Some(local) = settings.local_recirculation {
+        surrogate = surrogate.with_term(Box::new(LocalRecirculationTerm::with_settings(
+            hall, layout, local,
+        )?));
+    }
+    Ok(surrogate)
+}
+
 /// What a calibration with an external model returns.
 #[derive(Debug)]
 pub struct ModelCalibration {
@@ -82,15 +104,7 @@ where
             hall.name
         )));
     }
-    let mut surrogate = ThermalGraph::new(hall, layout.clone(), settings.surrogate)?;
-    if settings.flow_balance_terms {
-        for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
-            surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(hall, layout, kind)));
-        }
-    }
-    if settings.local_recirculation_term {
-        surrogate = surrogate.with_term(Box::new(LocalRecirculationTerm::new(hall, layout)));
-    }
+    let mut surrogate = hall_surrogate(hall, layout, settings)?;
     for &i in learned_params {
         surrogate =
             surrogate.with_term(Box::new(EffectLinearTerm::new(space.names()[i].clone(), i)));

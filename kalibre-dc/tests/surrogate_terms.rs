@@ -1,9 +1,13 @@
 //! The mass-balance surrogate terms: hand-written vector-Jacobian products against
 //! central finite differences, per type and per server, across the recirculation kink.
 
+use kalibre_dc::hall::Aisle;
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::snapshots::load_snapshots;
-use kalibre_dc::surrogate::{FlowBalance, FlowBalanceTerm, LocalRecirculationTerm, SurrogateTerm};
+use kalibre_dc::surrogate::{
+    FlowBalance, FlowBalanceTerm, LocalRecirculationSettings, LocalRecirculationTerm,
+    SurrogateTerm, LOCAL_RADIUS_M,
+};
 use kalibre_dc::ParamLayout;
 
 fn hall() -> Hall {
@@ -62,6 +66,14 @@ fn mass_balance_terms_match_finite_differences() {
             )),
             Box::new(FlowBalanceTerm::new(&hall, &layout, FlowBalance::Bypass)),
             Box::new(LocalRecirculationTerm::new(&hall, &layout)),
+            Box::new(
+                LocalRecirculationTerm::with_settings(
+                    &hall,
+                    &layout,
+                    LocalRecirculationSettings::within(LOCAL_RADIUS_M),
+                )
+                .unwrap(),
+            ),
         ];
         // Below, near and above the point where the servers draw the supply (about 0.14 cfm/W).
         for base in [0.09, 0.13, 0.14, 0.16, 0.25] {
@@ -96,7 +108,151 @@ fn local_recirculation_is_zero_when_supply_is_ample_and_grows_with_draw() {
     let (low, high) = (feature(0.05), feature(0.4));
     assert!(low.iter().all(|v| *v < 0.05), "{low:?}");
     assert!(high.iter().zip(&low).all(|(h, l)| h >= l));
-    assert!(high.iter().any(|v| *v > 1.0), "{high:?}");
+    // By default only cold-aisle sensors take the term, and each of them sees
+    // recirculation once the servers draw about 1.9 times the supply.
+    for (s, v) in hall.sensors.iter().zip(&high) {
+        match s.aisle {
+            Aisle::Cold => assert!(*v > 1.0, "{}: {v}", s.id),
+            Aisle::Hot => assert_eq!(*v, 0.0, "{}", s.id),
+        }
+    }
+}
+
+#[test]
+fn local_recirculation_reach_sets_which_sensors_and_servers_count() {
+    let hall = hall();
+    let layout = ParamLayout::new(&hall, &[]).unwrap();
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
+    let snaps = load_snapshots(&hall, &dir.join("snapshots.csv")).unwrap();
+    let whole = LocalRecirculationTerm::new(&hall, &layout);
+    let near = LocalRecirculationTerm::with_settings(
+        &hall,
+        &layout,
+        LocalRecirculationSettings::within(LOCAL_RADIUS_M),
+    )
+    .unwrap();
+    // The whole hall moves with every alpha, like the hall-wide terms, and takes their
+    // ridge; the 3 m form is local.
+    assert!(whole.hall_wide() && !near.hall_wide());
+    let n = hall.sensors.len();
+    let feature = |t: &LocalRecirculationTerm, alpha: f64| {
+        let mut out = vec![0.0; n];
+        t.features(
+            &snaps[0].state,
+            &vec![alpha; layout.space().dim()],
+            &mut out,
+        );
+        out
+    };
+    // The 3 m form gives hot-aisle sensors the term too.
+    let hot_near: Vec<f64> = hall
+        .sensors
+        .iter()
+        .zip(feature(&near, 0.4))
+        .filter(|(s, _)| s.aisle == Aisle::Hot)
+        .map(|(_, v)| v)
+        .collect();
+    assert!(hot_near.iter().any(|v| *v > 1.0), "{hot_near:?}");
+    // Against a direct computation on the demo hall (12 m long, so the 3 m reach leaves
+    // servers out): every server intake and tile, weighed by 1 / max(d, 0.5 m), gives
+    // each cold-aisle sensor rho_k, and the feature is (1 - 1 / rho_k) times the mean
+    // exhaust rise (rho_k is far above 1 here, where the softplus is the plain hinge).
+    let demo = kalibre_dc::synth::generate_hall(&kalibre_dc::synth::SynthOptions::new(
+        kalibre_dc::synth::Preset::Demo,
+        1,
+    ))
+    .unwrap();
+    let layout = ParamLayout::new(&demo, &[]).unwrap();
+    let state = kalibre_dc::snapshots::OperatingState {
+        label: "uniform".into(),
+        setpoint_c: vec![20.0; demo.cracs.len()],
+        fan_speed: vec![0.8; demo.cracs.len()],
+        power_w: (0..demo.server_count())
+            .map(|i| 200.0 + 10.0 * (i % 7) as f64)
+            .collect(),
+    };
+    let alpha = 1.5;
+    let params = vec![alpha; layout.space().dim()];
+    let mut got = vec![0.0; demo.sensors.len()];
+    LocalRecirculationTerm::new(&demo, &layout).features(&state, &params, &mut got);
+    let mut near_got = vec![0.0; demo.sensors.len()];
+    LocalRecirculationTerm::with_settings(
+        &demo,
+        &layout,
+        LocalRecirculationSettings::within(LOCAL_RADIUS_M),
+    )
+    .unwrap()
+    .features(&state, &params, &mut near_got);
+    let flow: Vec<f64> = state
+        .power_w
+        .iter()
+        .map(|p| alpha * p * 4.71947e-4)
+        .collect();
+    let q_srv: f64 = flow.iter().sum();
+    let q_sup: f64 = demo
+        .cracs
+        .iter()
+        .zip(&state.fan_speed)
+        .map(|(c, v)| v * c.rated_flow_m3_s)
+        .sum();
+    let rise = state.power_w.iter().sum::<f64>() / (1.2 * 1005.0 * q_srv);
+    let open: Vec<f64> = demo
+        .tiles
+        .iter()
+        .map(|t| t.size_m[0] * t.size_m[1] * t.open_fraction)
+        .collect();
+    let open_total: f64 = open.iter().sum();
+    let mut differs = false;
+    for (k, sensor) in demo.sensors.iter().enumerate() {
+        if sensor.aisle != Aisle::Cold {
+            assert_eq!(got[k], 0.0, "{}", sensor.id);
+            continue;
+        }
+        let w = |p: [f64; 3]| 1.0 / kalibre_dc::hall::distance(p, sensor.position_m).max(0.5);
+        let (mut draw, mut w_sum) = (0.0, 0.0);
+        for (srv, q) in demo.servers().zip(&flow) {
+            let wj = w(srv.intake_centre());
+            draw += wj * q;
+            w_sum += wj;
+        }
+        let (mut share, mut v_sum) = (0.0, 0.0);
+        for (t, o) in demo.tiles.iter().zip(&open) {
+            let centre = [
+                t.position_m[0] + 0.5 * t.size_m[0],
+                t.position_m[1] + 0.5 * t.size_m[1],
+                0.0,
+            ];
+            let vt = w(centre);
+            share += vt * o / open_total;
+            v_sum += vt;
+        }
+        let rho =
+            (draw / w_sum * flow.len() as f64) / (share / v_sum * demo.tiles.len() as f64 * q_sup);
+        assert!(rho > 2.6, "{}: rho {rho}", sensor.id);
+        let want = (1.0 - 1.0 / rho) * rise;
+        assert!(
+            (got[k] - want).abs() <= 1e-9 * want,
+            "{}: {} vs {want}",
+            sensor.id,
+            got[k]
+        );
+        differs |= (near_got[k] - got[k]).abs() > 1e-3;
+    }
+    assert!(differs, "the 3 m reach changes some cold-aisle sensor");
+    for bad in [0.0, -1.0, f64::NAN] {
+        let e = LocalRecirculationTerm::with_settings(
+            &hall,
+            &layout,
+            LocalRecirculationSettings {
+                radius_m: bad,
+                cold_aisle_only: true,
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("local_recirculation.radius_m"), "{e}");
+    }
 }
 
 /// Recirculation that no training run had, at a prediction that has it: the fitted graph

@@ -26,7 +26,7 @@ pub use adjacency::{Adjacency, AdjacencySettings, Csr};
 pub use effect_linear::EffectLinearTerm;
 pub use flow_balance::{FlowBalance, FlowBalanceTerm};
 pub use graph::{ThermalGraph, ThermalGraphSettings, HALL_WIDE_RIDGE};
-pub use local_flow::{LocalRecirculationTerm, LOCAL_RADIUS_M};
+pub use local_flow::{LocalRecirculationSettings, LocalRecirculationTerm, LOCAL_RADIUS_M};
 pub use objective::ThermalGraphObjective;
 pub use penalty::{
     PenaltyReport, PenaltySettings, RiseBound, RiseViolation, TemperatureRisePenalty, M3_S_PER_CFM,

@@ -168,8 +168,9 @@ pub struct CalibrateArgs {
     /// Leave out the surrogate's mass-balance terms (recirculation and bypass), as in the paper.
     #[arg(long = "paper-surrogate")]
     paper_surrogate: bool,
-    /// Add the surrogate's local recirculation term (draw of the servers near each sensor
-    /// against the supply openings near it).
+    /// Add the surrogate's local recirculation term to the cold-aisle sensors: the draw of
+    /// the hall's servers against its supply openings, each weighed by its reciprocal
+    /// distance to the sensor.
     #[arg(long = "local-recirculation")]
     local_recirculation: bool,
     /// The model: `builtin` (the built-in simulator), `openfoam` (a case generated from
@@ -273,7 +274,9 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         penalty,
         searcher: Hybrid::new(de, adam),
         flow_balance_terms: !args.paper_surrogate,
-        local_recirculation_term: args.local_recirculation,
+        local_recirculation: args
+            .local_recirculation
+            .then(kalibre_dc::surrogate::LocalRecirculationSettings::default),
         ..HallCalibrationSettings::default()
     };
     s.surrogate = s.surrogate.with_epochs(args.epochs);
