@@ -12,14 +12,16 @@
 //! midpoint, initial values) and 10 runs around the truth (each alpha times `exp(u)`, `u`
 //! uniform in [-0.5, 0.5], seed 7), every snapshot. Slopes are central differences (0.005 in the unit box) of the
 //! model and of the fitted surrogate, per snapshot and sensor, at the truth. Compared:
-//! the default training, and the training before session 6 (no ridge in Adam's loss, the
-//! mass-balance terms' weights ridged like the rest).
+//! the default training, the training before session 6 (no ridge in Adam's loss, the
+//! mass-balance terms' weights ridged like the rest), and the default with the local
+//! recirculation term (`LocalRecirculationSettings::default`, session 18).
 
 #[path = "experiments/mod.rs"]
 mod experiments;
 
 use kalibre::core::{Model, Sample, Surrogate, TrainingSet};
 use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::surrogate::LocalRecirculationSettings;
 use kalibre::dc::synth::Preset;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -137,11 +139,17 @@ fn main() {
     let hot = s.hot_sensors();
 
     let mut results = Vec::new();
-    for variant in ["default", "before session 6"] {
+    for variant in ["default", "before session 6", "local recirculation"] {
         let mut st = HallCalibrationSettings::default();
-        if variant != "default" {
-            st.surrogate.adam_ridge = false;
-            st.surrogate.hall_wide_ridge = st.surrogate.ridge;
+        match variant {
+            "before session 6" => {
+                st.surrogate.adam_ridge = false;
+                st.surrogate.hall_wide_ridge = st.surrogate.ridge;
+            }
+            "local recirculation" => {
+                st.local_recirculation = Some(LocalRecirculationSettings::default());
+            }
+            _ => {}
         }
         let mut g = experiments::kalibre_surrogate(&s, &st).expect("graph");
         g.fit(
