@@ -3,23 +3,27 @@
 
 use kalibre_dc::hall::Aisle;
 use kalibre_dc::hall::{AlphaMode, Hall};
-use kalibre_dc::snapshots::load_snapshots;
+use kalibre_dc::snapshots::{load_snapshots, HallSnapshot};
 use kalibre_dc::surrogate::{
     FlowBalance, FlowBalanceTerm, LocalRecirculationSettings, LocalRecirculationTerm,
     SurrogateTerm, LOCAL_RADIUS_M,
 };
 use kalibre_dc::ParamLayout;
 
+fn dev_dir() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean")
+}
+
 fn hall() -> Hall {
-    let dir =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
-    Hall::load(&dir.join("hall.json")).unwrap()
+    Hall::load(&dev_dir().join("hall.json")).unwrap()
+}
+
+fn snapshots(hall: &Hall) -> Vec<HallSnapshot> {
+    load_snapshots(hall, &dev_dir().join("snapshots.csv")).unwrap()
 }
 
 fn check(term: &dyn SurrogateTerm, hall: &Hall, params: &[f64]) {
-    let dir =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
-    let snaps = load_snapshots(hall, &dir.join("snapshots.csv")).unwrap();
+    let snaps = snapshots(hall);
     let n = hall.sensors.len();
     let cot: Vec<f64> = (0..n)
         .map(|k| ((k * 7 % 5) as f64 - 2.0) * 0.3 + 0.1)
@@ -91,9 +95,7 @@ fn mass_balance_terms_match_finite_differences() {
 fn local_recirculation_is_zero_when_supply_is_ample_and_grows_with_draw() {
     let hall = hall();
     let layout = ParamLayout::new(&hall, &[]).unwrap();
-    let dir =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
-    let snaps = load_snapshots(&hall, &dir.join("snapshots.csv")).unwrap();
+    let snaps = snapshots(&hall);
     let term = LocalRecirculationTerm::new(&hall, &layout);
     let n = hall.sensors.len();
     let feature = |alpha: f64| {
@@ -122,9 +124,7 @@ fn local_recirculation_is_zero_when_supply_is_ample_and_grows_with_draw() {
 fn local_recirculation_reach_sets_which_sensors_and_servers_count() {
     let hall = hall();
     let layout = ParamLayout::new(&hall, &[]).unwrap();
-    let dir =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
-    let snaps = load_snapshots(&hall, &dir.join("snapshots.csv")).unwrap();
+    let snaps = snapshots(&hall);
     let whole = LocalRecirculationTerm::new(&hall, &layout);
     let near = LocalRecirculationTerm::with_settings(
         &hall,
@@ -264,9 +264,7 @@ fn a_term_that_never_moved_in_training_does_not_blow_up_the_prediction() {
     use kalibre_dc::surrogate::{ThermalGraph, ThermalGraphSettings};
     let mut hall = hall();
     hall.calibrate.alpha = AlphaMode::PerType;
-    let dir =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/openfoam/of-dev-clean");
-    let snaps = load_snapshots(&hall, &dir.join("snapshots.csv")).unwrap();
+    let snaps = snapshots(&hall);
     let state = snaps[0].state.clone();
     let layout = ParamLayout::new(&hall, &[]).unwrap();
     let dim = layout.space().dim();

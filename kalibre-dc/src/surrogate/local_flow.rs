@@ -57,6 +57,7 @@ impl LocalRecirculationSettings {
         }
     }
 }
+
 const MIN_DISTANCE_M: f64 = 0.5;
 const SOFTPLUS_WIDTH: f64 = 0.05;
 
@@ -227,7 +228,8 @@ impl SurrogateTerm for LocalRecirculationTerm {
 
     /// With the whole hall in reach the feature moves with every alpha at once, as the
     /// hall-wide terms do, and takes their ridge: it then explains only what the local
-    /// blocks cannot (in the loop, a free weight lost 0.05 C on hall-b; session 18).
+    /// blocks cannot (session 18, 8 seeds: with the ordinary ridge the loop ended hall-b
+    /// at 0.334 C, with this one at 0.310 C; the default graph 0.265 C).
     fn hall_wide(&self) -> bool {
         self.whole_hall
     }
