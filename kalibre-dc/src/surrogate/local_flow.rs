@@ -12,8 +12,8 @@
 //! By default ([`LocalRecirculationSettings::default`]) every server and opening of the
 //! hall counts, weighed by `1 / d`, and only cold-aisle sensors take the term: the share
 //! of air a cold-aisle sensor sees recirculated, where the hall-wide term gives every
-//! sensor the hall's mean share. [`LocalRecirculationSettings::within`] is the first form
-//! (session 4): a 3 m radius and every sensor.
+//! sensor the hall's mean share. [`LocalRecirculationSettings::within`] gives the first form
+//! of the term: a 3 m radius and every sensor.
 
 use super::penalty::M3_S_PER_CFM;
 use super::term::{SurrogateTerm, TEMPERATURE_MIN_SCALE_K};
