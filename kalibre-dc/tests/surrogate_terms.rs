@@ -22,6 +22,19 @@ fn snapshots(hall: &Hall) -> Vec<HallSnapshot> {
     load_snapshots(hall, &dev_dir().join("snapshots.csv")).unwrap()
 }
 
+/// A term's features at `snap` with every alpha at `alpha`.
+fn uniform_features(
+    term: &dyn SurrogateTerm,
+    hall: &Hall,
+    layout: &ParamLayout,
+    snap: &HallSnapshot,
+    alpha: f64,
+) -> Vec<f64> {
+    let mut out = vec![0.0; hall.sensors.len()];
+    term.features(&snap.state, &vec![alpha; layout.space().dim()], &mut out);
+    out
+}
+
 fn check(term: &dyn SurrogateTerm, hall: &Hall, params: &[f64]) {
     let snaps = snapshots(hall);
     let n = hall.sensors.len();
@@ -97,21 +110,12 @@ fn local_recirculation_is_zero_when_supply_is_ample_and_grows_with_draw() {
     let layout = ParamLayout::new(&hall, &[]).unwrap();
     let snaps = snapshots(&hall);
     let term = LocalRecirculationTerm::new(&hall, &layout);
-    let n = hall.sensors.len();
-    let feature = |alpha: f64| {
-        let mut out = vec![0.0; n];
-        term.features(
-            &snaps[0].state,
-            &vec![alpha; layout.space().dim()],
-            &mut out,
-        );
-        out
-    };
+    let feature = |alpha: f64| uniform_features(&term, &hall, &layout, &snaps[0], alpha);
     let (low, high) = (feature(0.05), feature(0.4));
     assert!(low.iter().all(|v| *v < 0.05), "{low:?}");
     assert!(high.iter().zip(&low).all(|(h, l)| h >= l));
     // By default only cold-aisle sensors take the term, and each of them sees
-    // recirculation once the servers draw about 1.9 times the supply.
+    // recirculation at 0.4 cfm/W, where the servers draw nearly three times the supply.
     for (s, v) in hall.sensors.iter().zip(&high) {
         match s.aisle {
             Aisle::Cold => assert!(*v > 1.0, "{}: {v}", s.id),
@@ -135,15 +139,8 @@ fn local_recirculation_reach_sets_which_sensors_and_servers_count() {
     // The whole hall moves with every alpha, like the hall-wide terms, and takes their
     // ridge; the 3 m form is local.
     assert!(whole.hall_wide() && !near.hall_wide());
-    let n = hall.sensors.len();
     let feature = |t: &LocalRecirculationTerm, alpha: f64| {
-        let mut out = vec![0.0; n];
-        t.features(
-            &snaps[0].state,
-            &vec![alpha; layout.space().dim()],
-            &mut out,
-        );
-        out
+        uniform_features(t, &hall, &layout, &snaps[0], alpha)
     };
     // The 3 m form gives hot-aisle sensors the term too.
     let hot_near: Vec<f64> = hall
