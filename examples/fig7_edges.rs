@@ -129,19 +129,9 @@ fn score(
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let value = |flag: &str| {
-        args.iter()
-            .position(|a| a == flag)
-            .and_then(|i| args.get(i + 1))
-    };
-    let preset: Preset = value("--preset")
-        .map_or(Ok(Preset::HallA), |p| p.parse())
-        .unwrap_or_else(|e| {
-            eprintln!("--preset: {e}");
-            std::process::exit(2)
-        });
+    let preset = experiments::preset_flag(&args, Preset::HallA);
     let per_rack = args.iter().any(|a| a == "--per-rack");
-    let out = value("--out").map(std::path::PathBuf::from);
+    let out = experiments::flag_value(&args, "--out").map(std::path::PathBuf::from);
 
     let mode = per_rack.then_some(AlphaMode::PerServer);
     let s = experiments::setup_with_alpha(preset, false, mode).expect("the synthetic hall");

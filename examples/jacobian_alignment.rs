@@ -68,18 +68,8 @@ fn cosine(a: &[f64], b: &[f64]) -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let value = |flag: &str| {
-        args.iter()
-            .position(|a| a == flag)
-            .and_then(|i| args.get(i + 1))
-    };
-    let preset: Preset = value("--preset")
-        .map_or(Ok(Preset::HallB), |p| p.parse())
-        .unwrap_or_else(|e| {
-            eprintln!("jacobian_alignment: {e}");
-            std::process::exit(2)
-        });
-    let out = value("--out").map(std::path::PathBuf::from);
+    let preset = experiments::preset_flag(&args, Preset::HallB);
+    let out = experiments::flag_value(&args, "--out").map(std::path::PathBuf::from);
     let s = experiments::setup(preset, false).expect("synthetic hall");
     let layout = s.model.layout().clone();
     let space = layout.space();

@@ -278,6 +278,24 @@ impl Stats {
     }
 }
 
+/// The value after `flag` in `args`, when the flag is there (the analysis examples'
+/// `--flag VALUE` options).
+pub fn flag_value<'a>(args: &'a [String], flag: &str) -> Option<&'a str> {
+    let i = args.iter().position(|a| a == flag)?;
+    args.get(i + 1).map(String::as_str)
+}
+
+/// `--preset NAME` from `args`, or `default` without it; an unknown name exits with
+/// code 2 and a message naming the flag.
+pub fn preset_flag(args: &[String], default: Preset) -> Preset {
+    flag_value(args, "--preset")
+        .map_or(Ok(default), str::parse)
+        .unwrap_or_else(|e| {
+            eprintln!("--preset: {e}");
+            std::process::exit(2)
+        })
+}
+
 /// Resamples behind [`ratio_interval`].
 pub const BOOTSTRAP_RESAMPLES: usize = 10_000;
 const BOOTSTRAP_SEED: u64 = 2020;
