@@ -93,6 +93,100 @@ fn simulate_writes_predictions_and_vtk() {
     }
 }
 
+#[test]
+fn simulate_writes_each_servers_air_and_counts_warm_intakes() {
+    let dir = tmp("servers");
+    let hall = data("of-dev-clean/hall.json");
+    let snaps = data("of-dev-clean/snapshots.csv");
+    let (web, db, gpu) = (0.13, 0.17, 0.12);
+    let params = dir.join("params.json");
+    std::fs::write(
+        &params,
+        format!(r#"{{ "alpha/web": {web}, "alpha/db": {db}, "alpha/gpu": {gpu} }}"#),
+    )
+    .unwrap();
+    let table = dir.join("servers.csv");
+    let limit_c = 19.0;
+    let o = run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--params")
+        .arg(&params)
+        .arg("--out")
+        .arg(dir.join("pred.csv"))
+        .arg("--servers")
+        .arg(&table)
+        .arg(format!("--inlet-limit-c={limit_c}")));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(&table).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(
+        rows[0],
+        [
+            "snapshot",
+            "server",
+            "rack",
+            "type",
+            "power_w",
+            "flow_m3_s",
+            "intake_c",
+            "exhaust_c"
+        ]
+    );
+    assert_eq!(rows.len(), 1 + 3 * 20, "3 snapshots x 20 servers");
+    let num = |s: &str| -> f64 { s.parse().unwrap() };
+    let rho_cp = 1.2 * 1005.0;
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    let mut warm_in_all = 0;
+    for label in ["t0", "t1", "t2"] {
+        let mut warm = 0;
+        for r in rows[1..].iter().filter(|r| r[0] == label) {
+            let alpha = match r[3] {
+                "web" => web,
+                "db" => db,
+                "gpu" => gpu,
+                other => panic!("unexpected type {other}"),
+            };
+            let (power, flow, intake, exhaust) = (num(r[4]), num(r[5]), num(r[6]), num(r[7]));
+            // The flow is the hall's definition of alpha, and the exhaust carries the
+            // server's whole power: energy balance per server.
+            assert!(
+                (flow - alpha * power * 4.71947e-4).abs() < 1e-12 * flow.max(1.0),
+                "{r:?}"
+            );
+            let rise = power / (rho_cp * flow);
+            assert!((exhaust - intake - rise).abs() < 1e-9 * rise, "{r:?}");
+            // Intakes draw room air: at or above the coldest setpoint of the snapshot.
+            assert!((17.4..40.0).contains(&intake), "{r:?}");
+            warm += usize::from(intake > limit_c);
+        }
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(&format!("{label}: ")))
+            .unwrap_or_else(|| panic!("no inlet line for {label} in {stdout}"));
+        assert!(
+            line.contains(&format!("{warm} of 20 server intakes above {limit_c:.1} C")),
+            "{line}"
+        );
+        warm_in_all += warm;
+    }
+    assert!(
+        warm_in_all > 0,
+        "the limit should catch some intakes: {stdout}"
+    );
+    // A limit that is not a number is refused by name.
+    let o = run(kalibre()
+        .args(["simulate", "--inlet-limit-c=nan", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("pred.csv")));
+    assert_input_error(&o, "--inlet-limit-c");
+}
+
 /// `kalibre simulate` on a hall and snapshots, with optional parameters.
 fn simulate(hall: &Path, snaps: &Path, params: Option<&Path>, out: &Path) -> Output {
     let mut c = kalibre();

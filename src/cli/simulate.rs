@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use kalibre_core::{Model, ParamSpace};
+use kalibre_core::ParamSpace;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::sim::SimConfig;
 use kalibre_dc::snapshots;
@@ -34,6 +34,15 @@ pub struct SimulateArgs {
     /// Grid cell size of the built-in simulator (m).
     #[arg(long = "grid-m")]
     grid_m: Option<f64>,
+    /// Also write every server's predicted air per snapshot (CSV:
+    /// `snapshot,server,rack,type,power_w,flow_m3_s,intake_c,exhaust_c`): what the
+    /// calibrated model says where no sensor measures.
+    #[arg(long)]
+    servers: Option<PathBuf>,
+    /// Server intake temperature above which a server is counted as too warm (C); the
+    /// default is ASHRAE TC 9.9's recommended upper bound for classes A1-A4.
+    #[arg(long = "inlet-limit-c", default_value_t = kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)]
+    inlet_limit_c: f64,
 }
 
 /// Reads parameter values by name from a JSON object or a report's `best.params`.
@@ -103,28 +112,52 @@ pub fn run(args: SimulateArgs) -> CliResult {
         Some(p) => load_params(p, space)?,
         None => space.initial(),
     };
+    if !args.inlet_limit_c.is_finite() {
+        return Err(CliError::Input(format!(
+            "--inlet-limit-c: expected a finite temperature in C, got {}",
+            args.inlet_limit_c
+        )));
+    }
     let mut labels = Vec::with_capacity(snaps.len());
     let mut predicted = Vec::with_capacity(snaps.len());
+    let mut air = Vec::new();
+    let mut checks = Vec::with_capacity(snaps.len());
     for snap in &snaps {
         let state = &snap.state;
-        let values = match &args.vtk {
-            Some(dir) => {
-                let solution = model.solve(state, &params)?;
-                kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
-                solution.sensor_c().to_vec()
-            }
-            None => {
-                model
-                    .evaluate(state, &params)
-                    .map_err(|e| CliError::Run(format!("snapshot `{}`: {e}", state.label)))?
-                    .values
-            }
-        };
+        let failed =
+            |e: &dyn std::fmt::Display| CliError::Run(format!("snapshot `{}`: {e}", state.label));
+        let solution = model.solve(state, &params).map_err(|e| failed(&e))?;
+        if let Some(k) = solution.sensor_c().iter().position(|v| !v.is_finite()) {
+            return Err(failed(&format!(
+                "sensor `{}` came out as {}",
+                hall.sensors[k].id,
+                solution.sensor_c()[k]
+            )));
+        }
+        if let Some(dir) = &args.vtk {
+            kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
+        }
+        let servers = kalibre_dc::sim::server_air(&hall, state, &solution)?;
+        checks.push(kalibre_dc::sim::inlet_check(
+            &servers,
+            args.inlet_limit_c,
+            3,
+        )?);
+        if args.servers.is_some() {
+            air.extend(servers);
+        }
         labels.push(state.label.clone());
-        predicted.push(values);
+        predicted.push(solution.sensor_c().to_vec());
     }
     let csv = snapshots::write_predictions(&hall, &labels, &predicted);
     std::fs::write(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
+    if let Some(path) = &args.servers {
+        std::fs::write(path, kalibre_dc::sim::write_server_air(&air))
+            .map_err(|e| io_err(path, e))?;
+    }
+    for (label, check) in labels.iter().zip(&checks) {
+        println!("{}", inlet_line(label, check));
+    }
     println!(
         "wrote {} ({} snapshots x {} sensors){}",
         args.out.display(),
@@ -135,5 +168,30 @@ pub fn run(args: SimulateArgs) -> CliResult {
             .map(|d| format!(", VTK fields in {}", d.display()))
             .unwrap_or_default()
     );
+    if let Some(path) = &args.servers {
+        println!(
+            "wrote {} ({} snapshots x {} servers)",
+            path.display(),
+            labels.len(),
+            hall.servers().count()
+        );
+    }
     Ok(())
+}
+
+/// One snapshot's server intakes against the limit, e.g.
+/// `t0: 2 of 300 server intakes above 27.0 C; hottest A05-33 (rack A05) 28.4 C, ...`.
+fn inlet_line(label: &str, check: &kalibre_dc::sim::InletCheck) -> String {
+    let hottest: Vec<String> = check
+        .hottest
+        .iter()
+        .map(|s| format!("{} (rack {}) {:.1} C", s.server, s.rack, s.intake_c))
+        .collect();
+    format!(
+        "{label}: {} of {} server intakes above {:.1} C; hottest {}",
+        check.above_limit,
+        check.servers,
+        check.limit_c,
+        hottest.join(", ")
+    )
 }

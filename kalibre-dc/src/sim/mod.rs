@@ -26,6 +26,7 @@ mod dense;
 mod flow;
 mod grid;
 mod heat;
+mod inlets;
 mod linalg;
 mod mods;
 mod multigrid;
@@ -38,6 +39,9 @@ mod vtk;
 pub use advection::AdvectionStats;
 pub use config::{Advection, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
 pub use grid::Grid;
+pub use inlets::{
+    inlet_check, server_air, write_server_air, InletCheck, ServerAir, RECOMMENDED_MAX_INLET_C,
+};
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
 pub use solution::Solution;

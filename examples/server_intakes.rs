@@ -1,0 +1,247 @@
+//! What the calibrated model says where no sensor measures: every server's intake air,
+//! against OpenFOAM's own (`truth.json`'s `server_intake_c`), on the development datasets.
+//!
+//! ```sh
+//! cargo run --release --example server_intakes   # about 1 min; docs/results/server_intakes.json
+//! ```
+//!
+//! Options: `--out FILE` (JSON, default `docs/results/server_intakes.json`), `--data DIR`
+//! (default the workspace's `data/openfoam`).
+//!
+//! Per dataset (the stored data), the built-in model on its default grid predicts each
+//! server's intake (`kalibre simulate --servers`) at:
+//! - the hall's initial alphas (uncalibrated);
+//! - the alphas `kalibre calibrate` finds by default;
+//! - where the diagnosis names a significant effect: the hall with its suggested entry,
+//!   calibrated again under the Student-t likelihood, as `docs/diagnosis.md` advises;
+//! - the true alphas (the model's own floor: what its physics cannot do).
+//!
+//! Scores over servers and snapshots: MAE, bias (model - OpenFOAM), the largest error and
+//! where; per snapshot, the rank correlation of the intakes (does the model know which
+//! servers draw the warmest air?) and whether its warmest server is OpenFOAM's.
+
+use std::path::{Path, PathBuf};
+
+use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
+use kalibre::dc::effects::EffectRegistry;
+use kalibre::dc::hall::Hall;
+use kalibre::dc::sim::{server_air, SimConfig};
+use kalibre::dc::snapshots::HallSnapshot;
+use kalibre::dc::HallModel;
+use serde_json::{json, Value};
+
+#[path = "openfoam_cases/mod.rs"]
+mod openfoam_cases;
+use openfoam_cases::{calibrate_as_cli, write_json, Dataset, DATASETS};
+
+/// The model's intakes at `params`, per snapshot in hall server order, with the sensor MAE.
+fn predicted_intakes(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    params: &[f64],
+) -> Result<(Vec<Vec<f64>>, f64), String> {
+    let model = HallModel::new(hall, SimConfig::default()).map_err(|e| e.to_string())?;
+    let (mut intakes, mut err, mut count) = (Vec::new(), 0.0, 0usize);
+    for snap in snaps {
+        let sol = model
+            .solve(&snap.state, params)
+            .map_err(|e| e.to_string())?;
+        for (p, m) in sol.sensor_c().iter().zip(&snap.sensor_c) {
+            if let Some(m) = m {
+                err += (p - m).abs();
+                count += 1;
+            }
+        }
+        let air = server_air(hall, &snap.state, &sol).map_err(|e| e.to_string())?;
+        intakes.push(air.iter().map(|s| s.intake_c).collect());
+    }
+    Ok((intakes, err / count.max(1) as f64))
+}
+
+/// OpenFOAM's intakes per snapshot, hall server order.
+fn true_intakes(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    truth: &Value,
+) -> Result<Vec<Vec<f64>>, String> {
+    snaps
+        .iter()
+        .map(|snap| {
+            let label = &snap.state.label;
+            hall.servers()
+                .map(|s| {
+                    truth["snapshots"][label]["server_intake_c"][&s.server.id]
+                        .as_f64()
+                        .ok_or_else(|| {
+                            format!(
+                                "truth.json: /snapshots/{label}/server_intake_c/{}: missing",
+                                s.server.id
+                            )
+                        })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Ranks (0 = lowest), ties broken by order: enough for distinct CFD temperatures.
+fn ranks(v: &[f64]) -> Vec<f64> {
+    let mut idx: Vec<usize> = (0..v.len()).collect();
+    idx.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
+    let mut r = vec![0.0; v.len()];
+    for (rank, &i) in idx.iter().enumerate() {
+        r[i] = rank as f64;
+    }
+    r
+}
+
+/// Spearman's rank correlation.
+fn spearman(a: &[f64], b: &[f64]) -> f64 {
+    let (ra, rb) = (ranks(a), ranks(b));
+    let n = a.len() as f64;
+    let mean = (n - 1.0) / 2.0;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in ra.iter().zip(&rb) {
+        sab += (x - mean) * (y - mean);
+        saa += (x - mean) * (x - mean);
+        sbb += (y - mean) * (y - mean);
+    }
+    sab / (saa * sbb).sqrt()
+}
+
+fn argmax(v: &[f64]) -> usize {
+    (0..v.len()).fold(0, |best, i| if v[i] > v[best] { i } else { best })
+}
+
+/// Scores of predicted against true intakes.
+fn score(hall: &Hall, snaps: &[HallSnapshot], pred: &[Vec<f64>], truth: &[Vec<f64>]) -> Value {
+    let ids: Vec<&str> = hall.servers().map(|s| s.server.id.as_str()).collect();
+    let (mut abs, mut bias, mut n) = (0.0, 0.0, 0usize);
+    let mut worst = (0.0_f64, String::new());
+    let (mut rho, mut same_warmest) = (0.0, 0usize);
+    let mut warmest = Vec::new();
+    for (s, (p, t)) in pred.iter().zip(truth).enumerate() {
+        for (i, (p, t)) in p.iter().zip(t).enumerate() {
+            let e = p - t;
+            abs += e.abs();
+            bias += e;
+            n += 1;
+            if e.abs() > worst.0.abs() {
+                worst = (e, format!("{} in {}", ids[i], snaps[s].state.label));
+            }
+        }
+        rho += spearman(p, t);
+        let (wp, wt) = (argmax(p), argmax(t));
+        same_warmest += usize::from(wp == wt);
+        warmest.push(json!({
+            "snapshot": snaps[s].state.label, "model": ids[wp], "openfoam": ids[wt],
+            "openfoam_c": t[wt], "model_there_c": p[wt],
+        }));
+    }
+    json!({
+        "mae_c": abs / n as f64, "bias_c": bias / n as f64,
+        "worst_c": worst.0, "worst_at": worst.1,
+        "rank_correlation": rho / pred.len() as f64,
+        "same_warmest_server": same_warmest, "snapshots": pred.len(), "warmest": warmest,
+    })
+}
+
+fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
+    let registry = EffectRegistry::builtin();
+    let mut rows = Vec::new();
+    println!("| dataset | model | sensor MAE C | intake MAE C | bias C | worst C (where) | rank correlation | same warmest server |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (dataset, _) in DATASETS {
+        let data = Dataset::load(&data_dir.join(dataset))?;
+        let (hall, snaps) = (&data.hall, &data.snaps);
+        let truth = true_intakes(hall, snaps, &data.truth)?;
+        let work = std::env::temp_dir().join(format!("kalibre-server-intakes-{dataset}"));
+        let mut stages: Vec<(String, Hall, Vec<f64>)> = Vec::new();
+        let space = HallModel::new(hall, SimConfig::default())
+            .map_err(|e| e.to_string())?
+            .layout()
+            .space()
+            .clone();
+        stages.push(("uncalibrated".into(), hall.clone(), space.initial()));
+        let (cal, _) = calibrate_as_cli(hall, snaps, &work.join("cal"))?;
+        let best = cal.report.best.params.values();
+        stages.push(("calibrated".into(), hall.clone(), best.clone()));
+        let d = diagnose_hall(
+            hall,
+            snaps,
+            &best,
+            &registry,
+            &HallDiagnosisSettings::default(),
+        )
+        .map_err(|e| e.to_string())?;
+        if let Some(i) = d.diagnosis.hypotheses.iter().position(|h| h.significant) {
+            let mut next = hall.clone();
+            next.effects.push(d.suggestions[i].clone());
+            let mut settings = HallCalibrationSettings::default();
+            settings.core.robust_nu = Some(4.0);
+            let cal =
+                kalibre::dc::calibration::calibrate_hall(&next, snaps, &settings, None, Vec::new())
+                    .map_err(|e| e.to_string())?;
+            let name = format!("with {} (Student-t)", d.diagnosis.hypotheses[i].name);
+            stages.push((name, next, cal.report.best.params.values()));
+        }
+        let mut at_truth = space.initial();
+        for (i, name) in space.names().iter().enumerate() {
+            if let Some(v) = name
+                .strip_prefix("alpha/")
+                .and_then(|t| data.truth["alpha_true_cfm_per_w"][t].as_f64())
+            {
+                at_truth[i] = v;
+            }
+        }
+        stages.push(("true alphas".into(), hall.clone(), at_truth));
+        for (name, h, params) in &stages {
+            let (pred, sensor_mae) = predicted_intakes(h, snaps, params)?;
+            let mut s = score(h, snaps, &pred, &truth);
+            println!(
+                "| {dataset} | {name} | {sensor_mae:.3} | {:.3} | {:+.3} | {:+.2} ({}) | {:.2} | {} of {} |",
+                s["mae_c"].as_f64().unwrap_or(f64::NAN),
+                s["bias_c"].as_f64().unwrap_or(f64::NAN),
+                s["worst_c"].as_f64().unwrap_or(f64::NAN),
+                s["worst_at"].as_str().unwrap_or(""),
+                s["rank_correlation"].as_f64().unwrap_or(f64::NAN),
+                s["same_warmest_server"],
+                s["snapshots"],
+            );
+            s["dataset"] = json!(dataset);
+            s["model"] = json!(name);
+            s["sensor_mae_c"] = json!(sensor_mae);
+            s["params"] = json!(params);
+            rows.push(s);
+        }
+    }
+    write_json(
+        out,
+        &json!({ "experiment": "server_intakes", "rows": rows }),
+    )?;
+    println!("\nwrote {}", out.display());
+    Ok(())
+}
+
+fn main() {
+    let mut out = PathBuf::from("docs/results/server_intakes.json");
+    let mut data = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/openfoam"));
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    for pair in args.chunks(2) {
+        match (pair[0].as_str(), pair.get(1)) {
+            ("--out", Some(v)) => out = PathBuf::from(v),
+            ("--data", Some(v)) => data = PathBuf::from(v),
+            (flag, _) => {
+                eprintln!(
+                    "unknown argument or missing value `{flag}` (use --out FILE, --data DIR)"
+                );
+                std::process::exit(2)
+            }
+        }
+    }
+    if let Err(e) = run(&out, &data) {
+        eprintln!("server_intakes: {e}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,201 @@
+//! What a calibrated model is for: each server's predicted intake and exhaust air under
+//! one operating state, where no sensor measures it, and how many intakes exceed a
+//! recommended limit.
+//!
+//! A sensor reads the air at one point; the servers' own intakes are what equipment
+//! guidelines bound. ASHRAE TC 9.9 recommends 18-27 C at the server inlet for classes
+//! A1-A4, so 27 C is the default limit of [`inlet_check`].
+
+use std::fmt::Write;
+
+use super::Solution;
+use crate::hall::Hall;
+use crate::snapshots::OperatingState;
+use crate::{Error, Result};
+
+/// ASHRAE TC 9.9's recommended upper bound of server inlet air, classes A1-A4 (C).
+pub const RECOMMENDED_MAX_INLET_C: f64 = 27.0;
+
+/// One server's air under one solved operating state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServerAir {
+    /// The operating state's label.
+    pub snapshot: String,
+    /// Server id.
+    pub server: String,
+    /// Id of its rack.
+    pub rack: String,
+    /// Its server type.
+    pub server_type: String,
+    /// Power (W).
+    pub power_w: f64,
+    /// Air flow (m3/s).
+    pub flow_m3_s: f64,
+    /// Flow-weighted mean temperature of the air it draws (C).
+    pub intake_c: f64,
+    /// Temperature of the air it blows out (C).
+    pub exhaust_c: f64,
+}
+
+/// Every server's air in `solution`, hall order. The solution must be of `hall` at `state`.
+///
+/// ```
+/// use kalibre_dc::sim::{server_air, SimConfig, Simulator};
+/// use kalibre_dc::synth::{generate, Preset, SynthOptions};
+///
+/// let truth = generate(&SynthOptions::new(Preset::Demo, 1)).unwrap();
+/// let hall = &truth.hall;
+/// let sim = Simulator::new(hall, SimConfig::default().with_cell_m(0.4)).unwrap();
+/// let state = &truth.snapshots[0].state;
+/// let alpha = vec![0.12; state.power_w.len()];
+/// let solution = sim.solve(state, &alpha, &[]).unwrap();
+/// let air = server_air(hall, state, &solution).unwrap();
+/// assert_eq!(air.len(), hall.servers().count());
+/// assert!(air.iter().all(|s| s.exhaust_c >= s.intake_c));
+/// ```
+pub fn server_air(
+    hall: &Hall,
+    state: &OperatingState,
+    solution: &Solution,
+) -> Result<Vec<ServerAir>> {
+    let n = hall.servers().count();
+    let lengths = [
+        state.power_w.len(),
+        solution.server_flow_m3_s.len(),
+        solution.server_intake_c.len(),
+        solution.server_exhaust_c.len(),
+    ];
+    if lengths.iter().any(|&l| l != n) {
+        return Err(Error::Mismatch(format!(
+            "server air of snapshot `{}`: the hall has {n} servers, but the state has {} \
+             powers and the solution {} flows",
+            state.label, lengths[0], lengths[1]
+        )));
+    }
+    Ok(hall
+        .servers()
+        .map(|s| {
+            let i = s.index;
+            ServerAir {
+                snapshot: state.label.clone(),
+                server: s.server.id.clone(),
+                rack: s.rack.id.clone(),
+                server_type: s.server.server_type.clone(),
+                power_w: state.power_w[i],
+                flow_m3_s: solution.server_flow_m3_s[i],
+                intake_c: solution.server_intake_c[i],
+                exhaust_c: solution.server_exhaust_c[i],
+            }
+        })
+        .collect())
+}
+
+/// The rows as CSV: `snapshot,server,rack,type,power_w,flow_m3_s,intake_c,exhaust_c`.
+pub fn write_server_air(rows: &[ServerAir]) -> String {
+    let mut out = String::from("snapshot,server,rack,type,power_w,flow_m3_s,intake_c,exhaust_c\n");
+    for r in rows {
+        // Writing to a String cannot fail.
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{}",
+            csv_field(&r.snapshot),
+            csv_field(&r.server),
+            csv_field(&r.rack),
+            csv_field(&r.server_type),
+            r.power_w,
+            r.flow_m3_s,
+            r.intake_c,
+            r.exhaust_c
+        );
+    }
+    out
+}
+
+/// Quotes a field when CSV needs it.
+fn csv_field(field: &str) -> std::borrow::Cow<'_, str> {
+    if field.contains([',', '"', '\n', '\r']) || field.trim() != field {
+        format!("\"{}\"", field.replace('"', "\"\"")).into()
+    } else {
+        field.into()
+    }
+}
+
+/// Server intakes of one snapshot against a limit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InletCheck {
+    /// The limit (C).
+    pub limit_c: f64,
+    /// Servers checked.
+    pub servers: usize,
+    /// Servers drawing air above the limit.
+    pub above_limit: usize,
+    /// The hottest intakes, hottest first.
+    pub hottest: Vec<ServerAir>,
+}
+
+/// Counts the intakes of `rows` (one snapshot) above `limit_c` and keeps the `top`
+/// hottest. A limit that is not finite is an error.
+pub fn inlet_check(rows: &[ServerAir], limit_c: f64, top: usize) -> Result<InletCheck> {
+    if !limit_c.is_finite() {
+        return Err(Error::Mismatch(format!(
+            "inlet limit: expected a finite temperature in C, got {limit_c}"
+        )));
+    }
+    let mut sorted: Vec<&ServerAir> = rows.iter().collect();
+    // Ties keep hall order, so the listing is deterministic.
+    sorted.sort_by(|a, b| b.intake_c.total_cmp(&a.intake_c));
+    Ok(InletCheck {
+        limit_c,
+        servers: rows.len(),
+        above_limit: rows.iter().filter(|r| r.intake_c > limit_c).count(),
+        hottest: sorted.into_iter().take(top).cloned().collect(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn air(server: &str, intake_c: f64) -> ServerAir {
+        ServerAir {
+            snapshot: "t0".into(),
+            server: server.into(),
+            rack: "A1".into(),
+            server_type: "web".into(),
+            power_w: 300.0,
+            flow_m3_s: 0.02,
+            intake_c,
+            exhaust_c: intake_c + 12.0,
+        }
+    }
+
+    #[test]
+    fn check_counts_strictly_above_and_lists_hottest_first() {
+        let rows = [
+            air("a", 25.0),
+            air("b", 27.0),
+            air("c", 29.5),
+            air("d", 27.5),
+        ];
+        let c = inlet_check(&rows, 27.0, 2).unwrap();
+        assert_eq!((c.servers, c.above_limit), (4, 2));
+        let names: Vec<&str> = c.hottest.iter().map(|s| s.server.as_str()).collect();
+        assert_eq!(names, ["c", "d"]);
+        assert!(inlet_check(&rows, f64::NAN, 2).is_err());
+        assert_eq!(inlet_check(&[], 27.0, 5).unwrap().hottest.len(), 0);
+    }
+
+    #[test]
+    fn csv_has_a_header_and_quotes_what_needs_it() {
+        let mut odd = air("x,1", 20.0);
+        odd.rack = "rack \"B\"".into();
+        let csv = write_server_air(&[air("a", 21.5), odd]);
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(
+            lines[0],
+            "snapshot,server,rack,type,power_w,flow_m3_s,intake_c,exhaust_c"
+        );
+        assert_eq!(lines[1], "t0,a,A1,web,300,0.02,21.5,33.5");
+        assert_eq!(lines[2], "t0,\"x,1\",\"rack \"\"B\"\"\",web,300,0.02,20,32");
+    }
+}
