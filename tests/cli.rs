@@ -502,6 +502,75 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
     assert_input_error(&o, "--np is an OpenFOAM option: add --model openfoam");
 }
 
+/// `report.json` records the model the calibration ran (its grid and alpha mode), and
+/// `diagnose` and `simulate --params report.json` run that model without being told again.
+#[test]
+fn diagnose_and_simulate_run_the_model_the_calibration_recorded() {
+    let dir = tmp("recorded");
+    let cal = dir.join("cal");
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args(["--iterations", "1", "--polish", "0", "--grid-m", "0.25"])
+        .args(["--alpha", "per-server", "--out"])
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report_path = cal.join("report.json");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    assert_eq!(
+        report["model"],
+        serde_json::json!({ "kind": "builtin", "grid_m": 0.25, "alpha": "per_server" })
+    );
+    // Without --grid-m or --alpha: the calibration's grid and per-server parameters.
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .arg("--json")
+        .arg("--calibration")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let pred = dir.join("pred.csv");
+    let o = run(on_dataset("simulate", "of-dev-clean")
+        .arg("--params")
+        .arg(&report_path)
+        .arg("--out")
+        .arg(&pred));
+    assert!(o.status.success(), "{}", stderr(&o));
+    // The predictions are the calibration's best run: same model, same parameters.
+    let csv = std::fs::read_to_string(&pred).unwrap();
+    let residuals = report["residuals"].as_array().unwrap();
+    assert_eq!(residuals.len(), 3 * 24);
+    for r in residuals {
+        let row = format!(
+            "{},sensor_c,{},",
+            r["snapshot"].as_str().unwrap(),
+            r["sensor"].as_str().unwrap()
+        );
+        let line = csv.lines().find(|l| l.starts_with(&row)).unwrap();
+        let v: f64 = line.rsplit(',').next().unwrap().parse().unwrap();
+        let p = r["predicted_c"].as_f64().unwrap();
+        assert!((v - p).abs() < 1e-9, "{row}: {v} against {p}");
+    }
+    // A grid given again wins, and then it is another model than the one calibrated.
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--grid-m", "0.2", "--calibration"])
+        .arg(&cal));
+    assert_input_error(&o, "runs of another model");
+    // A built-in calibration is not diagnosed with OpenFOAM, before anything runs.
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--model", "openfoam", "--calibration"])
+        .arg(&cal));
+    assert_input_error(
+        &o,
+        "the calibration ran the builtin model; diagnose it with --model builtin",
+    );
+    // A record that does not parse is named.
+    let mut bad = report.clone();
+    bad["model"]["kind"] = serde_json::json!(7);
+    std::fs::write(&report_path, serde_json::to_string(&bad).unwrap()).unwrap();
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "report.json: /model: not a kalibre model record");
+}
+
 /// `kalibre diagnose --write-hall` writes the hall with the top significant suggestion
 /// added and warm-started at the calibrated values, which `kalibre calibrate` takes as it
 /// is; with nothing significant it writes nothing and says so.

@@ -19,6 +19,7 @@ use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
 
+use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::simulate::sim_config;
 use super::{with_threads, CliError, CliResult};
@@ -38,15 +39,17 @@ pub struct DiagnoseArgs {
     /// Print the diagnosis as JSON (`kalibre.diagnosis/1`) instead of text.
     #[arg(long)]
     json: bool,
-    /// Grid cell size (m) of the model that supplies the Jacobians; use the calibration's.
+    /// Grid cell size (m) of the model that supplies the Jacobians (default: the one the
+    /// calibration recorded in `report.json`, else the built-in default).
     #[arg(long = "grid-m")]
     grid_m: Option<f64>,
-    /// What solves the calibrated model and each candidate effect: `builtin` (the
-    /// built-in simulator, seconds, whatever model was calibrated) or `openfoam` (the
+    /// What solves the calibrated model and each candidate effect; it must be the model
+    /// the calibration ran: `builtin` (the built-in simulator, seconds) or `openfoam` (the
     /// calibration's OpenFOAM model: one solve per snapshot for the base, each calibrated
     /// parameter and each candidate it can represent: `crac_supply_offset`, `bypass` and
-    /// `rack_recirculation`; finished solves are kept in CALIBRATION/openfoam and reused;
-    /// use the calibration's --grid-m and OpenFOAM options).
+    /// `rack_recirculation`; finished solves are kept in CALIBRATION/openfoam and reused).
+    /// The grid, alpha mode and OpenFOAM options default to the ones the calibration
+    /// recorded.
     #[arg(long, value_enum, default_value_t = DiagnoseModel::Builtin)]
     model: DiagnoseModel,
     #[command(flatten)]
@@ -129,7 +132,36 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             report_path.display()
         ))
     })?;
-    let sim = sim_config(args.grid_m)?;
+    // The model the calibration ran, as it recorded it: its grid, alpha mode and
+    // OpenFOAM options stand unless given again here.
+    let recorded = CalibratedModel::of_report(&report_path, report.model.as_ref())?;
+    let chosen = match args.model {
+        DiagnoseModel::Builtin => "builtin",
+        DiagnoseModel::Openfoam => "openfoam",
+    };
+    if let Some(m) = recorded.as_ref().filter(|m| m.kind != chosen) {
+        return Err(CliError::Input(format!(
+            "{}: runs of another model than --model {chosen}: the calibration ran the {} model{}",
+            report_path.display(),
+            m.kind,
+            match m.kind.as_str() {
+                "openfoam" => "; diagnose it with --model openfoam",
+                "builtin" => "; diagnose it with --model builtin",
+                _ => ", which the diagnosis cannot solve; calibrate the hall with --model builtin or openfoam to diagnose it",
+            }
+        )));
+    }
+    let hall = match &recorded {
+        Some(m) => m.calibrated_hall(&hall),
+        None => hall,
+    };
+    let grid_m = grid_or_recorded(args.grid_m, recorded.as_ref());
+    let mut of_args = args.openfoam.clone();
+    if let Some(m) = &recorded {
+        of_args.of_iterations = of_args.of_iterations.or(m.of_iterations);
+        of_args.np = of_args.np.or(m.np);
+    }
+    let sim = sim_config(grid_m)?;
     let model = HallModel::new(&hall, sim.clone())?;
     // The solver, and the fingerprint of the model the calibration must have run.
     let (solver, fp): (Box<dyn EffectSolver>, String) = match args.model {
@@ -138,9 +170,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             model.fingerprint(),
         ),
         DiagnoseModel::Openfoam => {
-            let of = args
-                .openfoam
-                .settings(&args.calibration.join("openfoam"), args.grid_m)?;
+            let of = of_args.settings(&args.calibration.join("openfoam"), grid_m)?;
             let fp = OpenFoamModel::new(&hall, of.clone())
                 .map_err(of_err)?
                 .fingerprint();

@@ -1,6 +1,7 @@
 //! Subcommands of the `kalibre` tool.
 
 mod calibrate;
+mod calibrated_model;
 mod demo;
 mod diagnose;
 mod error;

@@ -9,7 +9,7 @@ use kalibre_dc::openfoam::{OpenFoamError, OpenFoamSettings};
 use super::{CliError, CliResult};
 
 /// OpenFOAM options (with `--model openfoam`).
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct OpenFoamArgs {
     /// OpenFOAM: processes per solve; 1 runs serially, more runs decomposePar then
     /// `mpirun -np N` (then run fewer solves at once so they do not compete for cores:

@@ -9,6 +9,7 @@ use kalibre_dc::sim::SimConfig;
 use kalibre_dc::snapshots;
 use kalibre_dc::HallModel;
 
+use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::{io_err, CliError, CliResult};
 
 /// Options of `kalibre simulate`.
@@ -21,7 +22,8 @@ pub struct SimulateArgs {
     #[arg(long)]
     snapshots: PathBuf,
     /// Parameter values: a JSON object `{ "alpha/<type>": 0.12, ... }`, or a calibration's
-    /// `report.json` (its best parameters). Parameters not given keep the hall's initial values.
+    /// `report.json` (its best parameters, and the alpha mode and grid it ran with).
+    /// Parameters not given keep the hall's initial values.
     #[arg(long)]
     params: Option<PathBuf>,
     /// Where to write the predicted sensor readings (snapshot CSV format, kind `sensor_c`).
@@ -31,7 +33,8 @@ pub struct SimulateArgs {
     /// into this directory, for ParaView.
     #[arg(long)]
     vtk: Option<PathBuf>,
-    /// Grid cell size of the built-in simulator (m).
+    /// Grid cell size of the built-in simulator (m); default: the grid a built-in
+    /// calibration recorded in the `--params` report, else 0.2.
     #[arg(long = "grid-m")]
     grid_m: Option<f64>,
     /// Also write every server's predicted air per snapshot (CSV:
@@ -45,16 +48,29 @@ pub struct SimulateArgs {
     inlet_limit_c: f64,
 }
 
-/// Reads parameter values by name from a JSON object or a report's `best.params`.
-pub fn load_params(path: &Path, space: &ParamSpace) -> CliResult<Vec<f64>> {
+/// Reads a `--params` file: a JSON object, or a calibration's `report.json` with the model
+/// it recorded (if any).
+fn read_params_file(path: &Path) -> CliResult<(serde_json::Value, Option<CalibratedModel>)> {
     let file = path.display().to_string();
     let text =
         std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
     let json: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| CliError::Input(format!("{file}: not valid JSON: {e}")))?;
+    // Only a report (one with `best`) records a model; a plain object is all parameters.
+    let recorded = match json.get("best") {
+        Some(_) => CalibratedModel::of_report(path, json.get("model"))?,
+        None => None,
+    };
+    Ok((json, recorded))
+}
+
+/// Parameter values by name from a JSON object or a report's `best.params` (`json`, read
+/// from `path`).
+fn load_params(path: &Path, json: &serde_json::Value, space: &ParamSpace) -> CliResult<Vec<f64>> {
+    let file = path.display().to_string();
     let (map, pointer) = match json.get("best").and_then(|b| b.get("params")) {
         Some(p) => (p, "/best/params"),
-        None => (&json, ""),
+        None => (json, ""),
     };
     let map = map.as_object().ok_or_else(|| {
         CliError::Input(format!(
@@ -106,11 +122,29 @@ pub fn run(args: SimulateArgs) -> CliResult {
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
-    let model = HallModel::new(&hall, sim_config(args.grid_m)?)?;
+    let file = args.params.as_deref().map(read_params_file).transpose()?;
+    let recorded = file.as_ref().and_then(|(_, m)| m.as_ref());
+    // A calibration's report brings the model it ran: its alpha mode and grid stand
+    // unless --grid-m is given.
+    if let Some(m) = recorded.filter(|m| m.kind != "builtin") {
+        eprintln!(
+            "note: the calibration ran the {} model; simulate runs the built-in simulator at its parameters",
+            m.kind
+        );
+    }
+    let hall = match recorded {
+        Some(m) => m.calibrated_hall(&hall),
+        None => hall,
+    };
+    let grid_m = match recorded.filter(|m| m.kind == "builtin") {
+        Some(m) => grid_or_recorded(args.grid_m, Some(m)),
+        None => args.grid_m,
+    };
+    let model = HallModel::new(&hall, sim_config(grid_m)?)?;
     let space = model.layout().space();
-    let params = match &args.params {
-        Some(p) => load_params(p, space)?,
-        None => space.initial(),
+    let params = match (&args.params, &file) {
+        (Some(p), Some((json, _))) => load_params(p, json, space)?,
+        _ => space.initial(),
     };
     if !args.inlet_limit_c.is_finite() {
         return Err(CliError::Input(format!(

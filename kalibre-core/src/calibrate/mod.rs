@@ -585,6 +585,7 @@ where
             runs: state.counts,
             journal: store.path().map(|_| store.load_report().clone()),
             wall_s: t_start.elapsed().as_secs_f64(),
+            model: None,
         })
     }
 }

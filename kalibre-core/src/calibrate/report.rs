@@ -337,4 +337,10 @@ pub struct Report {
     pub journal: Option<LoadReport>,
     /// Wall time of the whole calibration, seconds.
     pub wall_s: f64,
+    /// How the calibrated model was set up, as its domain describes it (e.g. the CLI's
+    /// `{ "kind": "builtin", "grid_m": 0.2, "alpha": "per_type" }`), so that a later
+    /// command can run the same model. The loop itself leaves it empty. Missing in
+    /// older reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<serde_json::Value>,
 }

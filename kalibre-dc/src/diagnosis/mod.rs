@@ -1,6 +1,6 @@
 //! Where a calibrated hall model fails and which physical effect is missing: a solver
-//! supplies the Jacobians (by default the built-in simulator, cheap whatever model was
-//! calibrated; or the calibrated model itself, see [`EffectSolver`]), each effect kind
+//! supplies the Jacobians (the built-in simulator, cheap, at the calibrated parameters; or
+//! the calibrated model itself, see [`EffectSolver`]), each effect kind
 //! supplies its candidate placements, and `kalibre_core::diagnose` ranks them.
 
 mod solver;

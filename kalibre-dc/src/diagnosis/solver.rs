@@ -1,6 +1,7 @@
-//! What runs the diagnosis's solves: the built-in simulator (cheap, whatever model was
-//! calibrated) or the calibrated model itself when it can represent the candidate effects
-//! (OpenFOAM: [`crate::openfoam::OpenFoamEffectSolver`]).
+//! What runs the diagnosis's solves: the built-in simulator (cheap) or the calibrated
+//! model itself when it can represent the candidate effects (OpenFOAM:
+//! [`crate::openfoam::OpenFoamEffectSolver`]). Its residuals are the solver's own at the
+//! calibrated parameters, so it should be the model that was calibrated.
 
 use crate::effects::Effect;
 use crate::sim::{SimConfig, Simulator};

@@ -20,6 +20,7 @@ use kalibre_dc::openfoam::OpenFoamModel;
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
 
+use super::calibrated_model::CalibratedModel;
 use super::diagnose::Likelihood;
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::simulate::sim_config;
@@ -370,6 +371,43 @@ fn calibrate_with_model<'o>(
     }
 }
 
+/// What `report.json` records of the model, for `diagnose` and `simulate` to repeat.
+fn model_record(
+    args: &CalibrateArgs,
+    hall: &Hall,
+    settings: &HallCalibrationSettings,
+) -> CliResult<CalibratedModel> {
+    let alpha = settings.alpha_mode.unwrap_or(hall.calibrate.alpha);
+    Ok(match args.model {
+        ModelArg::Builtin => CalibratedModel {
+            kind: "builtin".into(),
+            grid_m: Some(settings.sim.cell_m),
+            alpha,
+            of_iterations: None,
+            np: None,
+        },
+        ModelArg::Openfoam => {
+            let of = args
+                .openfoam
+                .settings(&args.out.join("openfoam"), args.grid_m)?;
+            CalibratedModel {
+                kind: "openfoam".into(),
+                grid_m: Some(of.grid_m),
+                alpha,
+                of_iterations: Some(of.iterations),
+                np: Some(of.np),
+            }
+        }
+        ModelArg::Command => CalibratedModel {
+            kind: "command".into(),
+            grid_m: None,
+            alpha,
+            of_iterations: None,
+            np: None,
+        },
+    })
+}
+
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     let settings = settings(&args)?;
@@ -409,6 +447,8 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         )
     })??;
     let wall_s = started.elapsed().as_secs_f64();
+    let mut report = report;
+    report.model = Some(model_record(&args, &hall, &settings)?.to_json());
     let report_path = args.out.join("report.json");
     let json = serde_json::to_string_pretty(&report)
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;
