@@ -49,6 +49,23 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
         "the error did not fall: {first:.3} -> {last:.3} C"
     );
     assert_eq!(story["outcome"], "improved");
+    // Where no sensor measures: the servers' intakes against the truth's. The alpha-only
+    // model misses the recirculating rack's intakes by degrees; with the effect it does
+    // not, and the intakes' error falls as the sensors' does.
+    let intakes = |k: usize| &steps[k]["intakes"];
+    let (before, after) = (
+        intakes(0)["mae_c"].as_f64().unwrap(),
+        intakes(1)["mae_c"].as_f64().unwrap(),
+    );
+    assert!(after < 0.5 * before, "intakes: {before:.3} -> {after:.3} C");
+    let worst = intakes(0)["worst_server"].as_str().unwrap();
+    assert!(worst.starts_with("A05-"), "worst intake before: {worst}");
+    let (w0, w1) = (
+        intakes(0)["worst_error_c"].as_f64().unwrap().abs(),
+        intakes(1)["worst_error_c"].as_f64().unwrap().abs(),
+    );
+    assert!(w1 < 0.5 * w0, "worst intake error: {w0:.2} -> {w1:.2} C");
+    assert!(stdout.contains("where no sensor measures"), "{stdout}");
     // The hall to continue from carries the entry.
     let hall: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("hall-with-effect.json")).unwrap())

@@ -10,6 +10,7 @@
 //! [`STORY_SCHEMA`]), `hall-with-effect.json`, per step `step-N/report.json`, per
 //! diagnosis `diagnosis-N.json`, and `report.html`.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -21,6 +22,7 @@ use crate::diagnosis::{diagnose_hall, HallDiagnosis, HallDiagnosisSettings};
 use crate::effects::EffectRegistry;
 use crate::hall::{AlphaMode, EffectSpec, Hall};
 use crate::report::{ThermalPlane, INLET_HEIGHT_M};
+use crate::sim::{intake_error, server_air};
 use crate::snapshots::HallSnapshot;
 use crate::{Error, HallModel, ParamLayout, Result};
 
@@ -41,6 +43,7 @@ const KEPT_HYPOTHESES: usize = 8;
 /// | `thermal_z_m` | 1.2 | height of the thermal planes (m) |
 /// | `thermal_snapshot` | 0 | snapshot of the thermal planes |
 /// | `reference_mae_c` | none | the MAE of a complete model at the true parameters, when known (synthetic halls): drawn as the floor |
+/// | `true_intakes_c` | none | each server's true intake air per snapshot (in the snapshots' order, by server id), when known (synthetic halls): each calibration's model is scored against it where no sensor measures |
 #[derive(Debug, Clone)]
 pub struct StorySettings {
     /// Settings of each calibration.
@@ -55,6 +58,8 @@ pub struct StorySettings {
     pub thermal_snapshot: usize,
     /// The floor a complete model reaches, when known (C).
     pub reference_mae_c: Option<f64>,
+    /// True server intakes per snapshot, by server id, when known (C).
+    pub true_intakes_c: Option<Vec<BTreeMap<String, f64>>>,
 }
 
 impl Default for StorySettings {
@@ -66,6 +71,7 @@ impl Default for StorySettings {
             thermal_z_m: INLET_HEIGHT_M,
             thermal_snapshot: 0,
             reference_mae_c: None,
+            true_intakes_c: None,
         }
     }
 }
@@ -89,6 +95,30 @@ pub struct Step {
     pub best_params: NamedValues,
     /// The calibration report.
     pub report: Report,
+    /// Its model's server intakes against the true ones, when those are known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intakes: Option<StepIntakes>,
+}
+
+/// A calibrated model's server intakes against the true ones: where no sensor measures.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepIntakes {
+    /// Mean absolute error over every server and snapshot (C).
+    pub mae_c: f64,
+    /// The server with the warmest true intake, and its snapshot.
+    pub warmest_server: String,
+    /// The snapshot of that intake.
+    pub warmest_snapshot: String,
+    /// Its true intake (C).
+    pub warmest_true_c: f64,
+    /// The model's intake there (C).
+    pub warmest_model_c: f64,
+    /// The server where the model is furthest from the truth, and its snapshot.
+    pub worst_server: String,
+    /// The snapshot of that intake.
+    pub worst_snapshot: String,
+    /// Model minus truth there (C).
+    pub worst_error_c: f64,
 }
 
 /// One hypothesis of a diagnosis, as the story keeps it.
@@ -274,6 +304,16 @@ pub fn run_story(
             wall_s: t.elapsed().as_secs_f64(),
             best_params: cal.report.best.params.clone(),
             report: cal.report.clone(),
+            intakes: match &settings.true_intakes_c {
+                Some(truth) => Some(step_intakes(
+                    &cal,
+                    &current,
+                    snaps,
+                    &cal.report.best.params.values(),
+                    truth,
+                )?),
+                None => None,
+            },
         };
         if index == 0 {
             let initial = cal.model.layout().space().initial();
@@ -395,6 +435,46 @@ fn plane(
         settings.thermal_z_m,
         format!("{label}, snapshot {}", snap.state.label),
     )
+}
+
+/// The calibrated model's server intakes at `params` against `truth` (per snapshot).
+fn step_intakes(
+    cal: &HallCalibration,
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    params: &[f64],
+    truth: &[BTreeMap<String, f64>],
+) -> Result<StepIntakes> {
+    if truth.len() != snaps.len() {
+        return Err(Error::Mismatch(format!(
+            "true intakes for {} snapshots, but {} snapshots",
+            truth.len(),
+            snaps.len()
+        )));
+    }
+    let mut rows = Vec::new();
+    for snap in snaps {
+        let solution = cal.model.solve(&snap.state, params)?;
+        rows.extend(server_air(hall, &snap.state, &solution)?);
+    }
+    let labels: Vec<&str> = snaps.iter().map(|s| s.state.label.as_str()).collect();
+    let lookup = |label: &str, server: &str| {
+        let k = labels.iter().position(|l| *l == label)?;
+        truth[k].get(server).copied()
+    };
+    let e = intake_error(&rows, &lookup)?;
+    let (w, t) = e.warmest_true;
+    let (x, tx) = e.worst;
+    Ok(StepIntakes {
+        mae_c: e.mae_c,
+        warmest_server: w.server,
+        warmest_snapshot: w.snapshot,
+        warmest_true_c: t,
+        warmest_model_c: w.intake_c,
+        worst_error_c: x.intake_c - tx,
+        worst_server: x.server,
+        worst_snapshot: x.snapshot,
+    })
 }
 
 fn summarise(after_step: usize, d: &HallDiagnosis, wall_s: f64) -> DiagnosisStep {

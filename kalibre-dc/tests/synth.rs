@@ -273,6 +273,20 @@ fn noise_is_seeded_gaussian_rounded_and_hidden_effects_stay_in_the_truth() {
         shift.iter().all(|d| (-1.05..=-0.9).contains(d)),
         "{shift:?}"
     );
+    // The truth records every server's intake. At fixed flows the temperature field is
+    // linear in the supply's, and each server's rise does not change: a supply 1 C
+    // colder makes every intake exactly 1 C colder.
+    for (a, b) in synth.truth.snapshots.iter().zip(&hidden.truth.snapshots) {
+        let (ia, ib) = (
+            a.server_intake_c.as_ref().unwrap(),
+            b.server_intake_c.as_ref().unwrap(),
+        );
+        assert_eq!(ia.len(), synth.hall.servers().count());
+        for s in synth.hall.servers() {
+            let d = ib[&s.server.id] - ia[&s.server.id];
+            assert!((d + 1.0).abs() < 1e-6, "{}: {d}", s.server.id);
+        }
+    }
 
     let unknown = parse_effect_arg("warp_drive:power=9").unwrap();
     let err = generate(&base.with_effect(unknown))

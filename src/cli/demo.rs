@@ -108,8 +108,23 @@ pub fn run(args: DemoArgs) -> CliResult {
         "wrote {}/{{hall.json, snapshots.csv, truth.json}}",
         args.out.display()
     );
+    // The truth's server intakes, in the snapshots' order (each truth snapshot is
+    // labelled as its measured one).
+    let true_intakes_c = synth
+        .snapshots
+        .iter()
+        .map(|snap| {
+            synth
+                .truth
+                .snapshots
+                .iter()
+                .find(|t| t.label == snap.state.label)
+                .and_then(|t| t.server_intake_c.clone())
+        })
+        .collect::<Option<Vec<_>>>();
     let settings = StorySettings {
         reference_mae_c: reference.as_ref().map(|r| r.model_at_truth_mae_c),
+        true_intakes_c,
         calibration: kalibre_dc::calibration::HallCalibrationSettings {
             core: kalibre_core::Settings {
                 seed: args.seed,
@@ -173,6 +188,13 @@ fn print_event(hall: &Hall, floor: Option<f64>, counter: &AtomicUsize, e: &Story
                     } else {
                         ""
                     }
+                );
+            }
+            if let Some(i) = &step.intakes {
+                println!(
+                    "  where no sensor measures: the servers' intake air is {:.2} C from the truth on average, \
+                     at most {:+.1} C ({} in {})",
+                    i.mae_c, i.worst_error_c, i.worst_server, i.worst_snapshot,
                 );
             }
         }

@@ -152,6 +152,53 @@ pub fn inlet_check(rows: &[ServerAir], limit_c: f64, top: usize) -> Result<Inlet
     })
 }
 
+/// How far a model's server intakes are from known true ones (a synthetic hall's
+/// `truth.json`, or OpenFOAM's), over one or more snapshots.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IntakeError {
+    /// Mean absolute error over every server and snapshot (C).
+    pub mae_c: f64,
+    /// The warmest true intake: that server's row, and its true temperature (C).
+    pub warmest_true: (ServerAir, f64),
+    /// The largest error: that server's row, and its true temperature (C).
+    pub worst: (ServerAir, f64),
+}
+
+/// Compares `predicted` (rows of any snapshots) with `truth` (per snapshot label, by
+/// server id). A server or snapshot the truth lacks is an error naming it.
+pub fn intake_error(
+    predicted: &[ServerAir],
+    truth: &dyn Fn(&str, &str) -> Option<f64>,
+) -> Result<IntakeError> {
+    let mut sum = 0.0;
+    let mut warmest: Option<(ServerAir, f64)> = None;
+    let mut worst: Option<(ServerAir, f64)> = None;
+    for row in predicted {
+        let t = truth(&row.snapshot, &row.server).ok_or_else(|| {
+            Error::Mismatch(format!(
+                "no true intake for server `{}` in snapshot `{}`",
+                row.server, row.snapshot
+            ))
+        })?;
+        sum += (row.intake_c - t).abs();
+        if warmest.as_ref().is_none_or(|(_, w)| t > *w) {
+            warmest = Some((row.clone(), t));
+        }
+        if worst
+            .as_ref()
+            .is_none_or(|(r, w)| (row.intake_c - t).abs() > (r.intake_c - w).abs())
+        {
+            worst = Some((row.clone(), t));
+        }
+    }
+    let none = || Error::Mismatch("no server intakes to compare".into());
+    Ok(IntakeError {
+        mae_c: sum / predicted.len() as f64,
+        warmest_true: warmest.ok_or_else(none)?,
+        worst: worst.ok_or_else(none)?,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -183,6 +230,23 @@ mod tests {
         assert_eq!(names, ["c", "d"]);
         assert!(inlet_check(&rows, f64::NAN, 2).is_err());
         assert_eq!(inlet_check(&[], 27.0, 5).unwrap().hottest.len(), 0);
+    }
+
+    #[test]
+    fn intake_error_is_the_mean_gap_and_finds_the_warmest_true_intake() {
+        let rows = [air("a", 20.0), air("b", 25.0)];
+        let truth = |_: &str, s: &str| match s {
+            "a" => Some(21.0),
+            "b" => Some(28.0),
+            _ => None,
+        };
+        let e = intake_error(&rows, &truth).unwrap();
+        assert!((e.mae_c - 2.0).abs() < 1e-12);
+        assert_eq!(e.warmest_true.0.server, "b");
+        assert_eq!(e.warmest_true.1, 28.0);
+        assert_eq!((e.worst.0.server.as_str(), e.worst.1), ("b", 28.0));
+        assert!(intake_error(&[air("c", 20.0)], &truth).is_err());
+        assert!(intake_error(&[], &truth).is_err());
     }
 
     #[test]

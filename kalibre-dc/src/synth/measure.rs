@@ -105,7 +105,16 @@ pub(crate) fn measure<R: Rng>(
 
     let fine_cell = options.measurement_cell();
     let fine = Simulator::new(hall, sim_config(fine_cell))?;
-    let noise_free = run_all(&fine, states, &alpha.per_server, &hidden)?;
+    // Sensor readings and server intakes of every state, in order.
+    let (noise_free, intakes): (Vec<Vec<f64>>, Vec<Vec<f64>>) = states
+        .par_iter()
+        .map(|s| {
+            fine.solve(s, &alpha.per_server, &hidden)
+                .map(|sol| (sol.sensor_c().to_vec(), sol.server_intake_c.clone()))
+        })
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .unzip();
     drop(fine);
 
     let normal = Normal::new(0.0, options.noise_c)
@@ -173,6 +182,12 @@ pub(crate) fn measure<R: Rng>(
             power_w: s.power_w.iter().sum(),
             sensor_c_noise_free: by_sensor(&noise_free[k]),
             sensor_c_model_at_truth: at_truth.as_ref().map(|t| by_sensor(&t[k])),
+            server_intake_c: Some(
+                hall.servers()
+                    .zip(&intakes[k])
+                    .map(|(s, v)| (s.server.id.clone(), *v))
+                    .collect(),
+            ),
         })
         .collect();
 

@@ -122,6 +122,12 @@ pub struct TruthSnapshot {
     /// best a complete model can do; its error is the noise and model-form floor.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor_c_model_at_truth: Option<BTreeMap<String, f64>>,
+    /// Each server's intake air in the measurement simulation (C, the flow-weighted mean
+    /// over its intake face), by server id: what a calibrated model should predict where
+    /// no sensor measures (the OpenFOAM datasets' `truth.json` has the same key).
+    /// Missing in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub server_intake_c: Option<BTreeMap<String, f64>>,
 }
 
 /// Reference errors (MAE over all snapshots and sensors, C) against the noisy readings.
