@@ -22,11 +22,12 @@
 
 use std::path::{Path, PathBuf};
 
+use kalibre::core::calibrate::Residual;
 use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
 use kalibre::dc::effects::EffectRegistry;
 use kalibre::dc::hall::Hall;
-use kalibre::dc::sim::{server_air, SimConfig};
+use kalibre::dc::sim::{coldest_under_read, server_air, SimConfig, RECOMMENDED_MAX_INLET_C};
 use kalibre::dc::snapshots::HallSnapshot;
 use kalibre::dc::HallModel;
 use serde_json::{json, Value};
@@ -147,9 +148,41 @@ fn score(hall: &Hall, snaps: &[HallSnapshot], pred: &[Vec<f64>], truth: &[Vec<f6
     })
 }
 
+/// A model scored: name, hall, parameters, and the calibration's residuals where it is one.
+type Stage = (String, Hall, Vec<f64>, Option<Vec<Residual>>);
+
+/// Per snapshot: the model's setpoint headroom under the recommended 27 C (the limit less
+/// its hottest intake), the same less its calibration's misfit
+/// (`kalibre simulate`'s note), and OpenFOAM's own.
+fn headroom(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    pred: &[Vec<f64>],
+    truth: &[Vec<f64>],
+    residuals: Option<&[Residual]>,
+) -> Value {
+    let limit = RECOMMENDED_MAX_INLET_C;
+    let misfit = residuals.and_then(|r| coldest_under_read(hall, r));
+    let max = |v: &[f64]| v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let rows: Vec<Value> = snaps
+        .iter()
+        .zip(pred.iter().zip(truth))
+        .map(|(snap, (p, t))| {
+            let model = limit - max(p);
+            json!({
+                "snapshot": snap.state.label, "model_c": model, "openfoam_c": limit - max(t),
+                "less_misfit_c": misfit.as_ref().map(|(_, m)| model + m),
+                "misfit_sensor": misfit.as_ref().map(|(s, _)| s),
+            })
+        })
+        .collect();
+    json!(rows)
+}
+
 fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
     let registry = EffectRegistry::builtin();
     let mut rows = Vec::new();
+    let mut headroom_lines = Vec::new();
     println!("| dataset | model | sensor MAE C | intake MAE C | bias C | worst C (where) | rank correlation | same warmest server |");
     println!("|---|---|---|---|---|---|---|---|");
     for (dataset, _) in DATASETS {
@@ -157,16 +190,21 @@ fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
         let (hall, snaps) = (&data.hall, &data.snaps);
         let truth = true_intakes(hall, snaps, &data.truth)?;
         let work = std::env::temp_dir().join(format!("kalibre-server-intakes-{dataset}"));
-        let mut stages: Vec<(String, Hall, Vec<f64>)> = Vec::new();
+        let mut stages: Vec<Stage> = Vec::new();
         let space = HallModel::new(hall, SimConfig::default())
             .map_err(|e| e.to_string())?
             .layout()
             .space()
             .clone();
-        stages.push(("uncalibrated".into(), hall.clone(), space.initial()));
+        stages.push(("uncalibrated".into(), hall.clone(), space.initial(), None));
         let (cal, _) = calibrate_as_cli(hall, snaps, &work.join("cal"))?;
         let best = cal.report.best.params.values();
-        stages.push(("calibrated".into(), hall.clone(), best.clone()));
+        stages.push((
+            "calibrated".into(),
+            hall.clone(),
+            best.clone(),
+            Some(cal.report.residuals.clone()),
+        ));
         let d = diagnose_hall(
             hall,
             snaps,
@@ -184,7 +222,12 @@ fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
                 kalibre::dc::calibration::calibrate_hall(&next, snaps, &settings, None, Vec::new())
                     .map_err(|e| e.to_string())?;
             let name = format!("with {} (Student-t)", d.diagnosis.hypotheses[i].name);
-            stages.push((name, next, cal.report.best.params.values()));
+            stages.push((
+                name,
+                next,
+                cal.report.best.params.values(),
+                Some(cal.report.residuals.clone()),
+            ));
         }
         let mut at_truth = space.initial();
         for (i, name) in space.names().iter().enumerate() {
@@ -195,10 +238,23 @@ fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
                 at_truth[i] = v;
             }
         }
-        stages.push(("true alphas".into(), hall.clone(), at_truth));
-        for (name, h, params) in &stages {
+        stages.push(("true alphas".into(), hall.clone(), at_truth, None));
+        for (name, h, params, residuals) in &stages {
             let (pred, sensor_mae) = predicted_intakes(h, snaps, params)?;
             let mut s = score(h, snaps, &pred, &truth);
+            s["headroom"] = headroom(h, snaps, &pred, &truth, residuals.as_deref());
+            if let Some(rows) = s["headroom"].as_array() {
+                headroom_lines.extend(rows.iter().map(|r| {
+                    format!(
+                        "| {dataset} | {name} | {} | {:.2} | {:.2} ({}) | {:.2} |",
+                        r["snapshot"].as_str().unwrap_or(""),
+                        r["model_c"].as_f64().unwrap_or(f64::NAN),
+                        r["less_misfit_c"].as_f64().unwrap_or(f64::NAN),
+                        r["misfit_sensor"].as_str().unwrap_or("-"),
+                        r["openfoam_c"].as_f64().unwrap_or(f64::NAN),
+                    )
+                }));
+            }
             println!(
                 "| {dataset} | {name} | {sensor_mae:.3} | {:.3} | {:+.3} | {:+.2} ({}) | {:.2} | {} of {} |",
                 s["mae_c"].as_f64().unwrap_or(f64::NAN),
@@ -215,6 +271,12 @@ fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
             s["params"] = json!(params);
             rows.push(s);
         }
+    }
+    println!("\nSetpoint headroom (27 C less the hottest intake), the model's less its misfit, and OpenFOAM's:\n");
+    println!("| dataset | model | snapshot | model's headroom C | less the misfit C (sensor) | OpenFOAM's C |");
+    println!("|---|---|---|---|---|---|");
+    for l in &headroom_lines {
+        println!("{l}");
     }
     write_json(
         out,

@@ -187,6 +187,98 @@ fn simulate_writes_each_servers_air_and_counts_warm_intakes() {
     assert_input_error(&o, "--inlet-limit-c");
 }
 
+/// What if every setpoint rose by the headroom `simulate` reports? The hottest intake
+/// then sits exactly at the limit: at fixed flows the temperatures move one for one with
+/// the supply's. Changes outside the hall's limits are refused by name.
+#[test]
+fn simulate_answers_what_if_and_its_headroom_is_exact() {
+    let dir = tmp("what-if");
+    let hall = data("of-dev-clean/hall.json");
+    let snaps = data("of-dev-clean/snapshots.csv");
+    let hottest_t1 = |extra: &[&str]| -> f64 {
+        let table = dir.join("servers.csv");
+        let o = run(kalibre()
+            .args(["simulate", "--hall"])
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(&snaps)
+            .arg("--out")
+            .arg(dir.join("pred.csv"))
+            .arg("--servers")
+            .arg(&table)
+            .args(extra));
+        assert!(o.status.success(), "{}", stderr(&o));
+        std::fs::read_to_string(&table)
+            .unwrap()
+            .lines()
+            .filter(|l| l.starts_with("t1,"))
+            .map(|l| l.split(',').nth(6).unwrap().parse::<f64>().unwrap())
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    let limit_c = 27.0;
+    // At the hall's initial alphas t1 is over the limit: the headroom is negative.
+    let headroom = limit_c - hottest_t1(&[]);
+    assert!(headroom < -0.5, "{headroom}");
+    let raised = hottest_t1(&["--setpoint-offset-c", &format!("{headroom:.12}")]);
+    assert!((raised - limit_c).abs() < 1e-6, "{raised}");
+    // Slower fans give less supply against the same server draw: warmer intakes.
+    assert!(hottest_t1(&["--fan-speed-scale", "0.9"]) > hottest_t1(&[]));
+    let refused = |extra: &[&str], needle: &str| {
+        let o = run(kalibre()
+            .args(["simulate", "--hall"])
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(&snaps)
+            .arg("--out")
+            .arg(dir.join("pred.csv"))
+            .args(extra));
+        assert_input_error(&o, needle);
+    };
+    refused(
+        &["--fan-speed-scale", "1.2"],
+        "CRAC `crac-1` in snapshot `t0` would run at 1.080 of its rated flow",
+    );
+    refused(
+        &["--power-scale=-1"],
+        "--power-scale: expected a factor >= 0",
+    );
+    refused(
+        &["--setpoint-offset-c", "inf"],
+        "--setpoint-offset-c: expected a finite",
+    );
+}
+
+/// A reader that closes early (`kalibre ... | head`) ends the process quietly, by the
+/// signal other Unix tools die of, not with a panic.
+#[cfg(unix)]
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tmp("pipe");
+    let mut child = kalibre()
+        .args(["simulate", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
+        .arg("--out")
+        .arg(dir.join("pred.csv"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Close the reading end before the first line is printed (the solves come first).
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(
+        o.status.signal(),
+        Some(libc::SIGPIPE),
+        "{:?}: {err}",
+        o.status
+    );
+}
+
 /// `kalibre simulate` on a hall and snapshots, with optional parameters.
 fn simulate(hall: &Path, snaps: &Path, params: Option<&Path>, out: &Path) -> Output {
     let mut c = kalibre();

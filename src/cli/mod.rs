@@ -5,9 +5,11 @@ mod calibrated_model;
 mod demo;
 mod diagnose;
 mod error;
+mod inlets;
 mod openfoam_args;
 mod simulate;
 mod synth;
+mod what_if;
 
 use clap::{Parser, Subcommand};
 

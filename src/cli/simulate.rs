@@ -10,7 +10,10 @@ use kalibre_dc::snapshots;
 use kalibre_dc::HallModel;
 
 use super::calibrated_model::{grid_or_recorded, CalibratedModel};
+use super::inlets::{inlet_line, under_read_note};
+use super::what_if::WhatIfArgs;
 use super::{io_err, CliError, CliResult};
+use kalibre_dc::sim::coldest_under_read;
 
 /// Options of `kalibre simulate`.
 #[derive(Debug, Args)]
@@ -46,6 +49,8 @@ pub struct SimulateArgs {
     /// default is ASHRAE TC 9.9's recommended upper bound for classes A1-A4.
     #[arg(long = "inlet-limit-c", default_value_t = kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)]
     inlet_limit_c: f64,
+    #[command(flatten)]
+    what_if: WhatIfArgs,
 }
 
 /// Reads a `--params` file: a JSON object, or a calibration's `report.json` with the model
@@ -121,7 +126,11 @@ pub fn run(args: SimulateArgs) -> CliResult {
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
-    let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
+    let mut snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
+    args.what_if.apply(&hall, &mut snaps)?;
+    if let Some(what) = args.what_if.describe() {
+        println!("what if: {what} (in every snapshot)");
+    }
     let file = args.params.as_deref().map(read_params_file).transpose()?;
     let recorded = file.as_ref().and_then(|(_, m)| m.as_ref());
     // A calibration's report brings the model it ran: its alpha mode and grid stand
@@ -192,6 +201,20 @@ pub fn run(args: SimulateArgs) -> CliResult {
     for (label, check) in labels.iter().zip(&checks) {
         println!("{}", inlet_line(label, check));
     }
+    // How far the calibration's own misfit says to trust those figures.
+    let residuals: Option<Vec<kalibre_core::calibrate::Residual>> = match (
+        &args.params,
+        file.as_ref().and_then(|(json, _)| json.get("residuals")),
+    ) {
+        (Some(path), Some(r)) => Some(
+            serde_json::from_value(r.clone())
+                .map_err(|e| CliError::Input(format!("{}: /residuals: {e}", path.display())))?,
+        ),
+        _ => None,
+    };
+    if let Some(under) = residuals.and_then(|r| coldest_under_read(&hall, &r)) {
+        println!("{}", under_read_note(&under, &labels, &checks));
+    }
     println!(
         "wrote {} ({} snapshots x {} sensors){}",
         args.out.display(),
@@ -211,21 +234,4 @@ pub fn run(args: SimulateArgs) -> CliResult {
         );
     }
     Ok(())
-}
-
-/// One snapshot's server intakes against the limit, e.g.
-/// `t0: 2 of 300 server intakes above 27.0 C; hottest A05-33 (rack A05) 28.4 C, ...`.
-fn inlet_line(label: &str, check: &kalibre_dc::sim::InletCheck) -> String {
-    let hottest: Vec<String> = check
-        .hottest
-        .iter()
-        .map(|s| format!("{} (rack {}) {:.1} C", s.server, s.rack, s.intake_c))
-        .collect();
-    format!(
-        "{label}: {} of {} server intakes above {:.1} C; hottest {}",
-        check.above_limit,
-        check.servers,
-        check.limit_c,
-        hottest.join(", ")
-    )
 }

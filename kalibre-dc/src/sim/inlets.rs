@@ -6,10 +6,13 @@
 //! guidelines bound. ASHRAE TC 9.9 recommends 18-27 C at the server inlet for classes
 //! A1-A4, so 27 C is the default limit of [`inlet_check`].
 
+use std::collections::BTreeMap;
 use std::fmt::Write;
 
+use kalibre_core::calibrate::Residual;
+
 use super::Solution;
-use crate::hall::Hall;
+use crate::hall::{Aisle, Hall};
 use crate::snapshots::OperatingState;
 use crate::{Error, Result};
 
@@ -150,6 +153,39 @@ pub fn inlet_check(rows: &[ServerAir], limit_c: f64, top: usize) -> Result<Inlet
         above_limit: rows.iter().filter(|r| r.intake_c > limit_c).count(),
         hottest: sorted.into_iter().take(top).cloned().collect(),
     })
+}
+
+/// The limit minus the hottest intake of a check (C): how far every setpoint can rise.
+/// At fixed flows the temperatures are linear in the supply's and the servers' rises do
+/// not move, so a uniform setpoint change moves every intake by exactly as much.
+pub fn setpoint_headroom_c(check: &InletCheck) -> Option<f64> {
+    check.hottest.first().map(|h| check.limit_c - h.intake_c)
+}
+
+/// From a calibration's residuals: the cold-aisle sensor the model reads coldest against
+/// the measurements, with the mean of predicted minus measured over the snapshots (C,
+/// negative); `None` when it reads no cold-aisle sensor colder than measured. Inlet
+/// sensors are the measurements nearest the intakes: where the model reads one colder
+/// than measured, intakes near it may be as much warmer than it predicts, so a headroom
+/// less this much is what the measurements support.
+pub fn coldest_under_read(hall: &Hall, residuals: &[Residual]) -> Option<(String, f64)> {
+    let mut sums: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
+    for r in residuals {
+        let cold = hall
+            .sensors
+            .iter()
+            .find(|s| s.id == r.sensor)
+            .is_some_and(|s| s.aisle == Aisle::Cold);
+        if cold {
+            let e = sums.entry(r.sensor.as_str()).or_default();
+            e.0 += r.predicted_c - r.measured_c;
+            e.1 += 1;
+        }
+    }
+    sums.into_iter()
+        .map(|(id, (sum, n))| (id.to_string(), sum / n as f64))
+        .filter(|(_, mean)| *mean < 0.0)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
 }
 
 /// How far a model's server intakes are from known true ones (a synthetic hall's

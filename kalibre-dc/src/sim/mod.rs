@@ -40,8 +40,8 @@ pub use advection::AdvectionStats;
 pub use config::{Advection, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
 pub use grid::Grid;
 pub use inlets::{
-    inlet_check, intake_error, server_air, write_server_air, InletCheck, IntakeError, ServerAir,
-    RECOMMENDED_MAX_INLET_C,
+    coldest_under_read, inlet_check, intake_error, server_air, setpoint_headroom_c,
+    write_server_air, InletCheck, IntakeError, ServerAir, RECOMMENDED_MAX_INLET_C,
 };
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
