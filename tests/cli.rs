@@ -96,8 +96,6 @@ fn simulate_writes_predictions_and_vtk() {
 #[test]
 fn simulate_writes_each_servers_air_and_counts_warm_intakes() {
     let dir = tmp("servers");
-    let hall = data("of-dev-clean/hall.json");
-    let snaps = data("of-dev-clean/snapshots.csv");
     let (web, db, gpu) = (0.13, 0.17, 0.12);
     let params = dir.join("params.json");
     std::fs::write(
@@ -107,11 +105,7 @@ fn simulate_writes_each_servers_air_and_counts_warm_intakes() {
     .unwrap();
     let table = dir.join("servers.csv");
     let limit_c = 19.0;
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
+    let o = run(on_dataset("simulate", "of-dev-clean")
         .arg("--params")
         .arg(&params)
         .arg("--out")
@@ -177,12 +171,8 @@ fn simulate_writes_each_servers_air_and_counts_warm_intakes() {
         "the limit should catch some intakes: {stdout}"
     );
     // A limit that is not a number is refused by name.
-    let o = run(kalibre()
-        .args(["simulate", "--inlet-limit-c=nan", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
+    let o = run(on_dataset("simulate", "of-dev-clean")
+        .args(["--inlet-limit-c=nan", "--out"])
         .arg(dir.join("pred.csv")));
     assert_input_error(&o, "--inlet-limit-c");
 }
@@ -193,20 +183,15 @@ fn simulate_writes_each_servers_air_and_counts_warm_intakes() {
 #[test]
 fn simulate_answers_what_if_and_its_headroom_is_exact() {
     let dir = tmp("what-if");
-    let hall = data("of-dev-clean/hall.json");
-    let snaps = data("of-dev-clean/snapshots.csv");
-    let hottest_t1 = |extra: &[&str]| -> f64 {
-        let table = dir.join("servers.csv");
-        let o = run(kalibre()
-            .args(["simulate", "--hall"])
-            .arg(&hall)
-            .arg("--snapshots")
-            .arg(&snaps)
+    let simulate = |extra: &[&str]| {
+        run(on_dataset("simulate", "of-dev-clean")
             .arg("--out")
             .arg(dir.join("pred.csv"))
-            .arg("--servers")
-            .arg(&table)
-            .args(extra));
+            .args(extra))
+    };
+    let hottest_t1 = |extra: &[&str]| -> f64 {
+        let table = dir.join("servers.csv");
+        let o = simulate(&[&["--servers", table.to_str().unwrap()], extra].concat());
         assert!(o.status.success(), "{}", stderr(&o));
         std::fs::read_to_string(&table)
             .unwrap()
@@ -223,17 +208,7 @@ fn simulate_answers_what_if_and_its_headroom_is_exact() {
     assert!((raised - limit_c).abs() < 1e-6, "{raised}");
     // Slower fans give less supply against the same server draw: warmer intakes.
     assert!(hottest_t1(&["--fan-speed-scale", "0.9"]) > hottest_t1(&[]));
-    let refused = |extra: &[&str], needle: &str| {
-        let o = run(kalibre()
-            .args(["simulate", "--hall"])
-            .arg(&hall)
-            .arg("--snapshots")
-            .arg(&snaps)
-            .arg("--out")
-            .arg(dir.join("pred.csv"))
-            .args(extra));
-        assert_input_error(&o, needle);
-    };
+    let refused = |extra: &[&str], needle: &str| assert_input_error(&simulate(extra), needle);
     refused(
         &["--fan-speed-scale", "1.2"],
         "CRAC `crac-1` in snapshot `t0` would run at 1.080 of its rated flow",
@@ -255,11 +230,7 @@ fn simulate_answers_what_if_and_its_headroom_is_exact() {
 fn a_closed_stdout_ends_quietly() {
     use std::os::unix::process::ExitStatusExt;
     let dir = tmp("pipe");
-    let mut child = kalibre()
-        .args(["simulate", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-clean/snapshots.csv"))
+    let mut child = on_dataset("simulate", "of-dev-clean")
         .arg("--out")
         .arg(dir.join("pred.csv"))
         .stdout(std::process::Stdio::piped())

@@ -13,7 +13,7 @@ use kalibre_core::calibrate::Residual;
 
 use super::Solution;
 use crate::hall::{Aisle, Hall};
-use crate::snapshots::OperatingState;
+use crate::snapshots::{quote, OperatingState};
 use crate::{Error, Result};
 
 /// ASHRAE TC 9.9's recommended upper bound of server inlet air, classes A1-A4 (C).
@@ -101,10 +101,10 @@ pub fn write_server_air(rows: &[ServerAir]) -> String {
         let _ = writeln!(
             out,
             "{},{},{},{},{},{},{},{}",
-            csv_field(&r.snapshot),
-            csv_field(&r.server),
-            csv_field(&r.rack),
-            csv_field(&r.server_type),
+            quote(&r.snapshot),
+            quote(&r.server),
+            quote(&r.rack),
+            quote(&r.server_type),
             r.power_w,
             r.flow_m3_s,
             r.intake_c,
@@ -112,15 +112,6 @@ pub fn write_server_air(rows: &[ServerAir]) -> String {
         );
     }
     out
-}
-
-/// Quotes a field when CSV needs it.
-fn csv_field(field: &str) -> std::borrow::Cow<'_, str> {
-    if field.contains([',', '"', '\n', '\r']) || field.trim() != field {
-        format!("\"{}\"", field.replace('"', "\"\"")).into()
-    } else {
-        field.into()
-    }
 }
 
 /// Server intakes of one snapshot against a limit.

@@ -11,6 +11,7 @@ use crate::hall::Hall;
 use crate::{Error, Result};
 
 pub use read::{load_snapshots, parse_snapshots, parse_snapshots_bytes};
+pub(crate) use write::quote;
 pub use write::{write_predictions, write_snapshots};
 
 /// One operating state of the hall: what the model is run at. Vectors are in hall order

@@ -53,7 +53,7 @@ fn row(out: &mut String, label: &str, kind: &str, id: &str, value: f64) {
 }
 
 /// Quotes a field when CSV needs it (separator, quote, line break, or edge whitespace).
-fn quote(field: &str) -> std::borrow::Cow<'_, str> {
+pub(crate) fn quote(field: &str) -> std::borrow::Cow<'_, str> {
     let needs = field.contains([',', '"', '\n', '\r'])
         || field.starts_with(char::is_whitespace)
         || field.ends_with(char::is_whitespace);
