@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use kalibre_core::ParamSpace;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::sim::SimConfig;
+use kalibre_dc::sim::{coldest_under_read, SimConfig};
 use kalibre_dc::snapshots;
 use kalibre_dc::HallModel;
 
@@ -13,7 +13,6 @@ use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::inlets::{inlet_line, under_read_note};
 use super::what_if::WhatIfArgs;
 use super::{io_err, CliError, CliResult};
-use kalibre_dc::sim::coldest_under_read;
 
 /// Options of `kalibre simulate`.
 #[derive(Debug, Args)]
