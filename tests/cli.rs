@@ -386,6 +386,18 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert!(whole.join("report.html").exists());
     let html = std::fs::read_to_string(whole.join("report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("Where the model fails"));
+    // The calibrated model's server intakes, and a headroom the misfit at the row-end
+    // inlets (which the built-in model reads colder than OpenFOAM) takes down.
+    assert!(html.contains("<h2>Server intakes</h2>"));
+    assert_eq!(
+        html.matches(" of 20 above 27.0 C").count(),
+        3,
+        "one row per snapshot"
+    );
+    assert!(
+        html.contains("headroom less the misfit at c-"),
+        "row-end under-read"
+    );
     // The default likelihood is the paper's, and the report says so.
     assert!(report["settings"].get("robust_nu").is_none());
     assert!(html.contains("<td>likelihood</td><td>least squares"));

@@ -1,11 +1,13 @@
 //! Offline HTML reports with SVG figures: what a calibration found, where the model
 //! still fails, and how the error fell.
 
+mod intakes;
 mod plan;
 mod story;
 mod svg;
 mod thermal;
 
+pub use intakes::intakes_html;
 pub use plan::plan_svg;
 pub use story::{outcome_text, story_error_svg, story_html};
 pub use thermal::{thermal_svg, ColourScale, Marker, ThermalPlane, INLET_HEIGHT_M};
@@ -15,6 +17,7 @@ use std::fmt::Write;
 use kalibre_core::calibrate::Report;
 
 use crate::hall::Hall;
+use crate::sim::{coldest_under_read, InletCheck};
 use crate::snapshots::HallSnapshot;
 use crate::surrogate::PenaltyReport;
 use svg::{esc, Chart};
@@ -129,12 +132,14 @@ pub fn parity_svg(hall: &Hall, report: &Report) -> String {
     c.finish()
 }
 
-/// The HTML report of one calibration.
+/// The HTML report of one calibration; with `intakes` (each snapshot's server intakes at
+/// the best parameters, labelled) it also shows them and the setpoint headroom.
 pub fn calibration_html(
     hall: &Hall,
     snaps: &[HallSnapshot],
     report: &Report,
     prior: &PenaltyReport,
+    intakes: Option<&[(String, InletCheck)]>,
 ) -> String {
     let mut h = String::new();
     let _ = write!(
@@ -273,6 +278,10 @@ pub fn calibration_html(
              what is missing.</p>",
             100.0 * icc
         );
+    }
+    if let Some(checks) = intakes {
+        let under = coldest_under_read(hall, &report.residuals);
+        h.push_str(&intakes_html(checks, under.as_ref()));
     }
     h.push_str("<h2>Residuals per sensor</h2><table><tr><th>sensor</th><th>aisle</th>");
     for s in snaps {

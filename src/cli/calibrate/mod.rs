@@ -17,8 +17,10 @@ use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::openfoam::OpenFoamModel;
+use kalibre_dc::sim::{inlet_check, server_air, InletCheck, RECOMMENDED_MAX_INLET_C};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
+use kalibre_dc::HallModel;
 
 use super::calibrated_model::CalibratedModel;
 use super::diagnose::Likelihood;
@@ -408,6 +410,33 @@ fn model_record(
     })
 }
 
+/// Each snapshot's server intakes at the best parameters (the built-in model, as
+/// calibrated), against ASHRAE's recommended limit.
+fn intake_checks(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    settings: &HallCalibrationSettings,
+    report: &Report,
+) -> CliResult<Vec<(String, InletCheck)>> {
+    let mut hall = hall.clone();
+    if let Some(mode) = settings.alpha_mode {
+        hall.calibrate.alpha = mode;
+    }
+    let model = HallModel::new(&hall, settings.sim.clone())?;
+    let params = report.best.params.values();
+    snaps
+        .iter()
+        .map(|snap| {
+            let solution = model.solve(&snap.state, &params)?;
+            let air = server_air(&hall, &snap.state, &solution)?;
+            Ok((
+                snap.state.label.clone(),
+                inlet_check(&air, RECOMMENDED_MAX_INLET_C, 3)?,
+            ))
+        })
+        .collect()
+}
+
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     let settings = settings(&args)?;
@@ -454,7 +483,18 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;
     std::fs::write(&report_path, json).map_err(|e| io_err(&report_path, e))?;
     let html_path = args.out.join("report.html");
-    let html = kalibre_dc::report::calibration_html(&hall, &snaps, &report, &penalty_report);
+    let intakes = match args.model {
+        ModelArg::Builtin => Some(intake_checks(&hall, &snaps, &settings, &report)?),
+        // The built-in model's intakes would not be the calibrated model's.
+        ModelArg::Openfoam | ModelArg::Command => None,
+    };
+    let html = kalibre_dc::report::calibration_html(
+        &hall,
+        &snaps,
+        &report,
+        &penalty_report,
+        intakes.as_deref(),
+    );
     std::fs::write(&html_path, html).map_err(|e| io_err(&html_path, e))?;
     print_summary(&report, wall_s, &penalty_report);
     println!(
