@@ -66,6 +66,9 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
     );
     assert!(w1 < 0.5 * w0, "worst intake error: {w0:.2} -> {w1:.2} C");
     assert!(stdout.contains("where no sensor measures"), "{stdout}");
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("<th>intakes: MAE (C)</th>"), "intake table");
+    assert!(html.contains(&format!("<td>{before:.2}</td>")), "{before}");
     // The hall to continue from carries the entry.
     let hall: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("hall-with-effect.json")).unwrap())

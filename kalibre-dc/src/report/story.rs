@@ -143,6 +143,33 @@ pub fn story_html(hall: &Hall, snaps: &[HallSnapshot], story: &StoryReport) -> S
             "<p>A complete model at the true parameters reaches {floor:.3} C on these data (noise and grid error).</p>"
         );
     }
+    if story.steps.iter().any(|s| s.intakes.is_some()) {
+        h.push_str(
+            "<p>Where no sensor measures: each calibrated model's intake air at every server \
+             against the truth's.</p><table><tr><th>step</th><th>intakes: MAE (C)</th>\
+             <th>largest error (C)</th><th>warmest true intake (C)</th></tr>",
+        );
+        for (i, s) in story.steps.iter().enumerate() {
+            if let Some(x) = &s.intakes {
+                let _ = write!(
+                    h,
+                    "<tr><td>{}. {}</td><td>{:.2}</td><td>{:+.2} ({} in {})</td>\
+                     <td>{:.1} ({} in {}; model {:.1})</td></tr>",
+                    i + 1,
+                    esc(&s.name),
+                    x.mae_c,
+                    x.worst_error_c,
+                    esc(&x.worst_server),
+                    esc(&x.worst_snapshot),
+                    x.warmest_true_c,
+                    esc(&x.warmest_server),
+                    esc(&x.warmest_snapshot),
+                    x.warmest_model_c
+                );
+            }
+        }
+        h.push_str("</table>");
+    }
     let _ = write!(
         h,
         "<h2>The error as effects are added</h2>{}",
