@@ -1,0 +1,53 @@
+//! Helpers of the command-line tests: the built binary, the OpenFOAM development data
+//! shipped in `data/openfoam`, scratch directories and error checks.
+#![allow(dead_code)] // each test file uses some of them
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn kalibre() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_kalibre"))
+}
+
+pub fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/openfoam")
+        .join(name)
+}
+
+pub fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("kalibre-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub fn run(cmd: &mut Command) -> Output {
+    cmd.output().expect("the kalibre binary runs")
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// `kalibre COMMAND --hall DATASET/hall.json --snapshots DATASET/snapshots.csv`, on an
+/// OpenFOAM development dataset.
+pub fn on_dataset(command: &str, dataset: &str) -> Command {
+    let mut c = kalibre();
+    c.arg(command)
+        .arg("--hall")
+        .arg(data(&format!("{dataset}/hall.json")))
+        .arg("--snapshots")
+        .arg(data(&format!("{dataset}/snapshots.csv")));
+    c
+}
+
+/// A bad input gives exit code 2 and one readable error line naming what is wrong.
+pub fn assert_input_error(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "stderr: {err}");
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "one error line, got: {err}");
+    assert!(lines[0].starts_with("kalibre: error: "), "{err}");
+    assert!(err.contains(needle), "`{needle}` not in: {err}");
+}
