@@ -26,6 +26,7 @@ use std::time::Instant;
 
 use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre::dc::hall::distance;
+use kalibre::dc::sim::{intake_error, server_air};
 use kalibre::dc::synth::{self, Preset, SynthOptions};
 use serde_json::json;
 
@@ -168,6 +169,52 @@ fn main() {
                 "numerical_pct": u.and_then(|u| u.rel_numerical()).map(|r| 100.0 * r),
             }));
         }
+        // Where no sensor measures: every server's intake against the truth's, at the
+        // loop's best alphas, at the polished ones, and at the true per-server alphas.
+        let intakes = |alpha_per_server: &[f64]| -> serde_json::Value {
+            let mut rows = Vec::new();
+            for snap in &s.snapshots {
+                let sol = cal
+                    .model
+                    .simulator()
+                    .solve(&snap.state, alpha_per_server, &[])
+                    .expect("solve");
+                rows.extend(server_air(&s.hall, &snap.state, &sol).expect("server air"));
+            }
+            let truth_of = |label: &str, server: &str| {
+                s.truth
+                    .snapshots
+                    .iter()
+                    .find(|t| t.label == label)?
+                    .server_intake_c
+                    .as_ref()?
+                    .get(server)
+                    .copied()
+            };
+            let e = intake_error(&rows, &truth_of).expect("true intakes");
+            let (w, t) = &e.worst;
+            json!({ "mae_c": e.mae_c, "worst_error_c": w.intake_c - t, "worst_at": format!("{} in {}", w.server, w.snapshot) })
+        };
+        let layout = cal.model.layout();
+        let intakes_loop = intakes(&layout.alpha_per_server(&loop_best.params.values()));
+        let intakes_polished = intakes(&layout.alpha_per_server(&r.best.params.values()));
+        let true_alpha: Vec<f64> = s
+            .truth
+            .alpha_server_cfm_per_w
+            .iter()
+            .map(|a| a.alpha_cfm_per_w)
+            .collect();
+        let intakes_truth = intakes(&true_alpha);
+        println!(
+            "  server intakes against the truth (MAE, worst): after 10 iterations {:.3} C ({:+.2} C), \
+             after the polish {:.3} C ({:+.2} C), the model at the true alphas {:.3} C ({:+.2} C)",
+            intakes_loop["mae_c"].as_f64().unwrap_or(f64::NAN),
+            intakes_loop["worst_error_c"].as_f64().unwrap_or(f64::NAN),
+            intakes_polished["mae_c"].as_f64().unwrap_or(f64::NAN),
+            intakes_polished["worst_error_c"].as_f64().unwrap_or(f64::NAN),
+            intakes_truth["mae_c"].as_f64().unwrap_or(f64::NAN),
+            intakes_truth["worst_error_c"].as_f64().unwrap_or(f64::NAN),
+        );
         let runs_per_snapshot = r.runs.total / s.snapshots.len();
         println!(
             "{name}: initial MAE {:.3} C, after 10 iterations {loop_mae:.3} C ({loop_runs_per_snapshot} \
@@ -260,6 +307,7 @@ fn main() {
             "loop_alpha_within_10pct": pass_alpha_loop,
             "numerical_weighting": settings.core.numerical_weighting,
             "numerical_checks": r.numerical_checks,
+            "intakes": { "loop": intakes_loop, "polished": intakes_polished, "true_alphas": intakes_truth },
             "history": r.history.iter().map(|h| json!({"iteration": h.iteration, "mae_c": h.mae_c})).collect::<Vec<_>>(),
         }));
     }
