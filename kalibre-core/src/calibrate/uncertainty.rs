@@ -76,7 +76,7 @@ pub struct ParamUncertainty {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shift: Option<f64>,
     /// The largest move of the value that the model's numerical variants cause
-    /// (physical units, absolute; [`super::numerical`]); none without variants.
+    /// (physical units, absolute; `calibrate::numerical`); none without variants.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub numerical: Option<f64>,
     /// `rel_std` combined in quadrature with `numerical / |value|` at most

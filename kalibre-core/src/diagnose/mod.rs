@@ -90,7 +90,7 @@ use robust::Likelihood;
 const MODESTY_WINDOW_BIC: f64 = 6.0;
 
 /// How far above the best significant hypothesis's BIC another may lie and still be
-/// reported as a close alternative: 6, as [`MODESTY_WINDOW_BIC`]; below it the evidence
+/// reported as a close alternative: 6, as `MODESTY_WINDOW_BIC`; below it the evidence
 /// between the two is at most "positive" on the Kass-Raftery scale, not "strong".
 pub const CLOSE_ALTERNATIVE_BIC: f64 = MODESTY_WINDOW_BIC;
 
