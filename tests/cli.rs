@@ -202,6 +202,16 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
         .iter()
         .all(|r| r["weight"].as_f64().is_some_and(|w| w > 0.0 && w <= 1.0)));
     assert!(String::from_utf8_lossy(&o.stdout).contains("grid weighting (polish)"));
+    // The least setpoint headroom over the snapshots, with the misfit taken off.
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.contains("server intakes (model)"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(
+        line.contains("setpoint headroom") && line.contains("the model under-reads c-"),
+        "{line}"
+    );
     assert!(html.contains("weighed by how far the finer grids move it"));
 
     // Start again, kill once a few runs are journaled, then resume.

@@ -29,7 +29,7 @@ use super::simulate::sim_config;
 use super::{io_err, with_threads, CliError, CliResult};
 use hall_command::HallCommand;
 use progress::Progress;
-use summary::print_summary;
+use summary::{print_summary, Intakes};
 
 /// How alpha is calibrated (overrides `calibrate.alpha` in hall.json).
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -495,8 +495,12 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         &penalty_report,
         intakes.as_deref(),
     );
+    let intakes = intakes.map(|checks| Intakes {
+        checks,
+        under_read: kalibre_dc::sim::coldest_under_read(&hall, &report.residuals),
+    });
     std::fs::write(&html_path, html).map_err(|e| io_err(&html_path, e))?;
-    print_summary(&report, wall_s, &penalty_report);
+    print_summary(&report, wall_s, &penalty_report, intakes.as_ref());
     println!(
         "wrote {}, {}, {}",
         report_path.display(),

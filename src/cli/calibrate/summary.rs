@@ -133,6 +133,7 @@ pub(super) fn print_summary(
     report: &Report,
     wall_s: f64,
     penalty: &kalibre_dc::surrogate::PenaltyReport,
+    intakes: Option<&Intakes>,
 ) {
     println!();
     println!("calibration summary");
@@ -173,6 +174,9 @@ pub(super) fn print_summary(
         kalibre_dc::report::likelihood_text(report)
     );
     print_uncertainty(report);
+    if let Some(line) = intakes.and_then(intakes_line) {
+        println!("  {:<28} {line}", "server intakes (model)");
+    }
     println!("  {:<28} {wall_s:.1} s", "wall time");
     if !penalty.violations.is_empty() {
         println!(
@@ -191,4 +195,33 @@ pub(super) fn print_summary(
     for (name, value) in &report.best.params.0 {
         println!("    {name:<30} {value:.5}");
     }
+}
+
+/// Each snapshot's server intakes at the best parameters, and the cold-aisle sensor the
+/// model reads coldest against the measurements (if any).
+pub(super) struct Intakes {
+    pub checks: Vec<(String, kalibre_dc::sim::InletCheck)>,
+    pub under_read: Option<(String, f64)>,
+}
+
+/// The snapshot with the least setpoint headroom, in words: its hottest intake, the
+/// headroom, and the headroom less the misfit.
+fn intakes_line(i: &Intakes) -> Option<String> {
+    let (label, check, room) = i
+        .checks
+        .iter()
+        .filter_map(|(l, c)| kalibre_dc::sim::setpoint_headroom_c(c).map(|r| (l, c, r)))
+        .min_by(|a, b| a.2.total_cmp(&b.2))?;
+    let hottest = check.hottest.first()?;
+    let misfit = i.under_read.as_ref().map_or(String::new(), |(s, m)| {
+        format!(
+            "; less the {:.2} C the model under-reads {s}: {:.2} C",
+            -m,
+            room + m
+        )
+    });
+    Some(format!(
+        "hottest {:.1} C ({} in {label}, {} of {} above {:.0} C); setpoint headroom {room:.2} C{misfit} (report.html)",
+        hottest.intake_c, hottest.server, check.above_limit, check.servers, check.limit_c
+    ))
 }
