@@ -6,7 +6,11 @@
 //! ```
 //!
 //! Options: `--out FILE` (JSON, default `docs/results/server_intakes.json`), `--data DIR`
-//! (default the workspace's `data/openfoam`).
+//! (default the workspace's `data/openfoam`), `--synthetic-seeds N` (default 2).
+//!
+//! Then the same on synthetic `demo` halls (seeds 1..N), clean and with each of the
+//! demo's hidden effects, against the synthetic truth's intakes (the built-in simulator
+//! on a finer grid, with the effect).
 //!
 //! Per dataset (the stored data), the built-in model on its default grid predicts each
 //! server's intake (`kalibre simulate --servers`) at:
@@ -29,6 +33,7 @@ use kalibre::dc::effects::EffectRegistry;
 use kalibre::dc::hall::Hall;
 use kalibre::dc::sim::{coldest_under_read, server_air, SimConfig, RECOMMENDED_MAX_INLET_C};
 use kalibre::dc::snapshots::HallSnapshot;
+use kalibre::dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
 use kalibre::dc::HallModel;
 use serde_json::{json, Value};
 
@@ -153,7 +158,7 @@ type Stage = (String, Hall, Vec<f64>, Option<Vec<Residual>>);
 
 /// Per snapshot: the model's setpoint headroom under the recommended 27 C (the limit less
 /// its hottest intake), the same less its calibration's misfit
-/// (`kalibre simulate`'s note), and OpenFOAM's own.
+/// (`kalibre simulate`'s note), and the truth's.
 fn headroom(
     hall: &Hall,
     snaps: &[HallSnapshot],
@@ -170,7 +175,7 @@ fn headroom(
         .map(|(snap, (p, t))| {
             let model = limit - max(p);
             json!({
-                "snapshot": snap.state.label, "model_c": model, "openfoam_c": limit - max(t),
+                "snapshot": snap.state.label, "model_c": model, "true_c": limit - max(t),
                 "less_misfit_c": misfit.as_ref().map(|(_, m)| model + m),
                 "misfit_sensor": misfit.as_ref().map(|(s, _)| s),
             })
@@ -179,8 +184,110 @@ fn headroom(
     json!(rows)
 }
 
-fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
-    let registry = EffectRegistry::builtin();
+/// The uncalibrated model, the default calibration and, where the diagnosis names a
+/// significant effect, the hall with its suggested entry calibrated again under the
+/// Student-t likelihood (as `docs/diagnosis.md` advises).
+fn calibrated_stages(
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    work: &Path,
+) -> Result<Vec<Stage>, String> {
+    let space = HallModel::new(hall, SimConfig::default())
+        .map_err(|e| e.to_string())?
+        .layout()
+        .space()
+        .clone();
+    let mut stages: Vec<Stage> = vec![("uncalibrated".into(), hall.clone(), space.initial(), None)];
+    let (cal, _) = calibrate_as_cli(hall, snaps, &work.join("cal"))?;
+    let best = cal.report.best.params.values();
+    stages.push((
+        "calibrated".into(),
+        hall.clone(),
+        best.clone(),
+        Some(cal.report.residuals.clone()),
+    ));
+    let d = diagnose_hall(
+        hall,
+        snaps,
+        &best,
+        &EffectRegistry::builtin(),
+        &HallDiagnosisSettings::default(),
+    )
+    .map_err(|e| e.to_string())?;
+    if let Some(i) = d.diagnosis.hypotheses.iter().position(|h| h.significant) {
+        let mut next = hall.clone();
+        next.effects.push(d.suggestions[i].clone());
+        let mut settings = HallCalibrationSettings::default();
+        settings.core.robust_nu = Some(4.0);
+        let cal =
+            kalibre::dc::calibration::calibrate_hall(&next, snaps, &settings, None, Vec::new())
+                .map_err(|e| e.to_string())?;
+        let name = format!("with {} (Student-t)", d.diagnosis.hypotheses[i].name);
+        stages.push((
+            name,
+            next,
+            cal.report.best.params.values(),
+            Some(cal.report.residuals.clone()),
+        ));
+    }
+    Ok(stages)
+}
+
+/// Scores every stage of one hall against its true intakes: a row of the intake table
+/// each (printed), the headroom rows (kept for the second table), and the JSON rows.
+fn score_stages(
+    dataset: &str,
+    snaps: &[HallSnapshot],
+    truth: &[Vec<f64>],
+    stages: &[Stage],
+    rows: &mut Vec<Value>,
+    headroom_lines: &mut Vec<String>,
+) -> Result<(), String> {
+    for (name, h, params, residuals) in stages {
+        let (pred, sensor_mae) = predicted_intakes(h, snaps, params)?;
+        let mut s = score(h, snaps, &pred, truth);
+        s["headroom"] = headroom(h, snaps, &pred, truth, residuals.as_deref());
+        if let Some(hr) = s["headroom"].as_array() {
+            headroom_lines.extend(hr.iter().map(|r| {
+                format!(
+                    "| {dataset} | {name} | {} | {:.2} | {:.2} ({}) | {:.2} |",
+                    r["snapshot"].as_str().unwrap_or(""),
+                    r["model_c"].as_f64().unwrap_or(f64::NAN),
+                    r["less_misfit_c"].as_f64().unwrap_or(f64::NAN),
+                    r["misfit_sensor"].as_str().unwrap_or("-"),
+                    r["true_c"].as_f64().unwrap_or(f64::NAN),
+                )
+            }));
+        }
+        println!(
+            "| {dataset} | {name} | {sensor_mae:.3} | {:.3} | {:+.3} | {:+.2} ({}) | {:.2} | {} of {} |",
+            s["mae_c"].as_f64().unwrap_or(f64::NAN),
+            s["bias_c"].as_f64().unwrap_or(f64::NAN),
+            s["worst_c"].as_f64().unwrap_or(f64::NAN),
+            s["worst_at"].as_str().unwrap_or(""),
+            s["rank_correlation"].as_f64().unwrap_or(f64::NAN),
+            s["same_warmest_server"],
+            s["snapshots"],
+        );
+        s["dataset"] = json!(dataset);
+        s["model"] = json!(name);
+        s["sensor_mae_c"] = json!(sensor_mae);
+        s["params"] = json!(params);
+        rows.push(s);
+    }
+    Ok(())
+}
+
+/// The demo's hidden effects (as `kalibre demo --effect` places them), and none.
+const SYNTHETIC_EFFECTS: [&str; 5] = [
+    "none",
+    "rack_recirculation:rack=A05,fraction=0.3",
+    "bypass:behind_rack=A03,fraction=0.2",
+    "containment_leakage:open_fraction=0.3",
+    "crac_supply_offset:offset_c=-1.5",
+];
+
+fn run(out: &Path, data_dir: &Path, synthetic_seeds: u64) -> Result<(), String> {
     let mut rows = Vec::new();
     let mut headroom_lines = Vec::new();
     println!("| dataset | model | sensor MAE C | intake MAE C | bias C | worst C (where) | rank correlation | same warmest server |");
@@ -190,46 +297,13 @@ fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
         let (hall, snaps) = (&data.hall, &data.snaps);
         let truth = true_intakes(hall, snaps, &data.truth)?;
         let work = std::env::temp_dir().join(format!("kalibre-server-intakes-{dataset}"));
-        let mut stages: Vec<Stage> = Vec::new();
+        let mut stages = calibrated_stages(hall, snaps, &work)?;
+        let mut at_truth = stages[0].2.clone();
         let space = HallModel::new(hall, SimConfig::default())
             .map_err(|e| e.to_string())?
             .layout()
             .space()
             .clone();
-        stages.push(("uncalibrated".into(), hall.clone(), space.initial(), None));
-        let (cal, _) = calibrate_as_cli(hall, snaps, &work.join("cal"))?;
-        let best = cal.report.best.params.values();
-        stages.push((
-            "calibrated".into(),
-            hall.clone(),
-            best.clone(),
-            Some(cal.report.residuals.clone()),
-        ));
-        let d = diagnose_hall(
-            hall,
-            snaps,
-            &best,
-            &registry,
-            &HallDiagnosisSettings::default(),
-        )
-        .map_err(|e| e.to_string())?;
-        if let Some(i) = d.diagnosis.hypotheses.iter().position(|h| h.significant) {
-            let mut next = hall.clone();
-            next.effects.push(d.suggestions[i].clone());
-            let mut settings = HallCalibrationSettings::default();
-            settings.core.robust_nu = Some(4.0);
-            let cal =
-                kalibre::dc::calibration::calibrate_hall(&next, snaps, &settings, None, Vec::new())
-                    .map_err(|e| e.to_string())?;
-            let name = format!("with {} (Student-t)", d.diagnosis.hypotheses[i].name);
-            stages.push((
-                name,
-                next,
-                cal.report.best.params.values(),
-                Some(cal.report.residuals.clone()),
-            ));
-        }
-        let mut at_truth = space.initial();
         for (i, name) in space.names().iter().enumerate() {
             if let Some(v) = name
                 .strip_prefix("alpha/")
@@ -239,41 +313,65 @@ fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
             }
         }
         stages.push(("true alphas".into(), hall.clone(), at_truth, None));
-        for (name, h, params, residuals) in &stages {
-            let (pred, sensor_mae) = predicted_intakes(h, snaps, params)?;
-            let mut s = score(h, snaps, &pred, &truth);
-            s["headroom"] = headroom(h, snaps, &pred, &truth, residuals.as_deref());
-            if let Some(rows) = s["headroom"].as_array() {
-                headroom_lines.extend(rows.iter().map(|r| {
-                    format!(
-                        "| {dataset} | {name} | {} | {:.2} | {:.2} ({}) | {:.2} |",
-                        r["snapshot"].as_str().unwrap_or(""),
-                        r["model_c"].as_f64().unwrap_or(f64::NAN),
-                        r["less_misfit_c"].as_f64().unwrap_or(f64::NAN),
-                        r["misfit_sensor"].as_str().unwrap_or("-"),
-                        r["openfoam_c"].as_f64().unwrap_or(f64::NAN),
-                    )
-                }));
+        score_stages(
+            dataset,
+            snaps,
+            &truth,
+            &stages,
+            &mut rows,
+            &mut headroom_lines,
+        )?;
+    }
+    // Synthetic `demo` halls: the truth is the built-in simulator itself on a finer grid,
+    // with one of the demo's hidden effects.
+    for seed in 1..=synthetic_seeds {
+        for effect in SYNTHETIC_EFFECTS {
+            let mut options = SynthOptions::new(Preset::Demo, seed).with_noise_c(0.15);
+            if effect != "none" {
+                options = options.with_effect(parse_effect_arg(effect).map_err(|e| e.to_string())?);
             }
-            println!(
-                "| {dataset} | {name} | {sensor_mae:.3} | {:.3} | {:+.3} | {:+.2} ({}) | {:.2} | {} of {} |",
-                s["mae_c"].as_f64().unwrap_or(f64::NAN),
-                s["bias_c"].as_f64().unwrap_or(f64::NAN),
-                s["worst_c"].as_f64().unwrap_or(f64::NAN),
-                s["worst_at"].as_str().unwrap_or(""),
-                s["rank_correlation"].as_f64().unwrap_or(f64::NAN),
-                s["same_warmest_server"],
-                s["snapshots"],
-            );
-            s["dataset"] = json!(dataset);
-            s["model"] = json!(name);
-            s["sensor_mae_c"] = json!(sensor_mae);
-            s["params"] = json!(params);
-            rows.push(s);
+            let s = synth::generate(&options).map_err(|e| e.to_string())?;
+            let truth: Vec<Vec<f64>> = s
+                .snapshots
+                .iter()
+                .map(|snap| {
+                    let t = s
+                        .truth
+                        .snapshots
+                        .iter()
+                        .find(|t| t.label == snap.state.label)
+                        .and_then(|t| t.server_intake_c.as_ref())
+                        .ok_or("a synthetic truth without server intakes")?;
+                    s.hall
+                        .servers()
+                        .map(|sv| {
+                            t.get(&sv.server.id)
+                                .copied()
+                                .ok_or("a server without a true intake")
+                        })
+                        .collect::<Result<Vec<f64>, _>>()
+                })
+                .collect::<Result<_, _>>()?;
+            let label = format!("demo-{seed} {}", effect.split(':').next().unwrap_or(effect));
+            let work = std::env::temp_dir().join(format!(
+                "kalibre-server-intakes-demo-{seed}-{}",
+                effect.split(':').next().unwrap_or(effect)
+            ));
+            let stages = calibrated_stages(&s.hall, &s.snapshots, &work)?;
+            score_stages(
+                &label,
+                &s.snapshots,
+                &truth,
+                &stages,
+                &mut rows,
+                &mut headroom_lines,
+            )?;
         }
     }
-    println!("\nSetpoint headroom (27 C less the hottest intake), the model's less its misfit, and OpenFOAM's:\n");
-    println!("| dataset | model | snapshot | model's headroom C | less the misfit C (sensor) | OpenFOAM's C |");
+    println!("\nSetpoint headroom (27 C less the hottest intake), the model's less its misfit, and the truth's:\n");
+    println!(
+        "| dataset | model | snapshot | model's headroom C | less the misfit C (sensor) | true C |"
+    );
     println!("|---|---|---|---|---|---|");
     for l in &headroom_lines {
         println!("{l}");
@@ -289,20 +387,27 @@ fn run(out: &Path, data_dir: &Path) -> Result<(), String> {
 fn main() {
     let mut out = PathBuf::from("docs/results/server_intakes.json");
     let mut data = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/openfoam"));
+    let mut synthetic_seeds = 2;
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
         match (pair[0].as_str(), pair.get(1)) {
             ("--out", Some(v)) => out = PathBuf::from(v),
             ("--data", Some(v)) => data = PathBuf::from(v),
+            ("--synthetic-seeds", Some(v)) => {
+                synthetic_seeds = v.parse().unwrap_or_else(|_| {
+                    eprintln!("--synthetic-seeds needs a whole number, got `{v}`");
+                    std::process::exit(2)
+                })
+            }
             (flag, _) => {
                 eprintln!(
-                    "unknown argument or missing value `{flag}` (use --out FILE, --data DIR)"
+                    "unknown argument or missing value `{flag}` (use --out FILE, --data DIR, --synthetic-seeds N)"
                 );
                 std::process::exit(2)
             }
         }
     }
-    if let Err(e) = run(&out, &data) {
+    if let Err(e) = run(&out, &data, synthetic_seeds) {
         eprintln!("server_intakes: {e}");
         std::process::exit(1);
     }

@@ -42,7 +42,8 @@ pub fn under_read_note(under: &(String, f64), labels: &[String], checks: &[Inlet
         .collect();
     format!(
         "note: the calibrated model reads cold-aisle sensor {sensor} {:.2} C colder than measured \
-         on average; intakes near it may be that much warmer than predicted. Headroom less that: {}",
+         on average; intakes near it may be that much warmer than predicted. Headroom less that \
+         (an allowance for the error the sensors show, not a bound): {}",
         -mean,
         safe.join(", ")
     )

@@ -56,7 +56,9 @@ pub fn intakes_html(checks: &[(String, InletCheck)], under: Option<&(String, f64
             h,
             "<p class=\"note\">The calibrated model reads cold-aisle sensor <code>{}</code> \
              {:.2} C colder than measured on average: intakes near it may be that much warmer \
-             than predicted. Count on the headroom less that.</p>",
+             than predicted. The headroom less that allows for the error the sensors show; \
+             an error where no sensor is (an effect the model lacks, its grid) is not in it \
+             (<code>kalibre diagnose</code> looks for the first).</p>",
             esc(sensor),
             -mean
         );
