@@ -162,6 +162,41 @@ fn simulate_answers_what_if_and_its_headroom_is_exact() {
     // Slower fans give less supply against the same server draw: warmer intakes.
     assert!(hottest_t1(&["--fan-speed-scale", "0.9"]) > hottest_t1(&[]));
     let refused = |extra: &[&str], needle: &str| assert_input_error(&simulate(extra), needle);
+    // On finer grids: each snapshot's least headroom over the grids, never above the
+    // model's own.
+    let o = simulate(&["--grid-check", "0.75,0.5"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    for label in ["t0", "t1", "t2"] {
+        let own = stdout
+            .lines()
+            .find(|l| l.starts_with(&format!("{label}: ")) && l.contains("server intakes"))
+            .unwrap_or_else(|| panic!("{stdout}"));
+        let fine = stdout
+            .lines()
+            .find(|l| l.starts_with(&format!("{label}: on finer grids")))
+            .unwrap_or_else(|| panic!("{stdout}"));
+        assert!(
+            fine.contains("at 0.150 m") && fine.contains("at 0.100 m"),
+            "{fine}"
+        );
+        let number = |text: &str, before: &str| -> f64 {
+            let head = &text[..text.find(before).unwrap()];
+            head.rsplit(' ').next().unwrap().parse().unwrap()
+        };
+        let least = number(fine, " C, allows for the grid");
+        // The model's own: `headroom H C` or `O C over`.
+        let model = if own.contains("headroom ") {
+            number(own, " C: every setpoint could rise")
+        } else {
+            -number(own, " C over")
+        };
+        assert!(least <= model + 1e-9, "{least} > {model}: {fine}");
+    }
+    refused(
+        &["--grid-check", "1.5"],
+        "--grid-check: 1.5 is not a finer grid",
+    );
     refused(
         &["--fan-speed-scale", "1.2"],
         "CRAC `crac-1` in snapshot `t0` would run at 1.080 of its rated flow",

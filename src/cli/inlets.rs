@@ -33,12 +33,16 @@ pub fn inlet_line(label: &str, check: &InletCheck) -> String {
 /// The note on the headroom: inlet sensors are the measurements nearest the intakes, and
 /// where the calibrated model reads one colder than measured, intakes near it may be as
 /// much warmer than it predicts.
-pub fn under_read_note(under: &(String, f64), labels: &[String], checks: &[InletCheck]) -> String {
+pub fn under_read_note(
+    under: &(String, f64),
+    labels: &[String],
+    headroom_c: &[Option<f64>],
+) -> String {
     let (sensor, mean) = under;
     let safe: Vec<String> = labels
         .iter()
-        .zip(checks)
-        .filter_map(|(l, c)| setpoint_headroom_c(c).map(|h| format!("{l} {:.2} C", h + mean)))
+        .zip(headroom_c)
+        .filter_map(|(l, h)| h.map(|h| format!("{l} {:.2} C", h + mean)))
         .collect();
     format!(
         "note: the calibrated model reads cold-aisle sensor {sensor} {:.2} C colder than measured \
@@ -79,7 +83,7 @@ mod tests {
         let note = under_read_note(
             &("c-A1-lo".into(), -3.5),
             &["t0".into(), "t1".into()],
-            &[check(21.0), check(25.0)],
+            &[check(21.0), check(25.0)].map(|c| setpoint_headroom_c(&c)),
         );
         assert!(note.contains("c-A1-lo 3.50 C colder"), "{note}");
         assert!(note.contains("t0 2.50 C, t1 -1.50 C"), "{note}");

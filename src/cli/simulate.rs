@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use kalibre_core::ParamSpace;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::sim::{coldest_under_read, SimConfig};
+use kalibre_dc::sim::{coldest_under_read, setpoint_headroom_c, SimConfig};
 use kalibre_dc::snapshots;
 use kalibre_dc::HallModel;
 
@@ -48,6 +48,11 @@ pub struct SimulateArgs {
     /// default is ASHRAE TC 9.9's recommended upper bound for classes A1-A4.
     #[arg(long = "inlet-limit-c", default_value_t = kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)]
     inlet_limit_c: f64,
+    /// Also solve on grids these factors of the cell size finer (e.g. `0.75,0.5`), and
+    /// take each snapshot's least setpoint headroom over the grids: the model's own grid
+    /// error at its hottest server is then in the figure.
+    #[arg(long = "grid-check", value_delimiter = ',', value_name = "F,F")]
+    grid_check: Vec<f64>,
     #[command(flatten)]
     what_if: WhatIfArgs,
 }
@@ -101,6 +106,40 @@ fn load_params(path: &Path, json: &serde_json::Value, space: &ParamSpace) -> Cli
         .check_physical(&values)
         .map_err(|e| CliError::Input(format!("{file}: {e}")))?;
     Ok(values)
+}
+
+/// Each `--grid-check` factor's cell size and, per snapshot, the setpoint headroom there.
+fn finer_headrooms(
+    hall: &Hall,
+    snaps: &[kalibre_dc::snapshots::HallSnapshot],
+    params: &[f64],
+    grid_m: Option<f64>,
+    args: &SimulateArgs,
+) -> CliResult<Vec<(f64, Vec<f64>)>> {
+    let base = sim_config(grid_m)?.cell_m;
+    args.grid_check
+        .iter()
+        .map(|&f| {
+            if !(f.is_finite() && f > 0.0 && f < 1.0) {
+                return Err(CliError::Input(format!(
+                    "--grid-check: {f} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)"
+                )));
+            }
+            let model = HallModel::new(hall, sim_config(Some(base * f))?)?;
+            let rooms = snaps
+                .iter()
+                .map(|snap| {
+                    let solution = model.solve(&snap.state, params).map_err(|e| {
+                        CliError::Run(format!("snapshot `{}` at {:.3} m: {e}", snap.state.label, base * f))
+                    })?;
+                    let air = kalibre_dc::sim::server_air(hall, &snap.state, &solution)?;
+                    let check = kalibre_dc::sim::inlet_check(&air, args.inlet_limit_c, 1)?;
+                    Ok(setpoint_headroom_c(&check).unwrap_or(f64::NAN))
+                })
+                .collect::<CliResult<Vec<f64>>>()?;
+            Ok((base * f, rooms))
+        })
+        .collect()
 }
 
 /// The simulator configuration for `--grid-m`.
@@ -200,6 +239,27 @@ pub fn run(args: SimulateArgs) -> CliResult {
     for (label, check) in labels.iter().zip(&checks) {
         println!("{}", inlet_line(label, check));
     }
+    // Each snapshot's headroom, the least over the finer grids when asked for.
+    let mut headroom: Vec<Option<f64>> = checks.iter().map(setpoint_headroom_c).collect();
+    if !args.grid_check.is_empty() {
+        let fine = finer_headrooms(&hall, &snaps, &params, grid_m, &args)?;
+        for (k, label) in labels.iter().enumerate() {
+            let shown: Vec<String> = fine
+                .iter()
+                .map(|(cell_m, rooms)| format!("{:.2} C at {cell_m:.3} m", rooms[k]))
+                .collect();
+            headroom[k] = fine
+                .iter()
+                .map(|(_, rooms)| rooms[k])
+                .chain(headroom[k])
+                .reduce(f64::min);
+            println!(
+                "{label}: on finer grids the headroom is {}; the least, {:.2} C, allows for the grid",
+                shown.join(", "),
+                headroom[k].unwrap_or(f64::NAN)
+            );
+        }
+    }
     // How far the calibration's own misfit says to trust those figures.
     let residuals: Option<Vec<kalibre_core::calibrate::Residual>> = match (
         &args.params,
@@ -212,7 +272,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         _ => None,
     };
     if let Some(under) = residuals.and_then(|r| coldest_under_read(&hall, &r)) {
-        println!("{}", under_read_note(&under, &labels, &checks));
+        println!("{}", under_read_note(&under, &labels, &headroom));
     }
     println!(
         "wrote {} ({} snapshots x {} sensors){}",
