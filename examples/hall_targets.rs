@@ -181,16 +181,7 @@ fn main() {
                     .expect("solve");
                 rows.extend(server_air(&s.hall, &snap.state, &sol).expect("server air"));
             }
-            let truth_of = |label: &str, server: &str| {
-                s.truth
-                    .snapshots
-                    .iter()
-                    .find(|t| t.label == label)?
-                    .server_intake_c
-                    .as_ref()?
-                    .get(server)
-                    .copied()
-            };
+            let truth_of = |label: &str, server: &str| s.truth.server_intake_c(label, server);
             let e = intake_error(&rows, &truth_of).expect("true intakes");
             let (w, t) = &e.worst;
             json!({ "mae_c": e.mae_c, "worst_error_c": w.intake_c - t, "worst_at": format!("{} in {}", w.server, w.snapshot) })

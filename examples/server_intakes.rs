@@ -365,19 +365,12 @@ fn run(out: &Path, data_dir: &Path, synthetic_seeds: u64) -> Result<(), String> 
                 .snapshots
                 .iter()
                 .map(|snap| {
-                    let t = s
-                        .truth
-                        .snapshots
-                        .iter()
-                        .find(|t| t.label == snap.state.label)
-                        .and_then(|t| t.server_intake_c.as_ref())
-                        .ok_or("a synthetic truth without server intakes")?;
                     s.hall
                         .servers()
                         .map(|sv| {
-                            t.get(&sv.server.id)
-                                .copied()
-                                .ok_or("a server without a true intake")
+                            s.truth
+                                .server_intake_c(&snap.state.label, &sv.server.id)
+                                .ok_or("a synthetic truth without server intakes")
                         })
                         .collect::<Result<Vec<f64>, _>>()
                 })

@@ -4,7 +4,7 @@ use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 
 use crate::effects::{Effect, EffectRegistry};
 use crate::hall::Hall;
-use crate::sim::{SimConfig, Simulator, Solution};
+use crate::sim::{server_air, ServerAir, SimConfig, Simulator, Solution};
 use crate::snapshots::OperatingState;
 use crate::{Error, ParamLayout, Result};
 
@@ -83,6 +83,13 @@ impl HallModel {
     /// The effects, in layout order.
     pub fn effects(&self) -> &[Box<dyn Effect>] {
         &self.effects
+    }
+
+    /// Every server's air in one state at `params` (layout order): what the model says
+    /// where no sensor measures.
+    pub fn server_air(&self, state: &OperatingState, params: &[f64]) -> Result<Vec<ServerAir>> {
+        let solution = self.solve(state, params)?;
+        server_air(self.sim.hall(), state, &solution)
     }
 
     /// Solves one state at `params` (layout order) and returns every field (for VTK and

@@ -22,7 +22,7 @@ use crate::diagnosis::{diagnose_hall, HallDiagnosis, HallDiagnosisSettings};
 use crate::effects::EffectRegistry;
 use crate::hall::{AlphaMode, EffectSpec, Hall};
 use crate::report::{ThermalPlane, INLET_HEIGHT_M};
-use crate::sim::{intake_error, server_air};
+use crate::sim::intake_error;
 use crate::snapshots::HallSnapshot;
 use crate::{Error, HallModel, ParamLayout, Result};
 
@@ -307,7 +307,6 @@ pub fn run_story(
             intakes: match &settings.true_intakes_c {
                 Some(truth) => Some(step_intakes(
                     &cal,
-                    &current,
                     snaps,
                     &cal.report.best.params.values(),
                     truth,
@@ -440,7 +439,6 @@ fn plane(
 /// The calibrated model's server intakes at `params` against `truth` (per snapshot).
 fn step_intakes(
     cal: &HallCalibration,
-    hall: &Hall,
     snaps: &[HallSnapshot],
     params: &[f64],
     truth: &[BTreeMap<String, f64>],
@@ -454,8 +452,7 @@ fn step_intakes(
     }
     let mut rows = Vec::new();
     for snap in snaps {
-        let solution = cal.model.solve(&snap.state, params)?;
-        rows.extend(server_air(hall, &snap.state, &solution)?);
+        rows.extend(cal.model.server_air(&snap.state, params)?);
     }
     let labels: Vec<&str> = snaps.iter().map(|s| s.state.label.as_str()).collect();
     let lookup = |label: &str, server: &str| {

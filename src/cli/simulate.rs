@@ -129,10 +129,9 @@ fn finer_headrooms(
             let rooms = snaps
                 .iter()
                 .map(|snap| {
-                    let solution = model.solve(&snap.state, params).map_err(|e| {
+                    let air = model.server_air(&snap.state, params).map_err(|e| {
                         CliError::Run(format!("snapshot `{}` at {:.3} m: {e}", snap.state.label, base * f))
                     })?;
-                    let air = kalibre_dc::sim::server_air(hall, &snap.state, &solution)?;
                     let check = kalibre_dc::sim::inlet_check(&air, args.inlet_limit_c, 1)?;
                     Ok(setpoint_headroom_c(&check).unwrap_or(f64::NAN))
                 })

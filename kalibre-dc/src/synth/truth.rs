@@ -42,6 +42,19 @@ pub struct Truth {
     pub reference: Option<ReferenceErrors>,
 }
 
+impl Truth {
+    /// A server's true intake air in a snapshot (C), when the truth records it.
+    pub fn server_intake_c(&self, snapshot: &str, server: &str) -> Option<f64> {
+        self.snapshots
+            .iter()
+            .find(|t| t.label == snapshot)?
+            .server_intake_c
+            .as_ref()?
+            .get(server)
+            .copied()
+    }
+}
+
 /// The true alpha of one server.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -17,7 +17,7 @@ use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::openfoam::OpenFoamModel;
-use kalibre_dc::sim::{inlet_check, server_air, InletCheck, RECOMMENDED_MAX_INLET_C};
+use kalibre_dc::sim::{inlet_check, InletCheck, RECOMMENDED_MAX_INLET_C};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
 use kalibre_dc::HallModel;
@@ -427,8 +427,7 @@ fn intake_checks(
     snaps
         .iter()
         .map(|snap| {
-            let solution = model.solve(&snap.state, &params)?;
-            let air = server_air(&hall, &snap.state, &solution)?;
+            let air = model.server_air(&snap.state, &params)?;
             Ok((
                 snap.state.label.clone(),
                 inlet_check(&air, RECOMMENDED_MAX_INLET_C, 3)?,
