@@ -2,7 +2,7 @@
 //! against OpenFOAM's own (`truth.json`'s `server_intake_c`), on the development datasets.
 //!
 //! ```sh
-//! cargo run --release --example server_intakes   # about 1 min; docs/results/server_intakes.json
+//! cargo run --release --example server_intakes   # about 3 min; docs/results/server_intakes.json
 //! ```
 //!
 //! Options: `--out FILE` (JSON, default `docs/results/server_intakes.json`), `--data DIR`
