@@ -189,13 +189,7 @@ fn main() {
         let layout = cal.model.layout();
         let intakes_loop = intakes(&layout.alpha_per_server(&loop_best.params.values()));
         let intakes_polished = intakes(&layout.alpha_per_server(&r.best.params.values()));
-        let true_alpha: Vec<f64> = s
-            .truth
-            .alpha_server_cfm_per_w
-            .iter()
-            .map(|a| a.alpha_cfm_per_w)
-            .collect();
-        let intakes_truth = intakes(&true_alpha);
+        let intakes_truth = intakes(&s.truth.alpha_per_server());
         println!(
             "  server intakes against the truth (MAE, worst): after 10 iterations {:.3} C ({:+.2} C), \
              after the polish {:.3} C ({:+.2} C), the model at the true alphas {:.3} C ({:+.2} C)",

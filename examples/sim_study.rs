@@ -102,12 +102,7 @@ fn main() {
         ds = vec![0.01];
     }
     let s = generate(&SynthOptions::new(Preset::Demo, 1).with_reference_runs(false)).unwrap();
-    let alpha: Vec<f64> = s
-        .truth
-        .alpha_server_cfm_per_w
-        .iter()
-        .map(|a| a.alpha_cfm_per_w)
-        .collect();
+    let alpha = s.truth.alpha_per_server();
     if diagnose_only {
         let states: Vec<OperatingState> = s.snapshots.iter().map(|sn| sn.state.clone()).collect();
         diagnose(

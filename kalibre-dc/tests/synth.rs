@@ -376,12 +376,7 @@ fn uncalibrated_demo_model_is_off_by_two_to_six_degrees() {
         .into_iter()
         .map(|t| hall.server_types[t.unwrap()].alpha_cfm_per_w.initial)
         .collect();
-    let truth: Vec<f64> = synth
-        .truth
-        .alpha_server_cfm_per_w
-        .iter()
-        .map(|s| s.alpha_cfm_per_w)
-        .collect();
+    let truth = synth.truth.alpha_per_server();
     let (mut uncal, mut at_truth, mut n) = (0.0, 0.0, 0.0);
     for snap in &synth.snapshots {
         let a = sim.solve(&snap.state, &initial, &[]).unwrap();

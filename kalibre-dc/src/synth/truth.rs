@@ -43,6 +43,14 @@ pub struct Truth {
 }
 
 impl Truth {
+    /// The true alpha of every server (cfm/W), in hall order.
+    pub fn alpha_per_server(&self) -> Vec<f64> {
+        self.alpha_server_cfm_per_w
+            .iter()
+            .map(|a| a.alpha_cfm_per_w)
+            .collect()
+    }
+
     /// A server's true intake air in a snapshot (C), when the truth records it.
     pub fn server_intake_c(&self, snapshot: &str, server: &str) -> Option<f64> {
         self.snapshots
