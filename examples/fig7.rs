@@ -16,6 +16,8 @@
 //! difference halved (`examples/fig7_edges.rs`); files get `-sharp` at the end.
 //! `--local-recirculation` gives both graphs the whole-hall local recirculation term on
 //! their cold-aisle sensors; files get `-local` at the end.
+//! `--influence-adjacency` gives both graphs hot-aisle edges from the model's own air
+//! flow at the initial alphas (`Simulator::sensor_influence`); files get `-influence`.
 //! `--quick`: 40 runs of `demo`, 1 seed. Prints the table and writes `fig7.json`,
 //! `fig7.md` and `fig7.svg`.
 
@@ -47,6 +49,7 @@ fn main() {
     };
     let raw_sharp = raw.iter().any(|a| a == "--sharp-adjacency");
     let raw_local = raw.iter().any(|a| a == "--local-recirculation");
+    let raw_influence = raw.iter().any(|a| a == "--influence-adjacency");
     let args = parse_args(raw.into_iter().filter(|a| {
         !matches!(
             a.as_str(),
@@ -56,6 +59,7 @@ fn main() {
                 | "--per-server"
                 | "--sharp-adjacency"
                 | "--local-recirculation"
+                | "--influence-adjacency"
         )
     }))
     .unwrap_or_else(|e| {
@@ -71,6 +75,7 @@ fn main() {
     cfg.grain = grain;
     cfg.sharp_adjacency = raw_sharp;
     cfg.local_recirculation = raw_local;
+    cfg.influence_adjacency = raw_influence;
     if let Some(n) = args.seeds {
         cfg.seeds = n;
     }
@@ -88,7 +93,12 @@ fn main() {
     } else {
         ""
     };
-    let stem = format!("{}{}{sharp}{local}", draw.stem(), grain.suffix());
+    let influence = if cfg.influence_adjacency {
+        "-influence"
+    } else {
+        ""
+    };
+    let stem = format!("{}{}{sharp}{local}{influence}", draw.stem(), grain.suffix());
     let written = write_json(&args.out_dir, &format!("{stem}.json"), &r)
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.md"), &md))
         .and_then(|_| write_file(&args.out_dir, &format!("{stem}.svg"), &svg(&r)));

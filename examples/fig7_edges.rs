@@ -14,7 +14,9 @@
 //! runs (the form's floor).
 //! - **Hot aisle:** one feature, the paper's heating block `sum_j Wss_jk P_j / alpha_j`,
 //!   with `Wss` built by [`Adjacency::from_hall`] under each edge rule: the default, other
-//!   cuts, powers of the reciprocal distance, and the height difference scaled.
+//!   cuts, powers of the reciprocal distance, and the height difference scaled; and
+//!   with `Wss` from the model's own flow at the initial alphas
+//!   ([`Adjacency::with_server_influence`], session 20).
 //! - **Cold aisle:** the hall-wide recirculation and bypass features, the local
 //!   recirculation term (its first, 3 m form and its default, whole-hall form), and
 //!   linear fits on the 11 per-type rises (and alphas): what a
@@ -25,6 +27,7 @@ mod experiments;
 
 use experiments::fig7::{draw_alphas, AlphaDraw, AlphaGrain, Fig7Config};
 use kalibre::core::Model;
+use kalibre::dc::calibration::SERVER_INFLUENCE_CUT;
 use kalibre::dc::hall::AlphaMode;
 use kalibre::dc::surrogate::{
     Adjacency, AdjacencySettings, FlowBalance, FlowBalanceTerm, LocalRecirculationSettings,
@@ -204,8 +207,32 @@ fn main() {
         "1/d, height x0.5".into(),
         default.with_server_vertical_scale(0.5),
     ));
-    for (name, rule) in rules {
-        let adj = Adjacency::from_hall(&s.hall, &rule).expect("adjacency");
+    // The model's own transport (session 20): each sensor's sensitivity to each server's
+    // rise in the flow at the initial alphas, cut at 1 % of the row's largest and not cut.
+    let initial = layout.alpha_per_server(&space.initial());
+    let influence = s
+        .model
+        .simulator()
+        .sensor_influence(&state, &initial)
+        .expect("the adjoint solves");
+    let mut adjacencies: Vec<(String, Adjacency)> = rules
+        .into_iter()
+        .map(|(name, rule)| {
+            (
+                name,
+                Adjacency::from_hall(&s.hall, &rule).expect("adjacency"),
+            )
+        })
+        .collect();
+    for cut in [SERVER_INFLUENCE_CUT, 0.0] {
+        adjacencies.push((
+            format!("from the model's flow, cut {cut}"),
+            Adjacency::from_hall(&s.hall, &default)
+                .and_then(|a| a.with_server_influence(&influence.per_sensor, &state.power_w, cut))
+                .expect("influence edges"),
+        ));
+    }
+    for (name, adj) in adjacencies {
         let block = |i: usize, k: usize| {
             vec![adj
                 .ss

@@ -14,13 +14,15 @@
 //! model and of the fitted surrogate, per snapshot and sensor, at the truth. Compared:
 //! the default training, the training before session 6 (no ridge in Adam's loss, the
 //! mass-balance terms' weights ridged like the rest), and the default with the local
-//! recirculation term (`LocalRecirculationSettings::default`, session 18).
+//! recirculation term (`LocalRecirculationSettings::default`, session 18), and the default
+//! with hot-aisle edges from the model's air flow at the initial alphas
+//! (`HallCalibrationSettings::server_influence`, session 20).
 
 #[path = "experiments/mod.rs"]
 mod experiments;
 
 use kalibre::core::{Model, Sample, Surrogate, TrainingSet};
-use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::calibration::{HallCalibrationSettings, SERVER_INFLUENCE_CUT};
 use kalibre::dc::surrogate::LocalRecirculationSettings;
 use kalibre::dc::synth::Preset;
 use rand::{Rng, SeedableRng};
@@ -129,7 +131,12 @@ fn main() {
     let hot = s.hot_sensors();
 
     let mut results = Vec::new();
-    for variant in ["default", "before session 6", "local recirculation"] {
+    for variant in [
+        "default",
+        "before session 6",
+        "local recirculation",
+        "influence edges",
+    ] {
         let mut st = HallCalibrationSettings::default();
         match variant {
             "before session 6" => {
@@ -139,6 +146,7 @@ fn main() {
             "local recirculation" => {
                 st.local_recirculation = Some(LocalRecirculationSettings::default());
             }
+            "influence edges" => st.server_influence = Some(SERVER_INFLUENCE_CUT),
             _ => {}
         }
         let mut g = experiments::kalibre_surrogate(&s, &st).expect("graph");

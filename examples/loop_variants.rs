@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
+use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings, SERVER_INFLUENCE_CUT};
 use kalibre::dc::surrogate::{LocalRecirculationSettings, PenaltySettings, LOCAL_RADIUS_M};
 use kalibre::dc::synth::{self, Preset, SynthOptions};
 use serde_json::json;
@@ -94,6 +94,14 @@ const VARIANTS: &[(&str, &str)] = &[
         "ridge on the mass-balance terms' weights 0.1 instead of 0.03",
     ),
     (
+        "influence-adjacency",
+        "hot-aisle server-sensor edges from the model's air flow at the initial alphas, cut at 1 % (session 20)",
+    ),
+    (
+        "influence-local",
+        "influence-adjacency and local-recirculation together",
+    ),
+    (
         "hall-wide-ridge-0.3",
         "ridge on the mass-balance terms' weights 0.3 instead of 0.03",
     ),
@@ -128,6 +136,11 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         }
         "local-recirculation-3m" => {
             s.local_recirculation = Some(LocalRecirculationSettings::within(LOCAL_RADIUS_M))
+        }
+        "influence-adjacency" => s.server_influence = Some(SERVER_INFLUENCE_CUT),
+        "influence-local" => {
+            s.server_influence = Some(SERVER_INFLUENCE_CUT);
+            s.local_recirculation = Some(LocalRecirculationSettings::default());
         }
         "focus-0.5" => s.core.focus = Some(0.5),
         "focus-2" => s.core.focus = Some(2.0),

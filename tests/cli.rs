@@ -77,6 +77,21 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
         .arg("--out")
         .arg(dir.join("cal")));
     assert_input_error(&o, "--nu: must be finite and > 0, got 0");
+    // Edges from the built-in simulator's flow asked of another model.
+    let o = run(kalibre()
+        .args([
+            "calibrate",
+            "--model",
+            "openfoam",
+            "--influence-edges",
+            "--hall",
+        ])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "--influence-edges");
     // Snapshots of another hall: an unknown id.
     let bad_snaps = dir.join("snaps.csv");
     std::fs::write(

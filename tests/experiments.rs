@@ -233,6 +233,41 @@ fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
         }
     }
     assert!(fig7::markdown(&local).contains("whole-hall local recirculation term"));
+
+    // Edges from the model's air flow change both graphs' hot-aisle predictions only.
+    let influence = fig7::run_fig7(
+        &fig7::Fig7Config {
+            influence_adjacency: true,
+            ..cfg
+        },
+        &quiet,
+    )
+    .unwrap();
+    assert_eq!(curve(&influence, 2), curve(&r, 2));
+    for graph in [0, 1] {
+        let aisle = |r: &fig7::Fig7Result, hot: bool| -> Vec<f64> {
+            r.curves[graph]
+                .points
+                .iter()
+                .map(|p| if hot { &p.hot_mae_c } else { &p.cold_mae_c })
+                .map(|m| m.as_ref().unwrap().mean)
+                .collect()
+        };
+        assert_ne!(
+            aisle(&influence, true),
+            aisle(&r, true),
+            "{}",
+            r.curves[graph].surrogate
+        );
+        for (a, b) in aisle(&influence, false).iter().zip(aisle(&r, false)) {
+            assert!(
+                (a - b).abs() <= 1e-6 * b,
+                "{}: {a} vs {b}",
+                r.curves[graph].surrogate
+            );
+        }
+    }
+    assert!(fig7::markdown(&influence).contains("edges from the model's air flow"));
 }
 
 #[test]

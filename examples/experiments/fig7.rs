@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use kalibre::baselines::{InputLevel, Mlp, MlpSettings};
 use kalibre::core::{Model, ParamSpace, Sample, Surrogate, TrainingSet};
-use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::calibration::{HallCalibrationSettings, SERVER_INFLUENCE_CUT};
 use kalibre::dc::hall::AlphaMode;
 use kalibre::dc::snapshots::OperatingState;
 use kalibre::dc::surrogate::LocalRecirculationSettings;
@@ -141,6 +141,10 @@ pub struct Fig7Config {
     /// (`LocalRecirculationSettings::default`: the whole hall weighed by 1/d; session 18).
     #[serde(default)]
     pub local_recirculation: bool,
+    /// Both graphs' hot-aisle edges from the model's own air flow at the initial alphas
+    /// (`HallCalibrationSettings::server_influence`; session 20), instead of `1 / d`.
+    #[serde(default)]
+    pub influence_adjacency: bool,
 }
 
 impl Fig7Config {
@@ -154,6 +158,7 @@ impl Fig7Config {
             grain: AlphaGrain::Type,
             sharp_adjacency: false,
             local_recirculation: false,
+            influence_adjacency: false,
         }
     }
     /// Seconds-long: 40 runs of `demo`, 1 seed.
@@ -166,6 +171,7 @@ impl Fig7Config {
             grain: AlphaGrain::Type,
             sharp_adjacency: false,
             local_recirculation: false,
+            influence_adjacency: false,
         }
     }
 }
@@ -280,6 +286,9 @@ fn surrogate_mae(
     let mut settings = HallCalibrationSettings::default();
     if cfg.local_recirculation {
         settings.local_recirculation = Some(LocalRecirculationSettings::default());
+    }
+    if cfg.influence_adjacency {
+        settings.server_influence = Some(SERVER_INFLUENCE_CUT);
     }
     if cfg.sharp_adjacency {
         settings.surrogate.adjacency = settings
@@ -585,6 +594,11 @@ pub fn markdown(r: &Fig7Result) -> String {
             }
             + if r.config.local_recirculation {
                 "; the whole-hall local recirculation term on the cold-aisle sensors"
+            } else {
+                ""
+            }
+            + if r.config.influence_adjacency {
+                "; hot-aisle edges from the model's air flow"
             } else {
                 ""
             },

@@ -16,9 +16,9 @@ use kalibre::core::search::ProjectedGradient;
 use kalibre::core::{Calibrator, Event, Observations, Report, RunStore, Searcher, Surrogate};
 use kalibre::dc::calibration::HallCalibrationSettings;
 use kalibre::dc::hall::{AlphaMode, Hall};
-use kalibre::dc::sim::SimConfig;
+use kalibre::dc::sim::{SensorInfluence, SimConfig};
 use kalibre::dc::snapshots::{self, HallSnapshot, OperatingState};
-use kalibre::dc::surrogate::{PenaltySettings, TemperatureRisePenalty, ThermalGraph};
+use kalibre::dc::surrogate::{Adjacency, PenaltySettings, TemperatureRisePenalty, ThermalGraph};
 use kalibre::dc::synth::{self, Preset, SynthOptions};
 use kalibre::dc::HallModel;
 use serde::{Deserialize, Serialize};
@@ -56,6 +56,10 @@ pub struct Setup {
     pub synth_s: f64,
     /// The true alpha per server type (cfm/W), as `truth.json` has it.
     pub true_alpha_type: std::collections::BTreeMap<String, f64>,
+    /// The sensors' influence from the model's flow at the initial alphas and the first
+    /// snapshot, once computed (its adjoint solves take seconds; every surrogate of a
+    /// setup shares it).
+    pub influence: std::sync::OnceLock<SensorInfluence>,
 }
 
 impl Setup {
@@ -104,6 +108,7 @@ pub fn setup_with_alpha(
         model,
         synth_s,
         true_alpha_type: s.truth.alpha_type_cfm_per_w,
+        influence: std::sync::OnceLock::new(),
     })
 }
 
@@ -178,11 +183,39 @@ pub fn kalibre_surrogate(
     setup: &Setup,
     settings: &HallCalibrationSettings,
 ) -> Result<ThermalGraph> {
+    let Some(cut) = settings.server_influence else {
+        return Ok(kalibre::dc::calibration_model::hall_surrogate(
+            &setup.hall,
+            setup.model.layout(),
+            settings,
+            None,
+        )?);
+    };
+    // As `calibration_model::server_influence_adjacency` builds it, with the adjoint
+    // solves done once per setup.
+    let layout = setup.model.layout();
+    let state = &setup.snaps[0].state;
+    let influence = match setup.influence.get() {
+        Some(i) => i,
+        None => {
+            let alpha = layout.alpha_per_server(&layout.space().initial());
+            let i = setup.model.simulator().sensor_influence(state, &alpha)?;
+            setup.influence.get_or_init(|| i)
+        }
+    };
+    let adjacency = Adjacency::from_hall(&setup.hall, &settings.surrogate.adjacency)?
+        .with_server_influence(&influence.per_sensor, &state.power_w, cut)?;
+    let geometric = HallCalibrationSettings {
+        server_influence: None,
+        ..settings.clone()
+    };
     Ok(kalibre::dc::calibration_model::hall_surrogate(
         &setup.hall,
         setup.model.layout(),
-        settings,
-    )?)
+        &geometric,
+        None,
+    )?
+    .with_adjacency(adjacency)?)
 }
 
 /// Serialises a preset by its CLI name.

@@ -16,6 +16,12 @@ use crate::snapshots::HallSnapshot;
 use crate::surrogate::{LocalRecirculationSettings, PenaltySettings, ThermalGraphSettings};
 use crate::{Error, HallModel, Result};
 
+/// The cut of [`HallCalibrationSettings::server_influence`]'s edges: entries under 1 % of
+/// a sensor's largest are dropped. On `hall-a` (rise box, 9 runs) it keeps about 60
+/// servers per hot-aisle sensor of 2,240, and fits as well as keeping all of them
+/// (`examples/fig7_edges.rs`).
+pub const SERVER_INFLUENCE_CUT: f64 = 0.01;
+
 /// Everything that shapes a hall calibration.
 ///
 /// | Name | Default | Meaning |
@@ -28,6 +34,7 @@ use crate::{Error, HallModel, Result};
 /// | `searcher` | [`Hybrid::default`] | DE (population 10, crossover 0.6, 100 generations), then Adam |
 /// | `flow_balance_terms` | true | add recirculation and bypass terms to the surrogate (beyond the paper, which assumes neither) |
 /// | `local_recirculation` | none | add the local draw-against-supply recirculation term with these settings ([`LocalRecirculationSettings`]; measured: a better fit to random runs, a slightly worse loop on hall-b, see docs/experiments.md) |
+/// | `server_influence` | none | build the hot-aisle server-sensor edges from the built-in simulator's own air flow ([`Adjacency::with_server_influence`](crate::surrogate::Adjacency::with_server_influence), at the initial alphas and the first snapshot, cut at this fraction of each row's largest edge; [`SERVER_INFLUENCE_CUT`] is the measured choice) instead of reciprocal distance; built-in model only |
 /// | `design_within_prior` | false | the initial design spans the alphas whose rises the prior accepts ([`PenaltySettings::plausible_bounds`]) instead of the whole bounds |
 /// | `grid_check` | `[0.75, 0.5]` | cell sizes, relative to `sim.cell_m`, at which the built-in model runs once per snapshot at the best parameters: the alphas' move from the grid alone is their numerical uncertainty (`ParamUncertainty::numerical`), counted when a parameter is called identified; with `core.numerical_weighting` (default) the grids run before the polish too, which weighs each sensor by them; empty: none |
 /// | `polish_max_params` | 64 | the loop's polish stage (`core.polish_iterations`, 8 by default) runs only when there are at most this many parameters: each of its Jacobians costs `params + 1` model runs per snapshot (per-server alpha on a real hall would need thousands); above it the report's settings show `polish_iterations` 0 |
@@ -50,6 +57,8 @@ pub struct HallCalibrationSettings {
     /// Add the local recirculation term (local draw against local supply per sensor)
     /// with these settings.
     pub local_recirculation: Option<LocalRecirculationSettings>,
+    /// Server-sensor edges from the simulator's flow, cut at this relative weight.
+    pub server_influence: Option<f64>,
     /// The initial design spans the prior's plausible alphas rather than the bounds.
     pub design_within_prior: bool,
     /// Most parameters for which the polish stage runs.
@@ -99,6 +108,7 @@ impl Default for HallCalibrationSettings {
             searcher: Hybrid::default(),
             flow_balance_terms: true,
             local_recirculation: None,
+            server_influence: None,
             design_within_prior: false,
             polish_max_params: 64,
             grid_check: vec![0.75, 0.5],
@@ -188,7 +198,16 @@ pub fn calibrate_hall_with_registry<'o>(
         report,
         penalty_report,
     } = calibrate_with_terms(
-        &hall, snaps, &model, &layout, &learned, settings, journal, observers, &variants,
+        &hall,
+        snaps,
+        &model,
+        &layout,
+        &learned,
+        settings,
+        journal,
+        observers,
+        &variants,
+        Some(model.simulator()),
     )?;
     Ok(HallCalibration {
         report,

@@ -9,22 +9,39 @@ use kalibre_core::{Calibrator, Model, Observe, RunStore, Settings};
 
 use crate::calibration::HallCalibrationSettings;
 use crate::hall::Hall;
+use crate::sim::Simulator;
 use crate::snapshots::{self, HallSnapshot, OperatingState};
 use crate::surrogate::{
-    EffectLinearTerm, FlowBalance, FlowBalanceTerm, LocalRecirculationTerm, PenaltyReport,
-    TemperatureRisePenalty, ThermalGraph,
+    Adjacency, EffectLinearTerm, FlowBalance, FlowBalanceTerm, LocalRecirculationTerm,
+    PenaltyReport, TemperatureRisePenalty, ThermalGraph,
 };
 use crate::{Error, ParamLayout, Result};
 
 /// The thermal graph every hall calibration searches on: the paper's cooling and heating
 /// blocks, plus the mass-balance terms (`settings.flow_balance_terms`) and the local
 /// recirculation term (`settings.local_recirculation`) when asked for.
+///
+/// With `settings.server_influence`, `flow` must be the built-in simulator and the
+/// operating state whose air flow gives the hot-aisle edges
+/// ([`server_influence_adjacency`]); other models have no flow to give, and are refused.
 pub fn hall_surrogate(
     hall: &Hall,
     layout: &ParamLayout,
     settings: &HallCalibrationSettings,
+    flow: Option<(&Simulator, &OperatingState)>,
 ) -> Result<ThermalGraph> {
     let mut surrogate = ThermalGraph::new(hall, layout.clone(), settings.surrogate)?;
+    if let Some(cut) = settings.server_influence {
+        let (sim, state) = flow.ok_or_else(|| {
+            Error::Mismatch(
+                "server_influence: the server-sensor edges from the air flow need the \
+                 built-in simulator; this model does not give its flow"
+                    .into(),
+            )
+        })?;
+        let adjacency = server_influence_adjacency(sim, layout, state, settings, cut)?;
+        surrogate = surrogate.with_adjacency(adjacency)?;
+    }
     if settings.flow_balance_terms {
         for kind in [FlowBalance::Recirculation, FlowBalance::Bypass] {
             surrogate = surrogate.with_term(Box::new(FlowBalanceTerm::new(hall, layout, kind)));
@@ -36,6 +53,25 @@ pub fn hall_surrogate(
         )?));
     }
     Ok(surrogate)
+}
+
+/// The graph's adjacency with hot-aisle edges from `sim`'s air flow at `state` and the
+/// layout's initial parameters ([`Simulator::sensor_influence`], then
+/// [`Adjacency::with_server_influence`] with `cut`); the CRAC edges stay geometric.
+pub fn server_influence_adjacency(
+    sim: &Simulator,
+    layout: &ParamLayout,
+    state: &OperatingState,
+    settings: &HallCalibrationSettings,
+    cut: f64,
+) -> Result<Adjacency> {
+    let alpha = layout.alpha_per_server(&layout.space().initial());
+    let influence = sim.sensor_influence(state, &alpha)?;
+    Adjacency::from_hall(sim.hall(), &settings.surrogate.adjacency)?.with_server_influence(
+        &influence.per_sensor,
+        &state.power_w,
+        cut,
+    )
 }
 
 /// What a calibration with an external model returns.
@@ -74,6 +110,7 @@ where
         journal,
         observers,
         &[],
+        None,
     )
 }
 
@@ -92,11 +129,14 @@ pub(crate) fn calibrate_with_terms<'o, M>(
     journal: Option<&Path>,
     observers: Vec<Box<dyn Observe + 'o>>,
     numerical_variants: &[(String, std::result::Result<&M, String>)],
+    simulator: Option<&Simulator>,
 ) -> Result<ModelCalibration>
 where
     M: Model<Scenario = OperatingState>,
 {
     let observations = snapshots::to_observations(hall, snaps)?;
+    // The flow of the first snapshot sets the influence edges (when asked for).
+    let flow = simulator.zip(snaps.first().map(|s| &s.state));
     let space = layout.space().clone();
     if space.is_empty() {
         return Err(Error::Mismatch(format!(
@@ -104,7 +144,7 @@ where
             hall.name
         )));
     }
-    let mut surrogate = hall_surrogate(hall, layout, settings)?;
+    let mut surrogate = hall_surrogate(hall, layout, settings, flow)?;
     for &i in learned_params {
         surrogate =
             surrogate.with_term(Box::new(EffectLinearTerm::new(space.names()[i].clone(), i)));

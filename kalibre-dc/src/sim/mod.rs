@@ -26,6 +26,7 @@ mod dense;
 mod flow;
 mod grid;
 mod heat;
+mod influence;
 mod inlets;
 mod linalg;
 mod mods;
@@ -39,6 +40,7 @@ mod vtk;
 pub use advection::AdvectionStats;
 pub use config::{Advection, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
 pub use grid::Grid;
+pub use influence::SensorInfluence;
 pub use inlets::{
     coldest_under_read, inlet_check, intake_error, server_air, setpoint_headroom_c,
     write_server_air, InletCheck, IntakeError, ServerAir, RECOMMENDED_MAX_INLET_C,

@@ -89,7 +89,7 @@ fn check_inputs(
 
 /// Gauss-Seidel sweeps before and after each coarse correction.
 const PRESSURE_SWEEPS: usize = 1;
-const HEAT_SWEEPS: usize = 1;
+pub(super) const HEAT_SWEEPS: usize = 1;
 
 /// The pressure multigrid for face conductances `g`.
 pub(super) fn pressure_multigrid(

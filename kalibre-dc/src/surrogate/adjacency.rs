@@ -239,6 +239,98 @@ impl Adjacency {
         }
         Ok(Adjacency { cs, ss })
     }
+
+    /// Replaces the hot-aisle `Wss` rows with edges from the model's own air flow:
+    /// `influence[k][j]` is sensor `k`'s sensitivity to server `j`'s temperature rise at
+    /// fixed flows (K per K, from [`crate::sim::Simulator::sensor_influence`]), and
+    /// `power_w` the servers' power at the state it was computed for.
+    ///
+    /// The heating block sums `P_j / alpha_j * Wss_jk`, and at fixed flows the sensor
+    /// warms by `sum_j G_kj * rise_j` with `rise_j` proportional to `1 / alpha_j`; so
+    /// `Wss_jk = G_kj / P_j`, cut below `cut` times the row's largest entry (it keeps the
+    /// servers that matter: at 0.01, about 60 per sensor on `hall-a` instead of 2,240) and
+    /// rescaled to sum 1, as the geometric rows are. A hot-aisle sensor that no server's
+    /// exhaust reaches in the flow (no positive entry) keeps its geometric row.
+    ///
+    /// ```
+    /// use kalibre_dc::surrogate::{Adjacency, AdjacencySettings};
+    /// use kalibre_dc::synth::{self, Preset, SynthOptions};
+    ///
+    /// let hall = synth::generate(&SynthOptions::new(Preset::Demo, 1)).unwrap().hall;
+    /// let geometric = Adjacency::from_hall(&hall, &AdjacencySettings::default()).unwrap();
+    /// // An influence that sees only the first server: every hot row keeps that one edge.
+    /// let mut influence = vec![vec![0.0; hall.server_count()]; hall.sensors.len()];
+    /// for row in &mut influence {
+    ///     row[0] = 0.3;
+    /// }
+    /// let power = vec![200.0; hall.server_count()];
+    /// let adj = geometric.with_server_influence(&influence, &power, 0.01).unwrap();
+    /// let hot = (0..hall.sensors.len()).find(|&k| adj.ss.range(k).len() > 0).unwrap();
+    /// assert_eq!(adj.ss.range(hot).len(), 1);
+    /// assert_eq!(adj.ss.get(hot, 0), 1.0);
+    /// ```
+    pub fn with_server_influence(
+        mut self,
+        influence: &[Vec<f64>],
+        power_w: &[f64],
+        cut: f64,
+    ) -> Result<Self> {
+        let rows = self.ss.rows();
+        if influence.len() != rows {
+            return Err(Error::Mismatch(format!(
+                "server influence has {} sensor rows, the adjacency {rows}",
+                influence.len()
+            )));
+        }
+        if !(0.0..=1.0).contains(&cut) {
+            return Err(setting("influence_cut", format!("{cut} is outside [0, 1]")));
+        }
+        let mut ss = Csr::default();
+        for (k, g) in influence.iter().enumerate() {
+            let geometric: Vec<(u32, f64)> = self
+                .ss
+                .range(k)
+                .map(|e| (self.ss.col[e], self.ss.val[e]))
+                .collect();
+            if geometric.is_empty() {
+                // A cold-aisle sensor: no heating block.
+                ss.push_row(geometric);
+                continue;
+            }
+            if g.len() != power_w.len() {
+                return Err(Error::Mismatch(format!(
+                    "server influence row {k} has {} servers, the power {}",
+                    g.len(),
+                    power_w.len()
+                )));
+            }
+            if let Some(j) = g.iter().position(|v| !v.is_finite()) {
+                return Err(Error::Mismatch(format!(
+                    "server influence of server {j} on sensor {k} is not finite"
+                )));
+            }
+            let w: Vec<f64> = g
+                .iter()
+                .zip(power_w)
+                .map(|(&g, &p)| if p > 0.0 && g > 0.0 { g / p } else { 0.0 })
+                .collect();
+            if w.iter().all(|&v| v <= 0.0) {
+                ss.push_row(geometric);
+                continue;
+            }
+            let mut row: Vec<(u32, f64)> = relative_cut(&w, cut)
+                .into_iter()
+                .filter(|e| e.1 > 0.0)
+                .collect();
+            let sum: f64 = row.iter().map(|e| e.1).sum();
+            for e in &mut row {
+                e.1 /= sum;
+            }
+            ss.push_row(row);
+        }
+        self.ss = ss;
+        Ok(self)
+    }
 }
 
 /// Entries `r_i / max r` at or above `threshold` (the maximum itself is always kept).

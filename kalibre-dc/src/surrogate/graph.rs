@@ -248,6 +248,43 @@ impl ThermalGraph {
         })
     }
 
+    /// Replaces the adjacency (the start of every fit) with `adjacency`, for instance
+    /// [`Adjacency::with_server_influence`]'s edges from the model's air flow; resets the
+    /// fit. Its rows must be the sensors, its columns the hall's CRACs and servers.
+    pub fn with_adjacency(mut self, adjacency: Adjacency) -> Result<Self> {
+        let n = self.hot.len();
+        if adjacency.cs.rows() != n || adjacency.ss.rows() != n {
+            return Err(Error::Mismatch(format!(
+                "adjacency has {} CRAC and {} server rows, the graph {n} sensors",
+                adjacency.cs.rows(),
+                adjacency.ss.rows()
+            )));
+        }
+        if adjacency.cs.col.iter().any(|&c| c as usize >= self.n_cracs)
+            || adjacency
+                .ss
+                .col
+                .iter()
+                .any(|&c| c as usize >= self.n_servers)
+        {
+            return Err(Error::Mismatch(format!(
+                "adjacency names a CRAC or server beyond the hall's {} CRACs and {} servers",
+                self.n_cracs, self.n_servers
+            )));
+        }
+        if let Some(k) = (0..n).find(|&k| !self.hot[k] && !adjacency.ss.range(k).is_empty()) {
+            return Err(Error::Mismatch(format!(
+                "adjacency row {k}: a cold-aisle sensor has server edges (only hot-aisle \
+                 sensors have a heating block)"
+            )));
+        }
+        self.geometric = adjacency.clone();
+        self.adjacency = adjacency;
+        self.w = Weights::unfitted(n, self.terms.len());
+        self.fitted = false;
+        Ok(self)
+    }
+
     /// Adds an additional linear term (resets the fit).
     pub fn with_term(mut self, term: Box<dyn SurrogateTerm>) -> Self {
         self.terms.push(term);

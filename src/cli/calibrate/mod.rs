@@ -176,6 +176,13 @@ pub struct CalibrateArgs {
     /// distance to the sensor.
     #[arg(long = "local-recirculation")]
     local_recirculation: bool,
+    /// Build the surrogate's hot-aisle edges from the built-in simulator's own air flow
+    /// (each sensor's sensitivity to each server's exhaust, one adjoint solve per sensor
+    /// at the initial alphas) instead of reciprocal distance. Built-in model only. The
+    /// graph fits random runs better with it, but the loop did worse on the synthetic
+    /// halls (docs/experiments.md); for halls whose air does not go where distance says.
+    #[arg(long = "influence-edges")]
+    influence_edges: bool,
     /// The model: `builtin` (the built-in simulator), `openfoam` (a case generated from
     /// hall.json, meshed once into OUT/openfoam and solved per run) or `command` (an
     /// external program described by --config). The surrogate is the same for all three.
@@ -280,6 +287,9 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         local_recirculation: args
             .local_recirculation
             .then(kalibre_dc::surrogate::LocalRecirculationSettings::default),
+        server_influence: args
+            .influence_edges
+            .then_some(kalibre_dc::calibration::SERVER_INFLUENCE_CUT),
         ..HallCalibrationSettings::default()
     };
     s.surrogate = s.surrogate.with_epochs(args.epochs);
@@ -310,6 +320,13 @@ fn check_model_flags(args: &CalibrateArgs) -> CliResult {
         )),
         (ModelArg::Builtin | ModelArg::Openfoam, Some(_)) => {
             Err(CliError::Input("--config is for --model command".into()))
+        }
+        (ModelArg::Openfoam | ModelArg::Command, _) if args.influence_edges => {
+            Err(CliError::Input(
+                "--influence-edges takes the air flow of the built-in simulator: it needs \
+                 --model builtin"
+                    .into(),
+            ))
         }
         _ => Ok(()),
     }
