@@ -210,10 +210,10 @@ fn main() {
     // The model's own transport (session 20): each sensor's sensitivity to each server's
     // rise in the flow at the initial alphas, cut at 1 % of the row's largest and not cut.
     let initial = layout.alpha_per_server(&space.initial());
-    let influence = s
+    let (_, influence) = s
         .model
         .simulator()
-        .sensor_influence(&state, &initial)
+        .sensor_influence(&state, &initial, &[])
         .expect("the adjoint solves");
     let mut adjacencies: Vec<(String, Adjacency)> = rules
         .into_iter()

@@ -1,5 +1,6 @@
 //! End-to-end tests of `kalibre simulate` on the small OpenFOAM development hall: the
-//! predictions, every server's air, the what-ifs and their headroom, and a closed stdout.
+//! predictions, every server's air, where each sensor's warming comes from, the what-ifs
+//! and their headroom, and a closed stdout.
 
 mod cli_support;
 
@@ -133,6 +134,61 @@ fn simulate_writes_each_servers_air_and_counts_warm_intakes() {
 /// What if every setpoint rose by the headroom `simulate` reports? The hottest intake
 /// then sits exactly at the limit: at fixed flows the temperatures move one for one with
 /// the supply's. Changes outside the hall's limits are refused by name.
+#[test]
+fn simulate_says_which_racks_warm_each_sensor() {
+    let dir = tmp("heat-sources");
+    let params = dir.join("params.json");
+    std::fs::write(
+        &params,
+        r#"{ "alpha/web": 0.13, "alpha/db": 0.17, "alpha/gpu": 0.12 }"#,
+    )
+    .unwrap();
+    let table = dir.join("heat.csv");
+    let o = run(on_dataset("simulate", "of-dev-clean")
+        .arg("--params")
+        .arg(&params)
+        .arg("--out")
+        .arg(dir.join("pred.csv"))
+        .arg("--heat-sources")
+        .arg(&table));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("heat.csv"));
+    let csv = std::fs::read_to_string(&table).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("snapshot,sensor,rack,warming_k,share"));
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    // (snapshot, sensor) -> [(rack, warming, share)]
+    type Racks = Vec<(String, f64, f64)>;
+    let mut groups: std::collections::BTreeMap<(String, String), Racks> = Default::default();
+    for r in &rows {
+        let (warming, share): (f64, f64) = (r[3].parse().unwrap(), r[4].parse().unwrap());
+        assert!((0.02 - 5e-5..=1.0 + 5e-5).contains(&share), "{r:?}");
+        assert!(warming > 0.0, "{r:?}");
+        groups
+            .entry((r[0].clone(), r[1].clone()))
+            .or_default()
+            .push((r[2].clone(), warming, share));
+    }
+    for ((snapshot, sensor), racks) in &groups {
+        let sum: f64 = racks.iter().map(|r| r.2).sum();
+        assert!(
+            sum <= 1.0 + 1e-3,
+            "{snapshot} {sensor}: shares sum to {sum}"
+        );
+        assert!(racks.windows(2).all(|w| w[0].1 >= w[1].1), "{racks:?}");
+    }
+    // Each hot-aisle sensor sits at its rack's exhausts (`h-A3` behind rack A3): that rack
+    // warms it most, in every snapshot.
+    for snapshot in ["t0", "t1", "t2"] {
+        for sensor in ["h-A1", "h-A3", "h-A5", "h-B2", "h-B4", "h-B5"] {
+            let racks = &groups[&(snapshot.to_string(), sensor.to_string())];
+            assert_eq!(racks[0].0, sensor[2..], "{snapshot} {sensor}: {racks:?}");
+        }
+    }
+}
+
 #[test]
 fn simulate_answers_what_if_and_its_headroom_is_exact() {
     let dir = tmp("what-if");

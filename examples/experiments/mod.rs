@@ -199,7 +199,10 @@ pub fn kalibre_surrogate(
         Some(i) => i,
         None => {
             let alpha = layout.alpha_per_server(&layout.space().initial());
-            let i = setup.model.simulator().sensor_influence(state, &alpha)?;
+            let (_, i) = setup
+                .model
+                .simulator()
+                .sensor_influence(state, &alpha, &[])?;
             setup.influence.get_or_init(|| i)
         }
     };

@@ -56,7 +56,7 @@ pub fn hall_surrogate(
 }
 
 /// The graph's adjacency with hot-aisle edges from `sim`'s air flow at `state` and the
-/// layout's initial parameters ([`Simulator::sensor_influence`], then
+/// layout's initial alphas, without effects ([`Simulator::sensor_influence`], then
 /// [`Adjacency::with_server_influence`] with `cut`); the CRAC edges stay geometric.
 pub fn server_influence_adjacency(
     sim: &Simulator,
@@ -66,7 +66,8 @@ pub fn server_influence_adjacency(
     cut: f64,
 ) -> Result<Adjacency> {
     let alpha = layout.alpha_per_server(&layout.space().initial());
-    let influence = sim.sensor_influence(state, &alpha)?;
+    // Without the hall's effects: their values are what the loop is still to find.
+    let (_, influence) = sim.sensor_influence(state, &alpha, &[])?;
     Adjacency::from_hall(sim.hall(), &settings.surrogate.adjacency)?.with_server_influence(
         &influence.per_sensor,
         &state.power_w,

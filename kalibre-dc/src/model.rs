@@ -4,7 +4,7 @@ use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 
 use crate::effects::{Effect, EffectRegistry};
 use crate::hall::Hall;
-use crate::sim::{server_air, ServerAir, SimConfig, Simulator, Solution};
+use crate::sim::{server_air, SensorInfluence, ServerAir, SimConfig, Simulator, Solution};
 use crate::snapshots::OperatingState;
 use crate::{Error, ParamLayout, Result};
 
@@ -92,20 +92,35 @@ impl HallModel {
         server_air(self.sim.hall(), state, &solution)
     }
 
+    /// Solves one state at `params` (layout order), effects included, and returns the run
+    /// with each sensor's sensitivity to each server's rise in its flow
+    /// ([`Simulator::sensor_influence`]): one adjoint solve per sensor.
+    pub fn sensor_influence(
+        &self,
+        state: &OperatingState,
+        params: &[f64],
+    ) -> Result<(Solution, SensorInfluence)> {
+        self.layout.space().check_physical(params)?;
+        let alpha = self.layout.alpha_per_server(params);
+        let effects = self.effect_values(params);
+        self.sim.sensor_influence(state, &alpha, &effects)
+    }
+
+    /// Each effect with its values in `params`.
+    fn effect_values<'a>(&'a self, params: &'a [f64]) -> Vec<(&'a dyn Effect, &'a [f64])> {
+        self.effects
+            .iter()
+            .enumerate()
+            .map(|(e, effect)| (effect.as_ref(), self.layout.effect_values(params, e)))
+            .collect()
+    }
+
     /// Solves one state at `params` (layout order) and returns every field (for VTK and
     /// reports).
     pub fn solve(&self, state: &OperatingState, params: &[f64]) -> Result<Solution> {
         self.layout.space().check_physical(params)?;
         let alpha = self.layout.alpha_per_server(params);
-        let values: Vec<&[f64]> = (0..self.effects.len())
-            .map(|e| self.layout.effect_values(params, e))
-            .collect();
-        let effects: Vec<(&dyn Effect, &[f64])> = self
-            .effects
-            .iter()
-            .zip(values)
-            .map(|(e, v)| (e.as_ref(), v))
-            .collect();
+        let effects = self.effect_values(params);
         self.sim.solve(state, &alpha, &effects)
     }
 }

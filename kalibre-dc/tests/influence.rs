@@ -1,12 +1,13 @@
 //! The sensors' influence from the simulator's flow (`Simulator::sensor_influence`)
 //! against forward runs: superposition of every server's rise, one server's rise changed
-//! at fixed flow, the maximum principle; and the graph's edges built from it.
+//! at fixed flow, the maximum principle, with and without effects; and the graph's edges
+//! built from it.
 
 #[path = "support/sim_halls.rs"]
 mod sim_halls;
 
 use kalibre_dc::hall::Aisle;
-use kalibre_dc::sim::{SimConfig, Simulator};
+use kalibre_dc::sim::{RackRecirculation, SimConfig, SimMods, Simulator};
 use kalibre_dc::surrogate::{Adjacency, AdjacencySettings};
 use sim_halls::{demo_hall, uniform_state, varied_state};
 
@@ -26,9 +27,47 @@ fn every_sensor_is_the_supply_plus_the_influence_times_the_rises() {
     let state = varied_state(&hall, 19.0, 0.9, 400.0);
     let alpha = varied_alpha(hall.server_count());
     let sol = sim.solve(&state, &alpha, &[]).expect("run");
-    let inf = sim.sensor_influence(&state, &alpha).expect("influence");
+    let (_, inf) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
     assert_eq!(inf.per_sensor.len(), hall.sensors.len());
     assert!(inf.max_rel_residual <= SimConfig::default().heat_tol);
+    for (k, row) in inf.per_sensor.iter().enumerate() {
+        let warmed: f64 = row
+            .iter()
+            .zip(sol.server_exhaust_c.iter().zip(&sol.server_intake_c))
+            .map(|(g, (exhaust, intake))| g * (exhaust - intake))
+            .sum();
+        let reading = sol.sensor_c()[k] - sol.supply_c;
+        assert!(
+            (reading - warmed).abs() < 1e-5,
+            "sensor {k}: reads {reading:.6} K over the supply, the influence gives {warmed:.6}"
+        );
+    }
+}
+
+#[test]
+fn the_influence_sees_the_runs_effects() {
+    let hall = demo_hall();
+    let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
+    let state = varied_state(&hall, 19.0, 0.9, 400.0);
+    let alpha = varied_alpha(hall.server_count());
+    // Exhaust drawn back to the intakes inside two racks: transfers without a rise.
+    let mut mods = SimMods::new(hall.cracs.len());
+    for rack in [2, 17] {
+        mods.rack_recirculation.push(RackRecirculation {
+            rack,
+            fraction: 0.25,
+            z_m: None,
+        });
+    }
+    let (sol, inf) = sim
+        .sensor_influence_with_mods(&state, &alpha, &mods)
+        .expect("influence");
+    let (_, plain) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
+    assert_ne!(inf.per_sensor, plain.per_sensor);
     for (k, row) in inf.per_sensor.iter().enumerate() {
         let warmed: f64 = row
             .iter()
@@ -50,7 +89,9 @@ fn one_servers_rise_at_fixed_flow_moves_the_sensors_as_its_column_says() {
     let state = varied_state(&hall, 19.0, 0.9, 400.0);
     let alpha = varied_alpha(hall.server_count());
     let base = sim.solve(&state, &alpha, &[]).expect("run");
-    let inf = sim.sensor_influence(&state, &alpha).expect("influence");
+    let (_, inf) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
     // Power up by 10 % and alpha down by as much keeps the server's flow, so the flow
     // field is the same and only its rise grows by 10 %.
     for j in [0, 37, 150, hall.server_count() - 1] {
@@ -78,7 +119,9 @@ fn influence_is_non_negative_and_an_idle_server_has_none() {
     let mut state = uniform_state(&hall, 18.0, 1.0, 350.0);
     state.power_w[5] = 0.0;
     let alpha = varied_alpha(hall.server_count());
-    let inf = sim.sensor_influence(&state, &alpha).expect("influence");
+    let (_, inf) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
     for (k, row) in inf.per_sensor.iter().enumerate() {
         // Upwind advection-diffusion keeps a maximum principle: a warmer exhaust never
         // cools a sensor.
@@ -105,7 +148,9 @@ fn influence_edges_keep_the_graphs_shape_and_refuse_bad_input() {
     let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
     let state = uniform_state(&hall, 18.0, 1.0, 350.0);
     let alpha = varied_alpha(hall.server_count());
-    let inf = sim.sensor_influence(&state, &alpha).expect("influence");
+    let (_, inf) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
     let geometric = Adjacency::from_hall(&hall, &AdjacencySettings::default()).expect("graph");
     let adj = geometric
         .clone()
@@ -201,4 +246,54 @@ fn the_graph_takes_influence_edges_only_from_the_built_in_flow() {
     }
     let e = graph.with_adjacency(bad).expect_err("cold-aisle edges");
     assert!(e.to_string().contains("cold-aisle"), "{e}");
+}
+
+#[test]
+fn the_racks_shares_add_up_to_each_sensors_warming() {
+    use kalibre_dc::sim::{rack_heat, write_rack_heat};
+
+    let hall = demo_hall();
+    let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
+    let state = varied_state(&hall, 19.0, 0.9, 400.0);
+    let alpha = varied_alpha(hall.server_count());
+    let (sol, inf) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
+    let all = rack_heat(&hall, "t0", &sol, &inf, 0.0).expect("every rack");
+    for (k, sensor) in hall.sensors.iter().enumerate() {
+        let rows: Vec<_> = all.iter().filter(|r| r.sensor == sensor.id).collect();
+        let warming = sol.sensor_c()[k] - sol.supply_c;
+        if rows.is_empty() {
+            assert!(
+                warming < 0.01 + 1e-5,
+                "{}: warmed {warming} K, no rows",
+                sensor.id
+            );
+            continue;
+        }
+        let total: f64 = rows.iter().map(|r| r.warming_k).sum();
+        assert!(
+            (total - warming).abs() < 1e-5,
+            "{}: {total} vs {warming}",
+            sensor.id
+        );
+        let shares: f64 = rows.iter().map(|r| r.share).sum();
+        assert!(
+            (shares - 1.0).abs() < 1e-9,
+            "{}: shares sum to {shares}",
+            sensor.id
+        );
+        assert!(rows.windows(2).all(|w| w[0].warming_k >= w[1].warming_k));
+    }
+    // The cut keeps the large shares only, and the CSV has one line per row.
+    let big = rack_heat(&hall, "t0", &sol, &inf, 0.2).expect("large shares");
+    assert!(!big.is_empty() && big.len() < all.len());
+    assert!(big.iter().all(|r| r.share >= 0.2));
+    let csv = write_rack_heat(&big);
+    assert!(csv.starts_with("snapshot,sensor,rack,warming_k,share\n"));
+    assert_eq!(csv.lines().count(), 1 + big.len());
+    assert!(rack_heat(&hall, "t0", &sol, &inf, 1.5).is_err());
+    let mut short = inf.clone();
+    short.per_sensor.pop();
+    assert!(rack_heat(&hall, "t0", &sol, &short, 0.0).is_err());
 }

@@ -14,6 +14,9 @@ use super::inlets::{inlet_line, under_read_note};
 use super::what_if::WhatIfArgs;
 use super::{io_err, CliError, CliResult};
 
+/// `--heat-sources` lists a rack when it gives at least this share of a sensor's warming.
+const HEAT_SOURCE_MIN_SHARE: f64 = 0.02;
+
 /// Options of `kalibre simulate`.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
@@ -44,6 +47,12 @@ pub struct SimulateArgs {
     /// calibrated model says where no sensor measures.
     #[arg(long)]
     servers: Option<PathBuf>,
+    /// Also write where each sensor's warming comes from, per snapshot (CSV:
+    /// `snapshot,sensor,rack,warming_k,share`): the racks whose exhausts give at least 2 %
+    /// of the sensor's warming over the supply in the model's air flow, largest first.
+    /// One adjoint solve per sensor and snapshot.
+    #[arg(long = "heat-sources")]
+    heat_sources: Option<PathBuf>,
     /// Server intake temperature above which a server is counted as too warm (C); the
     /// default is ASHRAE TC 9.9's recommended upper bound for classes A1-A4.
     #[arg(long = "inlet-limit-c", default_value_t = kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)]
@@ -202,11 +211,27 @@ pub fn run(args: SimulateArgs) -> CliResult {
     let mut predicted = Vec::with_capacity(snaps.len());
     let mut air = Vec::new();
     let mut checks = Vec::with_capacity(snaps.len());
+    let mut sources = Vec::new();
     for snap in &snaps {
         let state = &snap.state;
         let failed =
             |e: &dyn std::fmt::Display| CliError::Run(format!("snapshot `{}`: {e}", state.label));
-        let solution = model.solve(state, &params).map_err(|e| failed(&e))?;
+        let solution = match &args.heat_sources {
+            Some(_) => {
+                let (solution, influence) = model
+                    .sensor_influence(state, &params)
+                    .map_err(|e| failed(&e))?;
+                sources.extend(kalibre_dc::sim::rack_heat(
+                    &hall,
+                    &state.label,
+                    &solution,
+                    &influence,
+                    HEAT_SOURCE_MIN_SHARE,
+                )?);
+                solution
+            }
+            None => model.solve(state, &params).map_err(|e| failed(&e))?,
+        };
         if let Some(k) = solution.sensor_c().iter().position(|v| !v.is_finite()) {
             return Err(failed(&format!(
                 "sensor `{}` came out as {}",
@@ -233,6 +258,10 @@ pub fn run(args: SimulateArgs) -> CliResult {
     std::fs::write(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
     if let Some(path) = &args.servers {
         std::fs::write(path, kalibre_dc::sim::write_server_air(&air))
+            .map_err(|e| io_err(path, e))?;
+    }
+    if let Some(path) = &args.heat_sources {
+        std::fs::write(path, kalibre_dc::sim::write_rack_heat(&sources))
             .map_err(|e| io_err(path, e))?;
     }
     for (label, check) in labels.iter().zip(&checks) {
@@ -283,6 +312,13 @@ pub fn run(args: SimulateArgs) -> CliResult {
             .map(|d| format!(", VTK fields in {}", d.display()))
             .unwrap_or_default()
     );
+    if let Some(path) = &args.heat_sources {
+        println!(
+            "wrote {} (per snapshot and sensor, the racks giving at least {:.0} % of its warming)",
+            path.display(),
+            100.0 * HEAT_SOURCE_MIN_SHARE
+        );
+    }
     if let Some(path) = &args.servers {
         println!(
             "wrote {} ({} snapshots x {} servers)",

@@ -12,11 +12,12 @@
 use rayon::prelude::*;
 
 use super::config::Preconditioner;
-use super::heat::{heat_spec, HeatOp, Transfer};
+use super::heat::{heat_spec, HeatOp};
 use super::linalg::{bicgstab, Jacobi, Operator, Precond};
 use super::multigrid::{Multigrid, StencilSpec};
-use super::run::HEAT_SWEEPS;
-use super::{SimMods, Simulator};
+use super::run::{solve_keeping, HEAT_SWEEPS};
+use super::{SimMods, Simulator, Solution};
+use crate::effects::Effect;
 use crate::snapshots::OperatingState;
 use crate::{Error, Result};
 
@@ -71,45 +72,44 @@ pub struct SensorInfluence {
 }
 
 impl Simulator {
-    /// The sensitivity of each sensor to each server's rise at `state` and per-server
-    /// `alpha` (cfm/W), without effects: one adjoint solve per sensor on the flow of one
-    /// run. Upwind advection is used whatever the configured scheme (its adjoint is exact;
-    /// a limited scheme's is not linear).
+    /// The sensitivity of each sensor to each server's rise at `state`, per-server
+    /// `alpha` (cfm/W) and effects with their values, with the run it was taken from: one
+    /// adjoint solve per sensor on the flow of that run. The heat operator is upwind
+    /// whatever the configured scheme (its adjoint is exact; a limited scheme's is not
+    /// linear).
     pub fn sensor_influence(
         &self,
         state: &OperatingState,
         alpha_per_server: &[f64],
-    ) -> Result<SensorInfluence> {
-        let sol = self.solve_with_mods(
-            state,
-            alpha_per_server,
-            &SimMods::new(self.hall().cracs.len()),
-        )?;
+        effects: &[(&dyn Effect, &[f64])],
+    ) -> Result<(Solution, SensorInfluence)> {
+        let mut mods = SimMods::new(self.hall().cracs.len());
+        for (e, values) in effects {
+            e.modify(values, self.hall(), &mut mods)?;
+        }
+        self.sensor_influence_with_mods(state, alpha_per_server, &mods)
+    }
+
+    /// [`Self::sensor_influence`] with explicit modifications.
+    pub fn sensor_influence_with_mods(
+        &self,
+        state: &OperatingState,
+        alpha_per_server: &[f64],
+        mods: &SimMods,
+    ) -> Result<(Solution, SensorInfluence)> {
+        let (sol, parts) = solve_keeping(self, state, alpha_per_server, mods, true)?;
+        let parts = parts.ok_or_else(|| {
+            Error::Simulation("the run kept no heat operator for the adjoint".into())
+        })?;
         let topo = self.topo();
         let cfg = self.config();
         let n = topo.grid.len();
-        let mut sink = sol.fixed_sink_m3_s.clone();
-        let mut transfers = Vec::new();
-        let mut server_transfer = vec![usize::MAX; alpha_per_server.len()];
-        for (j, &q) in sol.server_flow_m3_s.iter().enumerate() {
-            if q > 0.0 {
-                for &(c, w) in &topo.server_intake[j] {
-                    sink[c] += w * q;
-                }
-                server_transfer[j] = transfers.len();
-                transfers.push(Transfer {
-                    from: topo.server_intake[j].clone(),
-                    to: topo.server_exhaust[j].clone(),
-                    flow_m3_s: q,
-                    rise_c: 0.0,
-                });
-            }
-        }
         let g = [
-            topo.g[0].as_slice(),
-            topo.g[1].as_slice(),
-            topo.g[2].as_slice(),
+            parts.g[0].as_slice(),
+            parts.g[1].as_slice(),
+            parts.g[2].as_slice(),
         ];
+        let transfers = &parts.transfers;
         let mg = (cfg.preconditioner == Preconditioner::Multigrid).then(|| {
             let spec = heat_spec(
                 &topo.grid,
@@ -118,8 +118,8 @@ impl Simulator {
                 g,
                 cfg.diffusivity_m2_s,
                 &sol.outlet_flux_m3_s,
-                &sink,
-                &transfers,
+                &parts.sink,
+                transfers,
             );
             Multigrid::build(transposed_spec(spec), false, HEAT_SWEEPS)
         });
@@ -131,8 +131,8 @@ impl Simulator {
                 g,
                 cfg.diffusivity_m2_s,
                 &sol.outlet_flux_m3_s,
-                &sink,
-                &transfers,
+                &parts.sink,
+                transfers,
             ),
         };
         let rows: Vec<(Vec<f64>, f64)> = topo
@@ -157,12 +157,15 @@ impl Simulator {
                 let stats = bicgstab(&op, pc, &b, &mut lambda, cfg.heat_tol, cfg.max_iterations);
                 if stats.rel_residual.is_nan() || stats.rel_residual > cfg.heat_tol {
                     return Err(Error::Simulation(format!(
-                        "sensor {k}: adjoint solve did not converge: relative residual \
+                        "sensor `{}`: adjoint solve did not converge: relative residual \
                          {:.3e} after {} iterations",
-                        stats.rel_residual, stats.iterations
+                        self.hall().sensors[k].id,
+                        stats.rel_residual,
+                        stats.iterations
                     )));
                 }
-                let row = server_transfer
+                let row = parts
+                    .server_transfer
                     .iter()
                     .map(|&t| match transfers.get(t) {
                         Some(tr) => {
@@ -175,10 +178,11 @@ impl Simulator {
             })
             .collect::<Result<_>>()?;
         let max_rel_residual = rows.iter().map(|r| r.1).fold(0.0, f64::max);
-        Ok(SensorInfluence {
+        let influence = SensorInfluence {
             per_sensor: rows.into_iter().map(|r| r.0).collect(),
             max_rel_residual,
-        })
+        };
+        Ok((sol, influence))
     }
 }
 

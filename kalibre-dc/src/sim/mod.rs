@@ -26,6 +26,7 @@ mod dense;
 mod flow;
 mod grid;
 mod heat;
+mod heat_sources;
 mod influence;
 mod inlets;
 mod linalg;
@@ -40,6 +41,7 @@ mod vtk;
 pub use advection::AdvectionStats;
 pub use config::{Advection, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
 pub use grid::Grid;
+pub use heat_sources::{rack_heat, write_rack_heat, RackHeat};
 pub use influence::SensorInfluence;
 pub use inlets::{
     coldest_under_read, inlet_check, intake_error, server_air, setpoint_headroom_c,

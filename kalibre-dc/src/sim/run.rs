@@ -111,6 +111,30 @@ pub(super) fn solve(
     alpha: &[f64],
     mods: &SimMods,
 ) -> Result<Solution> {
+    solve_keeping(sim, state, alpha, mods, false).map(|(sol, _)| sol)
+}
+
+/// What the heat operator of a run was built from, besides the solution's fluxes: kept
+/// for the adjoint (`influence.rs`), which must see the same operator, effects included.
+pub(super) struct HeatParts {
+    /// Face conductances with this run's opened panels.
+    pub g: [Vec<f64>; 3],
+    /// Flow leaving each cell other than through faces and outlets (m3/s).
+    pub sink: Vec<f64>,
+    /// Servers, in-rack recirculation and forced links.
+    pub transfers: Vec<Transfer>,
+    /// Each server's index in `transfers` (`usize::MAX`: no flow).
+    pub server_transfer: Vec<usize>,
+}
+
+/// [`solve`], also returning the heat operator's parts when `keep` is set.
+pub(super) fn solve_keeping(
+    sim: &Simulator,
+    state: &OperatingState,
+    alpha: &[f64],
+    mods: &SimMods,
+    keep: bool,
+) -> Result<(Solution, Option<HeatParts>)> {
     check_inputs(sim, state, alpha, mods)?;
     let hall = sim.hall();
     let topo = sim.topo();
@@ -466,7 +490,13 @@ pub(super) fn solve(
             }
         })
         .collect();
-    Ok(Solution {
+    let parts = keep.then(|| HeatParts {
+        g: g.clone().into_owned(),
+        sink: sink_all.clone(),
+        transfers: transfers.clone(),
+        server_transfer: server_transfer.clone(),
+    });
+    let solution = Solution {
         label: state.label.clone(),
         pressure: p,
         face_flux_m3_s: flux,
@@ -491,7 +521,8 @@ pub(super) fn solve(
         pressure_stats: pstats,
         heat_stats: hstats,
         advection_stats,
-    })
+    };
+    Ok((solution, parts))
 }
 
 /// What the heat operator is built from.
