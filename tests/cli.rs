@@ -495,4 +495,25 @@ fn diagnose_writes_the_next_hall() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("nothing significant:"), "{out}");
     assert!(!none.exists());
+    // Each worst sensor is followed by which racks warm it in the calibrated model's flow.
+    // The worst here are the row-end low cold-aisle sensors, which OpenFOAM's
+    // recirculation warms and no exhaust reaches in the built-in model.
+    let lines: Vec<&str> = out.lines().collect();
+    let worst: Vec<usize> = (0..lines.len())
+        .filter(|&i| lines[i].contains(" aisle at (") && lines[i].contains("the model reads"))
+        .collect();
+    assert_eq!(worst.len(), 5, "{out}");
+    for &i in &worst {
+        let next = lines[i + 1];
+        assert!(
+            next.contains("in the model, exhausts warm it by")
+                || next.contains("no exhaust reaches it in the model"),
+            "{}\n{next}",
+            lines[i]
+        );
+    }
+    assert!(
+        out.contains("the measured warmth takes a path the model lacks"),
+        "{out}"
+    );
 }

@@ -14,6 +14,7 @@ use kalibre_dc::diagnosis::{
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::openfoam::{OpenFoamEffectSolver, OpenFoamModel};
+use kalibre_dc::sim::RackHeat;
 use kalibre_dc::sim::Simulator;
 use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
@@ -265,7 +266,25 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
         return Ok(());
     }
-    print_where_it_fails(&hall, &report);
+    // Which racks warm the worst sensors in the calibrated built-in model's air flow (the
+    // first snapshot): whose alphas they inform, and where a missing effect would act.
+    // An OpenFOAM calibration's flow is OpenFOAM's, which the built-in model does not have.
+    let heat = match (args.model, snaps.first()) {
+        (DiagnoseModel::Builtin, Some(first)) => {
+            let (sol, influence) = model
+                .sensor_influence(&first.state, &params)
+                .map_err(|e| CliError::Run(format!("snapshot `{}`: {e}", first.state.label)))?;
+            Some(kalibre_dc::sim::rack_heat(
+                &hall,
+                &first.state.label,
+                &sol,
+                &influence,
+                0.0,
+            )?)
+        }
+        _ => None,
+    };
+    print_where_it_fails(&hall, &report, heat.as_deref());
     println!(
         "\nmissing effects, best first (MAE now {:.3} C):",
         d.diagnosis.mae
@@ -412,6 +431,44 @@ pub(super) fn sensor_line(hall: &Hall, sensor: &str, mean_c: f64) -> String {
     )
 }
 
+/// A rack is named among those warming a worst sensor when it gives at least this share.
+const WARMING_RACK_MIN_SHARE: f64 = 0.1;
+
+/// The racks that warm `sensor` in the model's flow, in words (`rows`: every rack's
+/// share, no cut).
+fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
+    let mine: Vec<&RackHeat> = rows.iter().filter(|r| r.sensor == sensor).collect();
+    let Some(first) = mine.first() else {
+        let none = "no exhaust reaches it in the model (under 0.01 K)";
+        return if mean_c < 0.0 {
+            format!(
+                "{none}: the measured warmth takes a path the model lacks, or the sensor is off"
+            )
+        } else {
+            none.into()
+        };
+    };
+    // Each row's share is its warming over the sensor's whole warming.
+    let total_k = first.warming_k / first.share;
+    let racks: Vec<String> = mine
+        .iter()
+        .filter(|r| r.share >= WARMING_RACK_MIN_SHARE)
+        .map(|r| format!("{} {:.0} %", r.rack, 100.0 * r.share))
+        .collect();
+    format!(
+        "in the model, exhausts warm it by {total_k:.1} K in {}: {}",
+        first.snapshot,
+        if racks.is_empty() {
+            format!(
+                "no rack gives {:.0} % of that",
+                100.0 * WARMING_RACK_MIN_SHARE
+            )
+        } else {
+            format!("racks {}", racks.join(", "))
+        }
+    )
+}
+
 /// A hypothesis's flags in words, e.g. `significant, not identifiable`.
 pub(super) fn hypothesis_flags(significant: bool, inert: bool, identifiable: bool) -> String {
     [
@@ -427,7 +484,7 @@ pub(super) fn hypothesis_flags(significant: bool, inert: bool, identifiable: boo
 }
 
 /// The worst sensors and the residual by aisle and snapshot, in words.
-fn print_where_it_fails(hall: &Hall, report: &Report) {
+fn print_where_it_fails(hall: &Hall, report: &Report, heat: Option<&[RackHeat]>) {
     println!("where the calibrated model fails (model minus measurement):");
     let mut by_group: BTreeMap<(String, String), (f64, usize)> = BTreeMap::new();
     for r in &report.residuals {
@@ -444,6 +501,9 @@ fn print_where_it_fails(hall: &Hall, report: &Report) {
     }
     for (sensor, mean) in worst_sensors(report).iter().take(5) {
         println!("  {}", sensor_line(hall, sensor, *mean));
+        if let Some(rows) = heat {
+            println!("  {:<12} {}", "", warming_racks(rows, sensor, *mean));
+        }
     }
     for ((aisle, snap), (s, n)) in &by_group {
         println!(
