@@ -148,6 +148,31 @@ fn fig7_quick_is_finite_and_some_surrogate_learns() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// A graph option changes both graphs' test MAE in one aisle (`hot`) and leaves the other
+/// aisle as it was, up to rounding, and the MLP exactly as it was.
+fn assert_only_one_aisle_changes(base: &fig7::Fig7Result, changed: &fig7::Fig7Result, hot: bool) {
+    let mae = |r: &fig7::Fig7Result, i: usize| -> Vec<f64> {
+        r.curves[i].points.iter().map(|p| p.mae_c.mean).collect()
+    };
+    assert_eq!(base.curves[2].surrogate, "vanilla MLP");
+    assert_eq!(mae(changed, 2), mae(base, 2));
+    for graph in [0, 1] {
+        let aisle = |r: &fig7::Fig7Result, hot: bool| -> Vec<f64> {
+            r.curves[graph]
+                .points
+                .iter()
+                .map(|p| if hot { &p.hot_mae_c } else { &p.cold_mae_c })
+                .map(|m| m.as_ref().unwrap().mean)
+                .collect()
+        };
+        let name = &base.curves[graph].surrogate;
+        assert_ne!(aisle(changed, hot), aisle(base, hot), "{name}");
+        for (a, b) in aisle(changed, !hot).iter().zip(aisle(base, !hot)) {
+            assert!((a - b).abs() <= 1e-6 * b, "{name}: {a} vs {b}");
+        }
+    }
+}
+
 #[test]
 fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
     let linear = fig7::run_fig7(&fig7::Fig7Config::quick(), &quiet).unwrap();
@@ -207,31 +232,8 @@ fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
         &quiet,
     )
     .unwrap();
-    assert_eq!(curve(&local, 2), curve(&r, 2));
-    for graph in [0, 1] {
-        let aisle = |r: &fig7::Fig7Result, hot: bool| -> Vec<f64> {
-            r.curves[graph]
-                .points
-                .iter()
-                .map(|p| if hot { &p.hot_mae_c } else { &p.cold_mae_c })
-                .map(|m| m.as_ref().unwrap().mean)
-                .collect()
-        };
-        assert_ne!(
-            aisle(&local, false),
-            aisle(&r, false),
-            "{}",
-            r.curves[graph].surrogate
-        );
-        // Hot-aisle sensors take a zero feature: the same up to rounding.
-        for (a, b) in aisle(&local, true).iter().zip(aisle(&r, true)) {
-            assert!(
-                (a - b).abs() <= 1e-6 * b,
-                "{}: {a} vs {b}",
-                r.curves[graph].surrogate
-            );
-        }
-    }
+    // Hot-aisle sensors take a zero feature: the same up to rounding.
+    assert_only_one_aisle_changes(&r, &local, false);
     assert!(fig7::markdown(&local).contains("whole-hall local recirculation term"));
 
     // Edges from the model's air flow change both graphs' hot-aisle predictions only.
@@ -243,30 +245,7 @@ fn fig7_rise_draw_varies_the_sensors_and_the_thermal_graph_learns_it() {
         &quiet,
     )
     .unwrap();
-    assert_eq!(curve(&influence, 2), curve(&r, 2));
-    for graph in [0, 1] {
-        let aisle = |r: &fig7::Fig7Result, hot: bool| -> Vec<f64> {
-            r.curves[graph]
-                .points
-                .iter()
-                .map(|p| if hot { &p.hot_mae_c } else { &p.cold_mae_c })
-                .map(|m| m.as_ref().unwrap().mean)
-                .collect()
-        };
-        assert_ne!(
-            aisle(&influence, true),
-            aisle(&r, true),
-            "{}",
-            r.curves[graph].surrogate
-        );
-        for (a, b) in aisle(&influence, false).iter().zip(aisle(&r, false)) {
-            assert!(
-                (a - b).abs() <= 1e-6 * b,
-                "{}: {a} vs {b}",
-                r.curves[graph].surrogate
-            );
-        }
-    }
+    assert_only_one_aisle_changes(&r, &influence, true);
     assert!(fig7::markdown(&influence).contains("edges from the model's air flow"));
 }
 

@@ -6,8 +6,11 @@
 #[path = "support/sim_halls.rs"]
 mod sim_halls;
 
-use kalibre_dc::hall::Aisle;
-use kalibre_dc::sim::{RackRecirculation, SimConfig, SimMods, Simulator};
+use kalibre_dc::hall::{Aisle, Hall};
+use kalibre_dc::sim::{
+    RackRecirculation, SensorInfluence, SimConfig, SimMods, Simulator, Solution,
+};
+use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::surrogate::{Adjacency, AdjacencySettings};
 use sim_halls::{demo_hall, uniform_state, varied_state};
 
@@ -18,20 +21,9 @@ fn varied_alpha(n: usize) -> Vec<f64> {
         .collect()
 }
 
-#[test]
-fn every_sensor_is_the_supply_plus_the_influence_times_the_rises() {
-    let hall = demo_hall();
-    let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
-    // One setpoint for every CRAC: the supply is then one temperature, and the rest of
-    // every sensor's reading is what the servers' rises put there.
-    let state = varied_state(&hall, 19.0, 0.9, 400.0);
-    let alpha = varied_alpha(hall.server_count());
-    let sol = sim.solve(&state, &alpha, &[]).expect("run");
-    let (_, inf) = sim
-        .sensor_influence(&state, &alpha, &[])
-        .expect("influence");
-    assert_eq!(inf.per_sensor.len(), hall.sensors.len());
-    assert!(inf.max_rel_residual <= SimConfig::default().heat_tol);
+/// Every sensor reads the supply plus the influence times the servers' rises (the supply
+/// must be one temperature).
+fn assert_superposition(sol: &Solution, inf: &SensorInfluence) {
     for (k, row) in inf.per_sensor.iter().enumerate() {
         let warmed: f64 = row
             .iter()
@@ -46,12 +38,33 @@ fn every_sensor_is_the_supply_plus_the_influence_times_the_rises() {
     }
 }
 
-#[test]
-fn the_influence_sees_the_runs_effects() {
+/// The demo hall with its simulator, a state with one setpoint for every CRAC (so the
+/// supply is one temperature) and varied power, and alpha varied server by server.
+fn demo_run() -> (Hall, Simulator, OperatingState, Vec<f64>) {
     let hall = demo_hall();
     let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
     let state = varied_state(&hall, 19.0, 0.9, 400.0);
     let alpha = varied_alpha(hall.server_count());
+    (hall, sim, state, alpha)
+}
+
+#[test]
+fn every_sensor_is_the_supply_plus_the_influence_times_the_rises() {
+    // The supply is one temperature: the rest of every sensor's reading is what the
+    // servers' rises put there.
+    let (hall, sim, state, alpha) = demo_run();
+    let sol = sim.solve(&state, &alpha, &[]).expect("run");
+    let (_, inf) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
+    assert_eq!(inf.per_sensor.len(), hall.sensors.len());
+    assert!(inf.max_rel_residual <= SimConfig::default().heat_tol);
+    assert_superposition(&sol, &inf);
+}
+
+#[test]
+fn the_influence_sees_the_runs_effects() {
+    let (hall, sim, state, alpha) = demo_run();
     // Exhaust drawn back to the intakes inside two racks: transfers without a rise.
     let mut mods = SimMods::new(hall.cracs.len());
     for rack in [2, 17] {
@@ -68,26 +81,12 @@ fn the_influence_sees_the_runs_effects() {
         .sensor_influence(&state, &alpha, &[])
         .expect("influence");
     assert_ne!(inf.per_sensor, plain.per_sensor);
-    for (k, row) in inf.per_sensor.iter().enumerate() {
-        let warmed: f64 = row
-            .iter()
-            .zip(sol.server_exhaust_c.iter().zip(&sol.server_intake_c))
-            .map(|(g, (exhaust, intake))| g * (exhaust - intake))
-            .sum();
-        let reading = sol.sensor_c()[k] - sol.supply_c;
-        assert!(
-            (reading - warmed).abs() < 1e-5,
-            "sensor {k}: reads {reading:.6} K over the supply, the influence gives {warmed:.6}"
-        );
-    }
+    assert_superposition(&sol, &inf);
 }
 
 #[test]
 fn one_servers_rise_at_fixed_flow_moves_the_sensors_as_its_column_says() {
-    let hall = demo_hall();
-    let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
-    let state = varied_state(&hall, 19.0, 0.9, 400.0);
-    let alpha = varied_alpha(hall.server_count());
+    let (hall, sim, state, alpha) = demo_run();
     let base = sim.solve(&state, &alpha, &[]).expect("run");
     let (_, inf) = sim
         .sensor_influence(&state, &alpha, &[])
@@ -252,10 +251,7 @@ fn the_graph_takes_influence_edges_only_from_the_built_in_flow() {
 fn the_racks_shares_add_up_to_each_sensors_warming() {
     use kalibre_dc::sim::{rack_heat, write_rack_heat};
 
-    let hall = demo_hall();
-    let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
-    let state = varied_state(&hall, 19.0, 0.9, 400.0);
-    let alpha = varied_alpha(hall.server_count());
+    let (hall, sim, state, alpha) = demo_run();
     let (sol, inf) = sim
         .sensor_influence(&state, &alpha, &[])
         .expect("influence");
