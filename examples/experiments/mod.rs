@@ -15,10 +15,11 @@ use std::path::{Path, PathBuf};
 use kalibre::core::search::ProjectedGradient;
 use kalibre::core::{Calibrator, Event, Observations, Report, RunStore, Searcher, Surrogate};
 use kalibre::dc::calibration::HallCalibrationSettings;
+use kalibre::dc::calibration_model;
 use kalibre::dc::hall::{AlphaMode, Hall};
 use kalibre::dc::sim::{SensorInfluence, SimConfig};
 use kalibre::dc::snapshots::{self, HallSnapshot, OperatingState};
-use kalibre::dc::surrogate::{Adjacency, PenaltySettings, TemperatureRisePenalty, ThermalGraph};
+use kalibre::dc::surrogate::{PenaltySettings, TemperatureRisePenalty, ThermalGraph};
 use kalibre::dc::synth::{self, Preset, SynthOptions};
 use kalibre::dc::HallModel;
 use serde::{Deserialize, Serialize};
@@ -184,7 +185,7 @@ pub fn kalibre_surrogate(
     settings: &HallCalibrationSettings,
 ) -> Result<ThermalGraph> {
     let Some(cut) = settings.server_influence else {
-        return Ok(kalibre::dc::calibration_model::hall_surrogate(
+        return Ok(calibration_model::hall_surrogate(
             &setup.hall,
             setup.model.layout(),
             settings,
@@ -193,32 +194,28 @@ pub fn kalibre_surrogate(
     };
     // As `calibration_model::server_influence_adjacency` builds it, with the adjoint
     // solves done once per setup.
-    let layout = setup.model.layout();
     let state = &setup.snaps[0].state;
     let influence = match setup.influence.get() {
         Some(i) => i,
         None => {
-            let alpha = layout.alpha_per_server(&layout.space().initial());
-            let (_, i) = setup
-                .model
-                .simulator()
-                .sensor_influence(state, &alpha, &[])?;
+            let i = calibration_model::initial_influence(
+                setup.model.simulator(),
+                setup.model.layout(),
+                state,
+            )?;
             setup.influence.get_or_init(|| i)
         }
     };
-    let adjacency = Adjacency::from_hall(&setup.hall, &settings.surrogate.adjacency)?
-        .with_server_influence(&influence.per_sensor, &state.power_w, cut)?;
+    let adjacency =
+        calibration_model::influence_adjacency(&setup.hall, state, settings, influence, cut)?;
     let geometric = HallCalibrationSettings {
         server_influence: None,
         ..settings.clone()
     };
-    Ok(kalibre::dc::calibration_model::hall_surrogate(
-        &setup.hall,
-        setup.model.layout(),
-        &geometric,
-        None,
-    )?
-    .with_adjacency(adjacency)?)
+    Ok(
+        calibration_model::hall_surrogate(&setup.hall, setup.model.layout(), &geometric, None)?
+            .with_adjacency(adjacency)?,
+    )
 }
 
 /// Serialises a preset by its CLI name.

@@ -9,7 +9,7 @@ use kalibre_core::{Calibrator, Model, Observe, RunStore, Settings};
 
 use crate::calibration::HallCalibrationSettings;
 use crate::hall::Hall;
-use crate::sim::Simulator;
+use crate::sim::{SensorInfluence, Simulator};
 use crate::snapshots::{self, HallSnapshot, OperatingState};
 use crate::surrogate::{
     Adjacency, EffectLinearTerm, FlowBalance, FlowBalanceTerm, LocalRecirculationTerm,
@@ -65,10 +65,31 @@ pub fn server_influence_adjacency(
     settings: &HallCalibrationSettings,
     cut: f64,
 ) -> Result<Adjacency> {
+    let influence = initial_influence(sim, layout, state)?;
+    influence_adjacency(sim.hall(), state, settings, &influence, cut)
+}
+
+/// The sensors' influence in `sim`'s flow at `state` and the layout's initial alphas,
+/// without effects: their values are what the loop is still to find.
+pub fn initial_influence(
+    sim: &Simulator,
+    layout: &ParamLayout,
+    state: &OperatingState,
+) -> Result<SensorInfluence> {
     let alpha = layout.alpha_per_server(&layout.space().initial());
-    // Without the hall's effects: their values are what the loop is still to find.
-    let (_, influence) = sim.sensor_influence(state, &alpha, &[])?;
-    Adjacency::from_hall(sim.hall(), &settings.surrogate.adjacency)?.with_server_influence(
+    Ok(sim.sensor_influence(state, &alpha, &[])?.1)
+}
+
+/// The graph's adjacency with hot-aisle edges from `influence` (taken at `state`), cut at
+/// `cut`; the CRAC edges stay geometric.
+pub fn influence_adjacency(
+    hall: &Hall,
+    state: &OperatingState,
+    settings: &HallCalibrationSettings,
+    influence: &SensorInfluence,
+    cut: f64,
+) -> Result<Adjacency> {
+    Adjacency::from_hall(hall, &settings.surrogate.adjacency)?.with_server_influence(
         &influence.per_sensor,
         &state.power_w,
         cut,
