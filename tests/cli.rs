@@ -172,6 +172,21 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
         html.contains("headroom less the misfit at c-"),
         "row-end under-read"
     );
+    // Which racks warm each sensor in the calibrated model's flow: a hot-aisle sensor's
+    // own rack first; no exhaust at a row-end low inlet, which OpenFOAM's recirculation
+    // round the row end warms.
+    assert!(html.contains("<th>warmed by, in the model</th>"));
+    let row = |sensor: &str| {
+        let start = html.find(&format!("<tr><td>{sensor}</td>")).unwrap();
+        let end = start + html[start..].find("</tr>").unwrap();
+        html[start..end].to_string()
+    };
+    assert!(row("h-B4").contains(" K: B4 "), "{}", row("h-B4"));
+    assert!(
+        row("c-A1-lo").ends_with("<td>no exhaust</td>"),
+        "{}",
+        row("c-A1-lo")
+    );
     // The default likelihood is the paper's, and the report says so.
     assert!(report["settings"].get("robust_nu").is_none());
     assert!(html.contains("<td>likelihood</td><td>least squares"));
@@ -341,6 +356,41 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
             assert!(!h[key].is_null(), "{key} missing in {h}");
         }
         assert_eq!(h["suggestion"]["kind"], h["effect"]);
+    }
+    // The worst sensors, worst first, each with the racks that warm it in the built-in
+    // model's flow; a rack's part of the warming is its share of the whole.
+    let worst = d["worst_sensors"].as_array().expect("worst_sensors");
+    assert_eq!(worst.len(), 5, "{d}");
+    let residuals: Vec<f64> = worst
+        .iter()
+        .map(|w| w["mean_residual_c"].as_f64().unwrap().abs())
+        .collect();
+    assert!(residuals.windows(2).all(|p| p[0] >= p[1]), "{residuals:?}");
+    for w in worst {
+        assert!(w["sensor"].as_str().is_some_and(|s| !s.is_empty()), "{w}");
+        assert_eq!(w["position_m"].as_array().map(Vec::len), Some(3), "{w}");
+        let Some(warming) = w.get("warming") else {
+            panic!("no `warming` with the built-in model: {w}");
+        };
+        if warming.is_null() {
+            continue;
+        }
+        let total_k = warming["warming_k"].as_f64().unwrap();
+        assert!(total_k > 0.0, "{w}");
+        let mut parts_k = 0.0;
+        for r in warming["racks"].as_array().unwrap() {
+            let (part_k, share) = (
+                r["warming_k"].as_f64().unwrap(),
+                r["share"].as_f64().unwrap(),
+            );
+            assert!((0.1..=1.0).contains(&share), "{w}");
+            assert!(
+                (part_k - share * total_k).abs() < 1e-9 * total_k.max(1.0),
+                "{w}"
+            );
+            parts_k += part_k;
+        }
+        assert!(parts_k <= total_k * (1.0 + 1e-9), "{w}");
     }
     // The same geometry under another name is another hall: refused.
     let o = run(on_dataset("diagnose", "of-dev-crac-offset")

@@ -14,8 +14,8 @@ use kalibre_dc::diagnosis::{
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::openfoam::{OpenFoamEffectSolver, OpenFoamModel};
-use kalibre_dc::sim::RackHeat;
-use kalibre_dc::sim::Simulator;
+use kalibre_dc::report::WARMING_RACK_MIN_SHARE;
+use kalibre_dc::sim::{sensor_warming, RackHeat, Simulator};
 use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
@@ -254,18 +254,6 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         Some(path) => write_next_hall(&hall, &report, &model, &d, path)?,
         None => None,
     };
-    if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&d.to_json())
-                .map_err(|e| CliError::Run(format!("JSON: {e}")))?
-        );
-        // stdout is the JSON document; say what was written on stderr.
-        if let Some(line) = &written {
-            eprintln!("{line}");
-        }
-        return Ok(());
-    }
     // Which racks warm the worst sensors in the calibrated built-in model's air flow (the
     // first snapshot): whose alphas they inform, and where a missing effect would act.
     // An OpenFOAM calibration's flow is OpenFOAM's, which the built-in model does not have.
@@ -284,6 +272,19 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
         _ => None,
     };
+    if args.json {
+        let mut doc = d.to_json();
+        doc["worst_sensors"] = worst_sensors_json(&hall, &report, heat.as_deref());
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&doc).map_err(|e| CliError::Run(format!("JSON: {e}")))?
+        );
+        // stdout is the JSON document; say what was written on stderr.
+        if let Some(line) = &written {
+            eprintln!("{line}");
+        }
+        return Ok(());
+    }
     print_where_it_fails(&hall, &report, heat.as_deref());
     println!(
         "\nmissing effects, best first (MAE now {:.3} C):",
@@ -431,14 +432,10 @@ pub(super) fn sensor_line(hall: &Hall, sensor: &str, mean_c: f64) -> String {
     )
 }
 
-/// A rack is named among those warming a worst sensor when it gives at least this share.
-const WARMING_RACK_MIN_SHARE: f64 = 0.1;
-
 /// The racks that warm `sensor` in the model's flow, in words (`rows`: every rack's
 /// share, no cut).
 fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
-    let mine: Vec<&RackHeat> = rows.iter().filter(|r| r.sensor == sensor).collect();
-    let Some(first) = mine.first() else {
+    let Some(warming) = sensor_warming(rows, sensor, WARMING_RACK_MIN_SHARE) else {
         let none = "no exhaust reaches it in the model (under 0.01 K)";
         return if mean_c < 0.0 {
             format!(
@@ -448,16 +445,15 @@ fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
             none.into()
         };
     };
-    // Each row's share is its warming over the sensor's whole warming.
-    let total_k = first.warming_k / first.share;
-    let racks: Vec<String> = mine
+    let racks: Vec<String> = warming
+        .racks
         .iter()
-        .filter(|r| r.share >= WARMING_RACK_MIN_SHARE)
         .map(|r| format!("{} {:.0} %", r.rack, 100.0 * r.share))
         .collect();
     format!(
-        "in the model, exhausts warm it by {total_k:.1} K in {}: {}",
-        first.snapshot,
+        "in the model, exhausts warm it by {:.1} K in {}: {}",
+        warming.warming_k,
+        warming.snapshot,
         if racks.is_empty() {
             format!(
                 "no rack gives {:.0} % of that",
@@ -467,6 +463,51 @@ fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
             format!("racks {}", racks.join(", "))
         }
     )
+}
+
+/// How many of the worst sensors the diagnosis describes.
+const WORST_SENSORS_SHOWN: usize = 5;
+
+/// `worst_sensors` of `diagnose --json`: the sensors the calibrated model misses most,
+/// each with where it is, the mean residual, and (built-in model) which racks warm it in
+/// the model's flow (`warming`, `null` when no exhaust reaches it; absent with a model
+/// whose flow kalibre does not have).
+fn worst_sensors_json(
+    hall: &Hall,
+    report: &Report,
+    heat: Option<&[RackHeat]>,
+) -> serde_json::Value {
+    worst_sensors(report)
+        .iter()
+        .take(WORST_SENSORS_SHOWN)
+        .map(|(sensor, mean_c)| {
+            let s = hall.sensors.iter().find(|s| s.id == *sensor);
+            let mut entry = serde_json::json!({
+                "sensor": sensor,
+                "aisle": s.map(|s| s.aisle.as_str()),
+                "position_m": s.map(|s| s.position_m),
+                "mean_residual_c": mean_c,
+            });
+            if let Some(rows) = heat {
+                entry["warming"] = sensor_warming(rows, sensor, WARMING_RACK_MIN_SHARE).map_or(
+                    serde_json::Value::Null,
+                    |w| {
+                        let racks: Vec<_> = w
+                            .racks
+                            .iter()
+                            .map(|r| {
+                                serde_json::json!({
+                                    "rack": r.rack, "warming_k": r.warming_k, "share": r.share
+                                })
+                            })
+                            .collect();
+                        serde_json::json!({"snapshot": w.snapshot, "warming_k": w.warming_k, "racks": racks})
+                    },
+                );
+            }
+            entry
+        })
+        .collect()
 }
 
 /// A hypothesis's flags in words, e.g. `significant, not identifiable`.
@@ -499,7 +540,7 @@ fn print_where_it_fails(hall: &Hall, report: &Report, heat: Option<&[RackHeat]>)
         g.0 += r.predicted_c - r.measured_c;
         g.1 += 1;
     }
-    for (sensor, mean) in worst_sensors(report).iter().take(5) {
+    for (sensor, mean) in worst_sensors(report).iter().take(WORST_SENSORS_SHOWN) {
         println!("  {}", sensor_line(hall, sensor, *mean));
         if let Some(rows) = heat {
             println!("  {:<12} {}", "", warming_racks(rows, sensor, *mean));

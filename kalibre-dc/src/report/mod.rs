@@ -17,7 +17,7 @@ use std::fmt::Write;
 use kalibre_core::calibrate::Report;
 
 use crate::hall::Hall;
-use crate::sim::{coldest_under_read, InletCheck};
+use crate::sim::{coldest_under_read, sensor_warming, InletCheck, RackHeat};
 use crate::snapshots::HallSnapshot;
 use crate::surrogate::PenaltyReport;
 use svg::{esc, Chart};
@@ -27,6 +27,10 @@ table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding
 th{background:#f3f4f6}td:first-child,th:first-child{text-align:left}\
 .grid{display:grid;grid-template-columns:repeat(auto-fit,minmax(420px,1fr));gap:1em}\
 .note{background:#fff7ed;border-left:4px solid #f97316;padding:.4em .8em}";
+
+/// A rack is named among those warming a sensor when it gives at least this share of the
+/// sensor's warming (in the report, and in `kalibre diagnose`).
+pub const WARMING_RACK_MIN_SHARE: f64 = 0.1;
 
 /// Mean residual (model minus measurement) per sensor over the snapshots of the report.
 pub fn mean_residual_per_sensor(hall: &Hall, report: &Report) -> Vec<f64> {
@@ -140,6 +144,7 @@ pub fn calibration_html(
     report: &Report,
     prior: &PenaltyReport,
     intakes: Option<&[(String, InletCheck)]>,
+    warming: Option<&[RackHeat]>,
 ) -> String {
     let mut h = String::new();
     let _ = write!(
@@ -283,9 +288,25 @@ pub fn calibration_html(
         let under = coldest_under_read(hall, &report.residuals);
         h.push_str(&intakes_html(checks, under.as_ref()));
     }
-    h.push_str("<h2>Residuals per sensor</h2><table><tr><th>sensor</th><th>aisle</th>");
+    h.push_str("<h2>Residuals per sensor</h2>");
+    if let (Some(_), Some(first)) = (warming, snaps.first()) {
+        let _ = write!(
+            h,
+            "<p>The last column gives the racks whose exhausts warm each sensor in the \
+             calibrated model's air flow (snapshot {}, racks giving at least {:.0} % of the \
+             sensor's warming over the supply): the racks whose alphas the sensor informs. A \
+             sensor the model reads too cold that no exhaust reaches takes its warmth by a path \
+             the model lacks.</p>",
+            esc(&first.state.label),
+            100.0 * WARMING_RACK_MIN_SHARE
+        );
+    }
+    h.push_str("<table><tr><th>sensor</th><th>aisle</th>");
     for s in snaps {
         let _ = write!(h, "<th>{} (C)</th>", esc(&s.state.label));
+    }
+    if warming.is_some() {
+        h.push_str("<th>warmed by, in the model</th>");
     }
     h.push_str("</tr>");
     for sensor in &hall.sensors {
@@ -310,6 +331,20 @@ pub fn calibration_html(
                 ),
                 None => write!(h, "<td>-</td>"),
             };
+        }
+        if let Some(rows) = warming {
+            let cell = match sensor_warming(rows, &sensor.id, WARMING_RACK_MIN_SHARE) {
+                None => "no exhaust".to_string(),
+                Some(w) => {
+                    let racks: Vec<String> = w
+                        .racks
+                        .iter()
+                        .map(|r| format!("{} {:.0} %", esc(&r.rack), 100.0 * r.share))
+                        .collect();
+                    format!("{:.2} K: {}", w.warming_k, racks.join(", "))
+                }
+            };
+            let _ = write!(h, "<td>{cell}</td>");
         }
         h.push_str("</tr>");
     }

@@ -99,6 +99,53 @@ pub fn rack_heat(
     Ok(rows)
 }
 
+/// What warms one sensor in one solved state (see [`sensor_warming`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorWarming<'a> {
+    /// The operating state's label.
+    pub snapshot: &'a str,
+    /// The sensor's whole warming over the supply by the racks' exhausts (K).
+    pub warming_k: f64,
+    /// The racks giving at least the share asked, largest first.
+    pub racks: Vec<&'a RackHeat>,
+}
+
+/// What warms `sensor` in the first state of `rows` that has rows for it: its whole
+/// warming and the racks giving at least `min_share` of it. `rows` must come from
+/// [`rack_heat`] with no cut (`min_share` 0 there), since the whole warming is read off
+/// the largest rack's share. `None` when no exhaust reaches the sensor (under
+/// [`MIN_WARMING_K`]).
+///
+/// ```
+/// use kalibre_dc::sim::{sensor_warming, RackHeat};
+/// let row = |rack: &str, warming_k: f64| RackHeat {
+///     snapshot: "t0".into(), sensor: "h-1".into(), rack: rack.into(),
+///     warming_k, share: warming_k / 10.0,
+/// };
+/// let rows = vec![row("A1", 8.0), row("A2", 1.5), row("A3", 0.5)];
+/// let w = sensor_warming(&rows, "h-1", 0.1).unwrap();
+/// assert!((w.warming_k - 10.0).abs() < 1e-12);
+/// assert_eq!(w.racks.iter().map(|r| r.rack.as_str()).collect::<Vec<_>>(), ["A1", "A2"]);
+/// assert!(sensor_warming(&rows, "c-1", 0.1).is_none());
+/// ```
+pub fn sensor_warming<'a>(
+    rows: &'a [RackHeat],
+    sensor: &str,
+    min_share: f64,
+) -> Option<SensorWarming<'a>> {
+    let first = rows.iter().find(|r| r.sensor == sensor)?;
+    let racks = rows
+        .iter()
+        .filter(|r| r.sensor == sensor && r.snapshot == first.snapshot && r.share >= min_share)
+        .collect();
+    Some(SensorWarming {
+        snapshot: &first.snapshot,
+        // Rows come largest first, and each share is the rack's part of the whole.
+        warming_k: first.warming_k / first.share,
+        racks,
+    })
+}
+
 /// The rows as CSV: `snapshot,sensor,rack,warming_k,share`.
 pub fn write_rack_heat(rows: &[RackHeat]) -> String {
     let mut out = String::from("snapshot,sensor,rack,warming_k,share\n");

@@ -41,7 +41,9 @@ mod vtk;
 pub use advection::AdvectionStats;
 pub use config::{Advection, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
 pub use grid::Grid;
-pub use heat_sources::{rack_heat, write_rack_heat, RackHeat, MIN_WARMING_K};
+pub use heat_sources::{
+    rack_heat, sensor_warming, write_rack_heat, RackHeat, SensorWarming, MIN_WARMING_K,
+};
 pub use influence::SensorInfluence;
 pub use inlets::{
     coldest_under_read, inlet_check, intake_error, server_air, setpoint_headroom_c,

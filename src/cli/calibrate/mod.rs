@@ -17,7 +17,7 @@ use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::openfoam::OpenFoamModel;
-use kalibre_dc::sim::{inlet_check, InletCheck, RECOMMENDED_MAX_INLET_C};
+use kalibre_dc::sim::{inlet_check, InletCheck, RackHeat, RECOMMENDED_MAX_INLET_C};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
 use kalibre_dc::HallModel;
@@ -427,21 +427,29 @@ fn model_record(
     })
 }
 
-/// Each snapshot's server intakes at the best parameters (the built-in model, as
-/// calibrated), against ASHRAE's recommended limit.
-fn intake_checks(
+/// What the calibrated built-in model says beyond the sensors.
+struct BuiltinFindings {
+    /// Every server's intake per snapshot against the recommended limit.
+    intakes: Vec<(String, InletCheck)>,
+    /// Which racks warm each sensor in the first snapshot's air flow (rows with no cut).
+    warming: Vec<RackHeat>,
+}
+
+/// The calibrated built-in model's [`BuiltinFindings`] (one adjoint solve per sensor for
+/// the warming).
+fn builtin_findings(
     hall: &Hall,
     snaps: &[HallSnapshot],
     settings: &HallCalibrationSettings,
     report: &Report,
-) -> CliResult<Vec<(String, InletCheck)>> {
+) -> CliResult<BuiltinFindings> {
     let mut hall = hall.clone();
     if let Some(mode) = settings.alpha_mode {
         hall.calibrate.alpha = mode;
     }
     let model = HallModel::new(&hall, settings.sim.clone())?;
     let params = report.best.params.values();
-    snaps
+    let intakes = snaps
         .iter()
         .map(|snap| {
             let air = model.server_air(&snap.state, &params)?;
@@ -450,7 +458,17 @@ fn intake_checks(
                 inlet_check(&air, RECOMMENDED_MAX_INLET_C, 3)?,
             ))
         })
-        .collect()
+        .collect::<CliResult<Vec<_>>>()?;
+    let warming = match snaps.first() {
+        Some(first) => {
+            let (sol, influence) = model
+                .sensor_influence(&first.state, &params)
+                .map_err(|e| CliError::Run(format!("snapshot `{}`: {e}", first.state.label)))?;
+            kalibre_dc::sim::rack_heat(&hall, &first.state.label, &sol, &influence, 0.0)?
+        }
+        None => Vec::new(),
+    };
+    Ok(BuiltinFindings { intakes, warming })
 }
 
 /// Runs `kalibre calibrate`.
@@ -499,10 +517,13 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;
     std::fs::write(&report_path, json).map_err(|e| io_err(&report_path, e))?;
     let html_path = args.out.join("report.html");
-    let intakes = match args.model {
-        ModelArg::Builtin => Some(intake_checks(&hall, &snaps, &settings, &report)?),
-        // The built-in model's intakes would not be the calibrated model's.
-        ModelArg::Openfoam | ModelArg::Command => None,
+    let (intakes, warming) = match args.model {
+        ModelArg::Builtin => {
+            let found = builtin_findings(&hall, &snaps, &settings, &report)?;
+            (Some(found.intakes), Some(found.warming))
+        }
+        // The built-in model's intakes and air flow would not be the calibrated model's.
+        ModelArg::Openfoam | ModelArg::Command => (None, None),
     };
     let html = kalibre_dc::report::calibration_html(
         &hall,
@@ -510,6 +531,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         &report,
         &penalty_report,
         intakes.as_deref(),
+        warming.as_deref(),
     );
     let intakes = intakes.map(|checks| Intakes {
         checks,
