@@ -17,7 +17,9 @@ use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::openfoam::OpenFoamModel;
-use kalibre_dc::sim::{inlet_check, InletCheck, RackHeat, RECOMMENDED_MAX_INLET_C};
+use kalibre_dc::sim::{
+    inlet_check, rack_heat, server_air, InletCheck, RackHeat, RECOMMENDED_MAX_INLET_C,
+};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
 use kalibre_dc::HallModel;
@@ -449,25 +451,26 @@ fn builtin_findings(
     }
     let model = HallModel::new(&hall, settings.sim.clone())?;
     let params = report.best.params.values();
-    let intakes = snaps
-        .iter()
-        .map(|snap| {
-            let air = model.server_air(&snap.state, &params)?;
-            Ok((
-                snap.state.label.clone(),
-                inlet_check(&air, RECOMMENDED_MAX_INLET_C, 3)?,
-            ))
-        })
-        .collect::<CliResult<Vec<_>>>()?;
-    let warming = match snaps.first() {
-        Some(first) => {
-            let (sol, influence) = model
-                .sensor_influence(&first.state, &params)
-                .map_err(|e| CliError::Run(format!("snapshot `{}`: {e}", first.state.label)))?;
-            kalibre_dc::sim::rack_heat(&hall, &first.state.label, &sol, &influence, 0.0)?
-        }
-        None => Vec::new(),
-    };
+    // The first snapshot's run comes with the adjoint solves, so it is solved once.
+    let mut warming = Vec::new();
+    let mut intakes = Vec::with_capacity(snaps.len());
+    for (k, snap) in snaps.iter().enumerate() {
+        let label = &snap.state.label;
+        let solution = if k == 0 {
+            let (solution, influence) = model
+                .sensor_influence(&snap.state, &params)
+                .map_err(|e| CliError::Run(format!("snapshot `{label}`: {e}")))?;
+            warming = rack_heat(&hall, label, &solution, &influence, 0.0)?;
+            solution
+        } else {
+            model.solve(&snap.state, &params)?
+        };
+        let air = server_air(&hall, &snap.state, &solution)?;
+        intakes.push((
+            label.clone(),
+            inlet_check(&air, RECOMMENDED_MAX_INLET_C, 3)?,
+        ));
+    }
     Ok(BuiltinFindings { intakes, warming })
 }
 
