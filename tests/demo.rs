@@ -33,6 +33,32 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
         assert!(stdout.contains(needle), "`{needle}` not in:\n{stdout}");
     }
 
+    // Under each worst sensor of the first diagnosis, which racks warm it in the model's
+    // flow. The worst is the inlet of the rack whose exhaust recirculates (hidden): the
+    // model reads it degrees too cold, and no exhaust reaches it in the model's flow.
+    let lines: Vec<&str> = stdout.lines().collect();
+    let first_diagnosis = lines
+        .iter()
+        .position(|l| l.contains("diagnose where the calibrated model fails"))
+        .unwrap();
+    let worst = &lines[first_diagnosis + 2..first_diagnosis + 8];
+    for pair in worst.chunks(2) {
+        assert!(pair[0].contains("the model reads"), "{stdout}");
+        assert!(
+            pair[1].contains("in the model, exhausts warm it by")
+                || pair[1].contains("no exhaust reaches it in the model"),
+            "{stdout}"
+        );
+    }
+    assert!(
+        worst[0].contains("c-A05-") && worst[0].contains("too cold"),
+        "{stdout}"
+    );
+    assert!(
+        worst[1].contains("the measured warmth takes a path the model lacks"),
+        "{stdout}"
+    );
+
     // story.json: two calibrations, the second with the added effect, and a lower error.
     let story: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("story.json")).unwrap()).unwrap();

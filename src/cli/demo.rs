@@ -4,14 +4,18 @@
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 use clap::Args;
 use kalibre_dc::hall::{EffectSpec, Hall};
+use kalibre_dc::sim::{rack_heat, RackHeat, SimConfig};
+use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::story::{run_story, StoryEvent, StoryOutcome, StoryReport, StorySettings};
 use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
 
-use super::diagnose::{hypothesis_flags, sensor_line, worst_sensors};
+use super::diagnose::{hypothesis_flags, sensor_line, warming_racks, worst_sensors};
 use super::{with_threads, CliError, CliResult};
+use kalibre_dc::HallModel;
 
 /// The effect hidden in the demo's truth when `--effect` is not given.
 pub const DEFAULT_EFFECT: &str = "rack_recirculation";
@@ -136,7 +140,23 @@ pub fn run(args: DemoArgs) -> CliResult {
     };
     let floor = settings.reference_mae_c;
     let counter = AtomicUsize::new(0);
-    let observer = |e: &StoryEvent<'_>| print_event(hall, floor, &counter, e);
+    // The hall as calibrated so far: effects join it as the story adds them.
+    let current = Mutex::new(hall.clone());
+    let sim = settings.calibration.sim.clone();
+    let first = synth.snapshots.first().map(|s| &s.state);
+    let observer = |e: &StoryEvent<'_>| {
+        if let StoryEvent::EffectAdded { hall, .. } = e {
+            *current.lock().unwrap_or_else(|p| p.into_inner()) = (*hall).clone();
+        }
+        let warming = match (e, first) {
+            (StoryEvent::DiagnosisDone { calibration, .. }, Some(first)) => {
+                let hall = current.lock().unwrap_or_else(|p| p.into_inner());
+                Some(sensor_warming_rows(&hall, &sim, first, calibration))
+            }
+            _ => None,
+        };
+        print_event(hall, floor, &counter, e, warming.as_ref());
+    };
     let story = with_threads(args.threads, || {
         run_story(
             hall,
@@ -165,8 +185,30 @@ pub fn run(args: DemoArgs) -> CliResult {
     Ok(())
 }
 
-/// Prints each step as it happens.
-fn print_event(hall: &Hall, floor: Option<f64>, counter: &AtomicUsize, e: &StoryEvent<'_>) {
+/// Which racks warm each sensor in the calibrated model's flow in `state` (rows with no
+/// cut), or why that could not be worked out.
+fn sensor_warming_rows(
+    hall: &Hall,
+    sim: &SimConfig,
+    state: &OperatingState,
+    calibration: &kalibre_core::calibrate::Report,
+) -> Result<Vec<RackHeat>, String> {
+    let model = HallModel::new(hall, sim.clone()).map_err(|e| e.to_string())?;
+    let (solution, influence) = model
+        .sensor_influence(state, &calibration.best.params.values())
+        .map_err(|e| e.to_string())?;
+    rack_heat(hall, &state.label, &solution, &influence, 0.0).map_err(|e| e.to_string())
+}
+
+/// Prints each step as it happens (`warming`: with a diagnosis, which racks warm each
+/// sensor in the calibrated model's flow).
+fn print_event(
+    hall: &Hall,
+    floor: Option<f64>,
+    counter: &AtomicUsize,
+    e: &StoryEvent<'_>,
+    warming: Option<&Result<Vec<RackHeat>, String>>,
+) {
     let n = || counter.fetch_add(1, Ordering::Relaxed) + 1;
     match e {
         StoryEvent::CalibrationStarted { name, .. } => println!("\nstep {}: {name}", n()),
@@ -204,7 +246,7 @@ fn print_event(hall: &Hall, floor: Option<f64>, counter: &AtomicUsize, e: &Story
         StoryEvent::DiagnosisDone {
             step, calibration, ..
         } => {
-            print_where(hall, calibration);
+            print_where(hall, calibration, warming);
             println!(
                 "  missing effects, best first (MAE now {:.3} C, {:.1} s):",
                 step.mae_c, step.wall_s
@@ -236,11 +278,21 @@ fn print_event(hall: &Hall, floor: Option<f64>, counter: &AtomicUsize, e: &Story
     }
 }
 
-/// The worst sensors, in words.
-fn print_where(hall: &Hall, report: &kalibre_core::calibrate::Report) {
+/// The worst sensors, in words, each with the racks that warm it in the model's flow.
+fn print_where(
+    hall: &Hall,
+    report: &kalibre_core::calibrate::Report,
+    warming: Option<&Result<Vec<RackHeat>, String>>,
+) {
     println!("  worst sensors (mean over the snapshots):");
     for (sensor, mean) in worst_sensors(report).iter().take(3) {
         println!("    {}", sensor_line(hall, sensor, *mean));
+        if let Some(Ok(rows)) = warming {
+            println!("      {}", warming_racks(rows, sensor, *mean));
+        }
+    }
+    if let Some(Err(e)) = warming {
+        println!("    (which racks warm them could not be worked out: {e})");
     }
 }
 

@@ -434,7 +434,7 @@ pub(super) fn sensor_line(hall: &Hall, sensor: &str, mean_c: f64) -> String {
 
 /// The racks that warm `sensor` in the model's flow, in words (`rows`: every rack's
 /// share, no cut).
-fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
+pub(super) fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
     let Some(warming) = sensor_warming(rows, sensor, WARMING_RACK_MIN_SHARE) else {
         let none = "no exhaust reaches it in the model (under 0.01 K)";
         return if mean_c < 0.0 {
@@ -451,7 +451,7 @@ fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
         .map(|r| format!("{} {:.0} %", r.rack, 100.0 * r.share))
         .collect();
     format!(
-        "in the model, exhausts warm it by {:.1} K in {}: {}",
+        "in the model, exhausts warm it by {:.2} K in {}: {}",
         warming.warming_k,
         warming.snapshot,
         if racks.is_empty() {
