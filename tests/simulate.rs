@@ -265,6 +265,27 @@ fn simulate_answers_what_if_and_its_headroom_is_exact() {
         &["--setpoint-offset-c", "inf"],
         "--setpoint-offset-c: expected a finite",
     );
+    // OpenFOAM's options need --model openfoam, and OpenFOAM runs give the sensor
+    // readings only (refused before any case is meshed).
+    refused(
+        &["--np", "2"],
+        "--np is an OpenFOAM option: add --model openfoam",
+    );
+    refused(
+        &["--of-dir", dir.join("of").to_str().unwrap()],
+        "--of-dir is an OpenFOAM option",
+    );
+    for flag in ["--vtk", "--servers", "--heat-sources"] {
+        refused(
+            &["--model", "openfoam", flag, dir.join("x").to_str().unwrap()],
+            &format!("{flag} needs the built-in simulator's fields"),
+        );
+    }
+    refused(
+        &["--model", "openfoam", "--inlet-limit-c", "30"],
+        "--inlet-limit-c needs the built-in simulator's fields",
+    );
+    assert!(!dir.join("of").exists() && !dir.join("openfoam").exists());
 }
 
 /// A reader that closes early (`kalibre ... | head`) ends the process quietly, by the

@@ -8,6 +8,7 @@ mod error;
 mod inlets;
 mod openfoam_args;
 mod simulate;
+mod simulate_openfoam;
 mod synth;
 mod what_if;
 
@@ -28,7 +29,8 @@ pub struct Cli {
 enum Command {
     /// Generate a synthetic hall with a hidden truth (hall.json, snapshots.csv, truth.json).
     Synth(synth::SynthArgs),
-    /// Run the built-in simulator on a hall's snapshots and write the predicted sensor readings.
+    /// Run the built-in simulator (or OpenFOAM) on a hall's snapshots and write the predicted
+    /// sensor readings.
     Simulate(simulate::SimulateArgs),
     /// Calibrate a hall's parameters (server air flow rates, effects) against its measurements.
     Calibrate(Box<calibrate::CalibrateArgs>),

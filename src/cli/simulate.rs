@@ -1,8 +1,9 @@
-//! `kalibre simulate`: the built-in simulator on a hall's snapshots.
+//! `kalibre simulate`: the built-in simulator on a hall's snapshots (OpenFOAM:
+//! `simulate_openfoam`).
 
 use std::path::{Path, PathBuf};
 
-use clap::Args;
+use clap::{Args, ValueEnum};
 use kalibre_core::ParamSpace;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::sim::{coldest_under_read, setpoint_headroom_c, SimConfig};
@@ -11,6 +12,7 @@ use kalibre_dc::HallModel;
 
 use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::inlets::{inlet_line, under_read_note};
+use super::openfoam_args::OpenFoamArgs;
 use super::what_if::WhatIfArgs;
 use super::{io_err, CliError, CliResult};
 
@@ -22,53 +24,83 @@ const HEAT_SOURCE_MIN_SHARE: f64 = 0.02;
 pub struct SimulateArgs {
     /// The hall (`hall.json`).
     #[arg(long)]
-    hall: PathBuf,
+    pub(super) hall: PathBuf,
     /// Operating conditions (`snapshots.csv`); sensor readings in it are ignored.
     #[arg(long)]
-    snapshots: PathBuf,
+    pub(super) snapshots: PathBuf,
     /// Parameter values: a JSON object `{ "alpha/<type>": 0.12, ... }`, or a calibration's
     /// `report.json` (its best parameters, and the alpha mode and grid it ran with).
     /// Parameters not given keep the hall's initial values.
     #[arg(long)]
-    params: Option<PathBuf>,
+    pub(super) params: Option<PathBuf>,
     /// Where to write the predicted sensor readings (snapshot CSV format, kind `sensor_c`).
     #[arg(long)]
-    out: PathBuf,
+    pub(super) out: PathBuf,
     /// Also write temperature, pressure and velocity fields as VTK files (one per snapshot)
     /// into this directory, for ParaView.
     #[arg(long)]
-    vtk: Option<PathBuf>,
-    /// Grid cell size of the built-in simulator (m); default: the grid a built-in
-    /// calibration recorded in the `--params` report, else 0.2.
+    pub(super) vtk: Option<PathBuf>,
+    /// Grid cell size (m) of the built-in simulator, or of the OpenFOAM mesh with
+    /// `--model openfoam`; default: the grid the `--params` report's calibration recorded
+    /// for that model, else 0.2.
     #[arg(long = "grid-m")]
-    grid_m: Option<f64>,
+    pub(super) grid_m: Option<f64>,
     /// Also write every server's predicted air per snapshot (CSV:
     /// `snapshot,server,rack,type,power_w,flow_m3_s,intake_c,exhaust_c`): what the
     /// calibrated model says where no sensor measures.
     #[arg(long)]
-    servers: Option<PathBuf>,
+    pub(super) servers: Option<PathBuf>,
     /// Also write where each sensor's warming comes from, per snapshot (CSV:
     /// `snapshot,sensor,rack,warming_k,share`): the racks whose exhausts give at least 2 %
     /// of the sensor's warming over the supply in the model's air flow, largest first.
     /// One adjoint solve per sensor and snapshot.
     #[arg(long = "heat-sources")]
-    heat_sources: Option<PathBuf>,
-    /// Server intake temperature above which a server is counted as too warm (C); the
-    /// default is ASHRAE TC 9.9's recommended upper bound for classes A1-A4.
-    #[arg(long = "inlet-limit-c", default_value_t = kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)]
-    inlet_limit_c: f64,
+    pub(super) heat_sources: Option<PathBuf>,
+    /// Server intake temperature above which a server is counted as too warm (C); default
+    /// 27, ASHRAE TC 9.9's recommended upper bound for classes A1-A4.
+    #[arg(long = "inlet-limit-c")]
+    pub(super) inlet_limit_c: Option<f64>,
     /// Also solve on grids these factors of the cell size finer (e.g. `0.75,0.5`), and
     /// take each snapshot's least setpoint headroom over the grids: the model's own grid
     /// error at its hottest server is then in the figure.
     #[arg(long = "grid-check", value_delimiter = ',', value_name = "F,F")]
-    grid_check: Vec<f64>,
+    pub(super) grid_check: Vec<f64>,
     #[command(flatten)]
-    what_if: WhatIfArgs,
+    pub(super) what_if: WhatIfArgs,
+    /// The model: `builtin` (the built-in simulator) or `openfoam` (a case generated from
+    /// hall.json, meshed once into `--of-dir`, one solve per snapshot; predicted sensor
+    /// readings only).
+    #[arg(long, value_enum, default_value_t = SimulateModel::Builtin)]
+    pub(super) model: SimulateModel,
+    /// OpenFOAM: where the case is meshed and solved; default: the calibration's
+    /// `openfoam` directory when `--params` is its `report.json` (its mesh is reused), else
+    /// `openfoam` beside `--out`.
+    #[arg(long = "of-dir")]
+    pub(super) of_dir: Option<PathBuf>,
+    #[command(flatten)]
+    pub(super) openfoam: OpenFoamArgs,
+}
+
+/// The model `kalibre simulate` runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SimulateModel {
+    /// The built-in simulator.
+    Builtin,
+    /// OpenFOAM (`buoyantBoussinesqSimpleFoam`).
+    Openfoam,
+}
+
+/// `--inlet-limit-c`, or ASHRAE's recommended bound.
+fn inlet_limit_c(args: &SimulateArgs) -> f64 {
+    args.inlet_limit_c
+        .unwrap_or(kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)
 }
 
 /// Reads a `--params` file: a JSON object, or a calibration's `report.json` with the model
 /// it recorded (if any).
-fn read_params_file(path: &Path) -> CliResult<(serde_json::Value, Option<CalibratedModel>)> {
+pub(super) fn read_params_file(
+    path: &Path,
+) -> CliResult<(serde_json::Value, Option<CalibratedModel>)> {
     let file = path.display().to_string();
     let text =
         std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
@@ -84,7 +116,11 @@ fn read_params_file(path: &Path) -> CliResult<(serde_json::Value, Option<Calibra
 
 /// Parameter values by name from a JSON object or a report's `best.params` (`json`, read
 /// from `path`).
-fn load_params(path: &Path, json: &serde_json::Value, space: &ParamSpace) -> CliResult<Vec<f64>> {
+pub(super) fn load_params(
+    path: &Path,
+    json: &serde_json::Value,
+    space: &ParamSpace,
+) -> CliResult<Vec<f64>> {
     let file = path.display().to_string();
     let (map, pointer) = match json.get("best").and_then(|b| b.get("params")) {
         Some(p) => (p, "/best/params"),
@@ -141,7 +177,7 @@ fn finer_headrooms(
                     let air = model.server_air(&snap.state, params).map_err(|e| {
                         CliError::Run(format!("snapshot `{}` at {:.3} m: {e}", snap.state.label, base * f))
                     })?;
-                    let check = kalibre_dc::sim::inlet_check(&air, args.inlet_limit_c, 1)?;
+                    let check = kalibre_dc::sim::inlet_check(&air, inlet_limit_c(args), 1)?;
                     Ok(setpoint_headroom_c(&check).unwrap_or(f64::NAN))
                 })
                 .collect::<CliResult<Vec<f64>>>()?;
@@ -178,13 +214,24 @@ pub fn run(args: SimulateArgs) -> CliResult {
         println!("what if: {what} (in every snapshot)");
     }
     let file = args.params.as_deref().map(read_params_file).transpose()?;
+    args.openfoam
+        .refuse_unless(args.model == SimulateModel::Openfoam)?;
+    if args.model == SimulateModel::Openfoam {
+        return super::simulate_openfoam::run(&args, &hall, &snaps, file.as_ref());
+    }
+    if args.of_dir.is_some() {
+        return Err(CliError::Input(
+            "--of-dir is an OpenFOAM option: add --model openfoam".into(),
+        ));
+    }
     let recorded = file.as_ref().and_then(|(_, m)| m.as_ref());
     // A calibration's report brings the model it ran: its alpha mode and grid stand
     // unless --grid-m is given.
     if let Some(m) = recorded.filter(|m| m.kind != "builtin") {
         eprintln!(
-            "note: the calibration ran the {} model; simulate runs the built-in simulator at its parameters",
-            m.kind
+            "note: the calibration ran the {} model; simulate runs the built-in simulator at its parameters{}",
+            m.kind,
+            if m.kind == "openfoam" { " (--model openfoam runs OpenFOAM)" } else { "" }
         );
     }
     let hall = match recorded {
@@ -201,10 +248,10 @@ pub fn run(args: SimulateArgs) -> CliResult {
         (Some(p), Some((json, _))) => load_params(p, json, space)?,
         _ => space.initial(),
     };
-    if !args.inlet_limit_c.is_finite() {
+    if !inlet_limit_c(&args).is_finite() {
         return Err(CliError::Input(format!(
             "--inlet-limit-c: expected a finite temperature in C, got {}",
-            args.inlet_limit_c
+            inlet_limit_c(&args)
         )));
     }
     let mut labels = Vec::with_capacity(snaps.len());
@@ -245,7 +292,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         let servers = kalibre_dc::sim::server_air(&hall, state, &solution)?;
         checks.push(kalibre_dc::sim::inlet_check(
             &servers,
-            args.inlet_limit_c,
+            inlet_limit_c(&args),
             3,
         )?);
         if args.servers.is_some() {

@@ -1,0 +1,118 @@
+//! `kalibre simulate --model openfoam`: OpenFOAM on a hall's snapshots, at a calibration's
+//! parameters or any others, what-ifs included; the predicted sensor readings.
+
+use std::time::Instant;
+
+use kalibre_core::Model;
+use kalibre_dc::hall::Hall;
+use kalibre_dc::openfoam::OpenFoamModel;
+use kalibre_dc::snapshots::{self, HallSnapshot};
+
+use super::calibrated_model::{grid_or_recorded, CalibratedModel};
+use super::openfoam_args::of_err;
+use super::simulate::{load_params, SimulateArgs};
+use super::{io_err, CliError, CliResult};
+
+/// The built-in simulator's options that OpenFOAM runs do not have, by flag.
+fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {
+    let given = [
+        ("--vtk", args.vtk.is_some()),
+        ("--servers", args.servers.is_some()),
+        ("--heat-sources", args.heat_sources.is_some()),
+        ("--grid-check", !args.grid_check.is_empty()),
+        ("--inlet-limit-c", args.inlet_limit_c.is_some()),
+    ];
+    match given.iter().find(|(_, g)| *g) {
+        Some((flag, _)) => Err(CliError::Input(format!(
+            "{flag} needs the built-in simulator's fields; with --model openfoam, simulate \
+             writes the sensor readings only"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// Runs OpenFOAM on every snapshot of `snaps` (what-ifs applied) at the parameters of
+/// `file` (a JSON object or a calibration's report, as read by `--params`) and writes the
+/// predicted readings.
+pub(super) fn run(
+    args: &SimulateArgs,
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    file: Option<&(serde_json::Value, Option<CalibratedModel>)>,
+) -> CliResult {
+    refuse_builtin_only(args)?;
+    // An OpenFOAM calibration's report brings its mesh, iterations and processes; any
+    // report its alpha mode.
+    let recorded = file.and_then(|(_, m)| m.as_ref());
+    let of_recorded = recorded.filter(|m| m.kind == "openfoam");
+    if let Some(m) = recorded.filter(|m| m.kind != "openfoam") {
+        eprintln!(
+            "note: the calibration ran the {} model; simulate runs OpenFOAM at its parameters",
+            m.kind
+        );
+    }
+    let hall = match recorded {
+        Some(m) => m.calibrated_hall(hall),
+        None => hall.clone(),
+    };
+    let mut of_args = args.openfoam.clone();
+    if let Some(m) = of_recorded {
+        of_args.of_iterations = of_args.of_iterations.or(m.of_iterations);
+        of_args.np = of_args.np.or(m.np);
+    }
+    // Beside the calibration, an OpenFOAM calibration's meshed case is found again.
+    let root = match (&args.of_dir, &args.params, file) {
+        (Some(dir), _, _) => dir.clone(),
+        (None, Some(p), Some((json, _))) if json.get("best").is_some() => p
+            .parent()
+            .map_or_else(|| "openfoam".into(), |d| d.join("openfoam")),
+        _ => args
+            .out
+            .parent()
+            .map_or_else(|| "openfoam".into(), |d| d.join("openfoam")),
+    };
+    let settings = of_args.settings(&root, grid_or_recorded(args.grid_m, of_recorded))?;
+    let model = OpenFoamModel::new(&hall, settings).map_err(of_err)?;
+    let space = model.layout().space();
+    let params = match (&args.params, file) {
+        (Some(p), Some((json, _))) => load_params(p, json, space)?,
+        _ => space.initial(),
+    };
+    let mut labels = Vec::with_capacity(snaps.len());
+    let mut predicted = Vec::with_capacity(snaps.len());
+    for snap in snaps {
+        let label = &snap.state.label;
+        let started = Instant::now();
+        let out = model
+            .evaluate(&snap.state, &params)
+            .map_err(|e| CliError::Run(format!("snapshot `{label}`: OpenFOAM: {e}")))?;
+        if let Some(k) = out.values.iter().position(|v| !v.is_finite()) {
+            return Err(CliError::Run(format!(
+                "snapshot `{label}`: OpenFOAM: sensor `{}` came out as {}",
+                hall.sensors[k].id, out.values[k]
+            )));
+        }
+        let (lo, hi) = out
+            .values
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(*v), hi.max(*v))
+            });
+        println!(
+            "{label}: OpenFOAM solved in {:.0} s; sensors read {lo:.2} to {hi:.2} C",
+            started.elapsed().as_secs_f64()
+        );
+        labels.push(label.clone());
+        predicted.push(out.values);
+    }
+    let csv = snapshots::write_predictions(&hall, &labels, &predicted);
+    std::fs::write(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
+    println!(
+        "wrote {} ({} snapshots x {} sensors; OpenFOAM case in {})",
+        args.out.display(),
+        labels.len(),
+        hall.sensors.len(),
+        root.display()
+    );
+    Ok(())
+}
