@@ -265,8 +265,8 @@ fn simulate_answers_what_if_and_its_headroom_is_exact() {
         &["--setpoint-offset-c", "inf"],
         "--setpoint-offset-c: expected a finite",
     );
-    // OpenFOAM's options need --model openfoam, and OpenFOAM runs give the sensor
-    // readings only (refused before any case is meshed).
+    // OpenFOAM's options need --model openfoam, and the built-in simulator's fields are
+    // not OpenFOAM's (refused before any case is meshed).
     refused(
         &["--np", "2"],
         "--np is an OpenFOAM option: add --model openfoam",
@@ -275,15 +275,15 @@ fn simulate_answers_what_if_and_its_headroom_is_exact() {
         &["--of-dir", dir.join("of").to_str().unwrap()],
         "--of-dir is an OpenFOAM option",
     );
-    for flag in ["--vtk", "--servers", "--heat-sources"] {
+    for flag in ["--vtk", "--heat-sources"] {
         refused(
             &["--model", "openfoam", flag, dir.join("x").to_str().unwrap()],
             &format!("{flag} needs the built-in simulator's fields"),
         );
     }
     refused(
-        &["--model", "openfoam", "--inlet-limit-c", "30"],
-        "--inlet-limit-c needs the built-in simulator's fields",
+        &["--model", "openfoam", "--grid-check", "0.5"],
+        "--grid-check needs the built-in simulator's fields",
     );
     assert!(!dir.join("of").exists() && !dir.join("openfoam").exists());
 }

@@ -7,7 +7,8 @@ mod openfoam_common;
 use openfoam_common::*;
 
 /// At the true alphas, one snapshot through the CLI reproduces the development hall's
-/// noise-free OpenFOAM readings, and the case is meshed beside `--out`.
+/// noise-free OpenFOAM readings and its servers' intakes, and the case is meshed beside
+/// `--out`.
 #[test]
 fn simulate_with_openfoam_reproduces_the_openfoam_data() {
     require_openfoam();
@@ -42,6 +43,8 @@ fn simulate_with_openfoam_reproduces_the_openfoam_data() {
         .arg(dir.join("truth-params.json"))
         .arg("--out")
         .arg(dir.join("pred.csv"))
+        .arg("--servers")
+        .arg(dir.join("servers.csv"))
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
@@ -69,4 +72,28 @@ fn simulate_with_openfoam_reproduces_the_openfoam_data() {
     // The datasets' own noise is 0.15 C; the hall's initial alphas are 4.9 C off.
     let mae = sum / n as f64;
     assert!(mae < 0.15, "MAE {mae:.3} C against the OpenFOAM data");
+    // Every server's intake, as the dataset's OpenFOAM run sampled it, and an exhaust
+    // warmer by the power over the flow's heat capacity.
+    let want = &truth["snapshots"]["t0"]["server_intake_c"];
+    let servers = std::fs::read_to_string(dir.join("servers.csv")).unwrap();
+    let (mut sum, mut n) = (0.0, 0);
+    for line in servers.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let num = |k: usize| f[k].parse::<f64>().unwrap();
+        let (power_w, flow_m3_s, intake_c, exhaust_c) = (num(4), num(5), num(6), num(7));
+        sum += (intake_c - want[f[1]].as_f64().unwrap()).abs();
+        n += 1;
+        let rise_k = power_w / (1.2 * 1005.0 * flow_m3_s);
+        assert!((exhaust_c - intake_c - rise_k).abs() < 1e-6, "{line}");
+    }
+    assert_eq!(n, 20, "{servers}");
+    let mae = sum / n as f64;
+    assert!(
+        mae < 0.15,
+        "intakes: MAE {mae:.3} C against the OpenFOAM data"
+    );
+    assert!(
+        stdout.contains("t0: 0 of 20 server intakes above 27.0 C"),
+        "{stdout}"
+    );
 }

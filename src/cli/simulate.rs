@@ -90,8 +90,33 @@ pub enum SimulateModel {
     Openfoam,
 }
 
+/// How far the calibration's own misfit says to trust the headrooms: with a report as
+/// `--params`, the note on the cold-aisle sensor the model reads coldest.
+pub(super) fn print_under_read_note(
+    args: &SimulateArgs,
+    file: Option<&(serde_json::Value, Option<CalibratedModel>)>,
+    hall: &Hall,
+    labels: &[String],
+    headroom_c: &[Option<f64>],
+) -> CliResult {
+    let residuals: Option<Vec<kalibre_core::calibrate::Residual>> = match (
+        &args.params,
+        file.and_then(|(json, _)| json.get("residuals")),
+    ) {
+        (Some(path), Some(r)) => Some(
+            serde_json::from_value(r.clone())
+                .map_err(|e| CliError::Input(format!("{}: /residuals: {e}", path.display())))?,
+        ),
+        _ => None,
+    };
+    if let Some(under) = residuals.and_then(|r| coldest_under_read(hall, &r)) {
+        println!("{}", under_read_note(&under, labels, headroom_c));
+    }
+    Ok(())
+}
+
 /// `--inlet-limit-c`, or ASHRAE's recommended bound.
-fn inlet_limit_c(args: &SimulateArgs) -> f64 {
+pub(super) fn inlet_limit_c(args: &SimulateArgs) -> f64 {
     args.inlet_limit_c
         .unwrap_or(kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)
 }
@@ -335,20 +360,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
             );
         }
     }
-    // How far the calibration's own misfit says to trust those figures.
-    let residuals: Option<Vec<kalibre_core::calibrate::Residual>> = match (
-        &args.params,
-        file.as_ref().and_then(|(json, _)| json.get("residuals")),
-    ) {
-        (Some(path), Some(r)) => Some(
-            serde_json::from_value(r.clone())
-                .map_err(|e| CliError::Input(format!("{}: /residuals: {e}", path.display())))?,
-        ),
-        _ => None,
-    };
-    if let Some(under) = residuals.and_then(|r| coldest_under_read(&hall, &r)) {
-        println!("{}", under_read_note(&under, &labels, &headroom));
-    }
+    print_under_read_note(&args, file.as_ref(), &hall, &labels, &headroom)?;
     println!(
         "wrote {} ({} snapshots x {} sensors){}",
         args.out.display(),

@@ -1,39 +1,40 @@
 //! `kalibre simulate --model openfoam`: OpenFOAM on a hall's snapshots, at a calibration's
-//! parameters or any others, what-ifs included; the predicted sensor readings.
+//! parameters or any others, what-ifs included; the predicted sensor readings, and every
+//! server's air with the intakes counted against the limit.
 
 use std::time::Instant;
 
-use kalibre_core::Model;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::openfoam::OpenFoamModel;
+use kalibre_dc::openfoam::{server_air_from_intakes, OpenFoamModel};
+use kalibre_dc::sim::{inlet_check, setpoint_headroom_c, write_server_air};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 
 use super::calibrated_model::{grid_or_recorded, CalibratedModel};
+use super::inlets::inlet_line;
 use super::openfoam_args::of_err;
-use super::simulate::{load_params, SimulateArgs};
+use super::simulate::{inlet_limit_c, load_params, print_under_read_note, SimulateArgs};
 use super::{io_err, CliError, CliResult};
 
 /// The built-in simulator's options that OpenFOAM runs do not have, by flag.
 fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {
     let given = [
         ("--vtk", args.vtk.is_some()),
-        ("--servers", args.servers.is_some()),
         ("--heat-sources", args.heat_sources.is_some()),
         ("--grid-check", !args.grid_check.is_empty()),
-        ("--inlet-limit-c", args.inlet_limit_c.is_some()),
     ];
     match given.iter().find(|(_, g)| *g) {
         Some((flag, _)) => Err(CliError::Input(format!(
             "{flag} needs the built-in simulator's fields; with --model openfoam, simulate \
-             writes the sensor readings only"
+             writes the sensor readings and the servers' air"
         ))),
         None => Ok(()),
     }
 }
 
 /// Runs OpenFOAM on every snapshot of `snaps` (what-ifs applied) at the parameters of
-/// `file` (a JSON object or a calibration's report, as read by `--params`) and writes the
-/// predicted readings.
+/// `file` (a JSON object or a calibration's report, as read by `--params`), writes the
+/// predicted readings (and with `--servers` every server's air), and prints each
+/// snapshot's intakes against the limit with the setpoint headroom.
 pub(super) fn run(
     args: &SimulateArgs,
     hall: &Hall,
@@ -78,13 +79,23 @@ pub(super) fn run(
         (Some(p), Some((json, _))) => load_params(p, json, space)?,
         _ => space.initial(),
     };
+    let limit_c = inlet_limit_c(args);
+    if !limit_c.is_finite() {
+        return Err(CliError::Input(format!(
+            "--inlet-limit-c: expected a finite temperature in C, got {limit_c}"
+        )));
+    }
+    // The case prescribes each server's flow from its alpha.
+    let alpha = model.layout().alpha_per_server(&params);
     let mut labels = Vec::with_capacity(snaps.len());
     let mut predicted = Vec::with_capacity(snaps.len());
+    let mut air = Vec::new();
+    let mut checks = Vec::with_capacity(snaps.len());
     for snap in snaps {
         let label = &snap.state.label;
         let started = Instant::now();
-        let out = model
-            .evaluate(&snap.state, &params)
+        let (out, intake_c) = model
+            .evaluate_servers(&snap.state, &params)
             .map_err(|e| CliError::Run(format!("snapshot `{label}`: OpenFOAM: {e}")))?;
         if let Some(k) = out.values.iter().position(|v| !v.is_finite()) {
             return Err(CliError::Run(format!(
@@ -92,21 +103,29 @@ pub(super) fn run(
                 hall.sensors[k].id, out.values[k]
             )));
         }
-        let (lo, hi) = out
-            .values
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                (lo.min(*v), hi.max(*v))
-            });
         println!(
-            "{label}: OpenFOAM solved in {:.0} s; sensors read {lo:.2} to {hi:.2} C",
+            "{label}: OpenFOAM solved in {:.0} s",
             started.elapsed().as_secs_f64()
         );
+        let servers =
+            server_air_from_intakes(&hall, &snap.state, &alpha, &intake_c, model.settings())?;
+        checks.push(inlet_check(&servers, limit_c, 3)?);
+        if args.servers.is_some() {
+            air.extend(servers);
+        }
         labels.push(label.clone());
         predicted.push(out.values);
     }
     let csv = snapshots::write_predictions(&hall, &labels, &predicted);
     std::fs::write(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
+    if let Some(path) = &args.servers {
+        std::fs::write(path, write_server_air(&air)).map_err(|e| io_err(path, e))?;
+    }
+    for (label, check) in labels.iter().zip(&checks) {
+        println!("{}", inlet_line(label, check));
+    }
+    let headroom: Vec<Option<f64>> = checks.iter().map(setpoint_headroom_c).collect();
+    print_under_read_note(args, file, &hall, &labels, &headroom)?;
     println!(
         "wrote {} ({} snapshots x {} sensors; OpenFOAM case in {})",
         args.out.display(),
@@ -114,5 +133,13 @@ pub(super) fn run(
         hall.sensors.len(),
         root.display()
     );
+    if let Some(path) = &args.servers {
+        println!(
+            "wrote {} ({} snapshots x {} servers)",
+            path.display(),
+            labels.len(),
+            hall.servers().count()
+        );
+    }
     Ok(())
 }

@@ -104,8 +104,8 @@ pub fn create_patch(g: &CaseGeometry) -> String {
     s
 }
 
-/// `system/controlDict` with the probes and one `surfaceFieldValue` per opening (for the
-/// energy balance).
+/// `system/controlDict` with the probes, one `surfaceFieldValue` per opening (for the
+/// energy balance) and one per server intake.
 pub fn control_dict(g: &CaseGeometry, st: &OpenFoamSettings) -> String {
     let k = st.iterations;
     let mut s = header("dictionary", "controlDict");
@@ -135,6 +135,18 @@ pub fn control_dict(g: &CaseGeometry, st: &OpenFoamSettings) -> String {
              regionType patch;\n        name {0};\n        operation weightedSum;\n        weightField phi;\n        \
              fields (T);\n    }}\n",
             p.name
+        );
+    }
+    // Every server's intake air, flux-weighted over its face and sampled as the probes
+    // are: what the CFD says where no sensor measures.
+    for srv in &g.servers {
+        let _ = write!(
+            s,
+            "    intake_{0}\n    {{\n        type surfaceFieldValue;\n        libs (\"libfieldFunctionObjects.so\");\n        \
+             writeControl timeStep;\n        writeInterval {1};\n        log false;\n        writeFields false;\n        \
+             regionType patch;\n        name {0};\n        operation weightedAverage;\n        weightField phi;\n        \
+             fields (T);\n    }}\n",
+            srv.intake.name, st.probe_every
         );
     }
     s += "}\n";

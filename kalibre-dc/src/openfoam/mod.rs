@@ -19,6 +19,7 @@ mod geometry;
 mod model;
 mod params;
 mod results;
+mod servers;
 mod settings;
 mod solver;
 
@@ -31,6 +32,7 @@ pub use geometry::{
 pub use model::{OpenFoamModel, RunTimings, SUPPORTED_EFFECTS};
 pub use params::{RunInputs, M3_S_PER_CFM};
 pub use results::{log_verdict, probe_window, ProbeWindow};
+pub use servers::server_air_from_intakes;
 pub use settings::OpenFoamSettings;
 pub use solver::OpenFoamEffectSolver;
 

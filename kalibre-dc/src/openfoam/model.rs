@@ -25,6 +25,11 @@ pub const SUPPORTED_EFFECTS: [&str; 3] = ["crac_supply_offset", "bypass", "rack_
 /// Version of the case generator: part of the fingerprint and the case directory name.
 const GENERATOR: &str = "kalibre-dc-openfoam/1";
 
+/// What a meshed case samples beyond the sensors, in its directory name only: a case
+/// meshed before its `controlDict` sampled the server intakes lacks them, while the
+/// sensors' readings (and so the fingerprint) are unchanged.
+const CASE_SAMPLES: &str = "server-intakes";
+
 /// A hall's OpenFOAM model, with the same [`ParamLayout`] as [`crate::HallModel`].
 #[derive(Debug)]
 pub struct OpenFoamModel {
@@ -39,6 +44,14 @@ pub struct OpenFoamModel {
     runs: RunDirs,
     fingerprint: String,
     sensor_names: Vec<String>,
+}
+
+/// One finished solve.
+struct Solved {
+    outputs: Outputs,
+    timings: RunTimings,
+    /// Every server's intake air (C), hall order.
+    server_intake_c: Vec<f64>,
 }
 
 /// What one run did, beyond its outputs (for overhead measurements and reports).
@@ -128,10 +141,10 @@ impl OpenFoamModel {
             hall_json.as_bytes(),
             settings_json.as_bytes(),
         ];
-        // Without extras the key is the one earlier versions gave, so meshed cases stay.
         if extras != CaseExtras::default() {
             case_parts.push(extras_key.as_bytes());
         }
+        case_parts.push(CASE_SAMPLES.as_bytes());
         let case_key = hash_hex(&case_parts);
         let fingerprint = format!(
             "{GENERATOR}:{}",
@@ -274,6 +287,21 @@ impl OpenFoamModel {
         let t0 = Instant::now();
         let inputs = self.inputs(state, params)?;
         self.solve_inputs(state, params, &inputs, t0)
+            .map(|r| (r.outputs, r.timings))
+    }
+
+    /// Runs one solve, returning the sensors' outputs and every server's intake air (C,
+    /// hall order): flux-weighted over the intake face and averaged over the same
+    /// iterations as the sensors.
+    pub fn evaluate_servers(
+        &self,
+        state: &OperatingState,
+        params: &[f64],
+    ) -> Result<(Outputs, Vec<f64>), ModelError> {
+        let t0 = Instant::now();
+        let inputs = self.inputs(state, params)?;
+        self.solve_inputs(state, params, &inputs, t0)
+            .map(|r| (r.outputs, r.server_intake_c))
     }
 
     /// Runs one solve at per-server `alpha` (cfm/W) and each effect's values (as a
@@ -292,6 +320,7 @@ impl OpenFoamModel {
             .copied()
             .collect();
         self.solve_inputs(state, &key, &inputs, t0)
+            .map(|r| (r.outputs, r.timings))
     }
 
     /// Solves `inputs` in a fresh run directory named from `key`'s values.
@@ -301,7 +330,7 @@ impl OpenFoamModel {
         key: &[f64],
         inputs: &RunInputs,
         t0: Instant,
-    ) -> Result<(Outputs, RunTimings), ModelError> {
+    ) -> Result<Solved, ModelError> {
         let key = key.iter().fold(
             u128::from_str_radix(&self.fingerprint[GENERATOR.len() + 1..], 16).unwrap_or(0),
             |h, p| h.rotate_left(13) ^ u128::from(p.to_bits()),
@@ -315,19 +344,14 @@ impl OpenFoamModel {
         if !keep {
             let t3 = Instant::now();
             let _ = std::fs::remove_dir_all(&dir);
-            if let Ok((_, timings)) = &mut result {
-                timings.cleanup_s = t3.elapsed().as_secs_f64();
+            if let Ok(solved) = &mut result {
+                solved.timings.cleanup_s = t3.elapsed().as_secs_f64();
             }
         }
         result
     }
 
-    fn run_in(
-        &self,
-        dir: &Path,
-        inputs: &RunInputs,
-        t0: Instant,
-    ) -> Result<(Outputs, RunTimings), ModelError> {
+    fn run_in(&self, dir: &Path, inputs: &RunInputs, t0: Instant) -> Result<Solved, ModelError> {
         let io = |what: &str, e: std::io::Error| ModelError::failed(format!("{what}: {e}"));
         let case = self.case.path();
         for sub in ["constant", "system"] {
@@ -430,16 +454,39 @@ impl OpenFoamModel {
             },
             &self.sensor_names,
         )?;
-        Ok((
+        let server_intake_c = self
+            .geometry
+            .servers
+            .iter()
+            .map(|srv| {
+                let f = dir.join(format!(
+                    "postProcessing/intake_{}/0/surfaceFieldValue.dat",
+                    srv.intake.name
+                ));
+                let text = std::fs::read_to_string(&f)
+                    .map_err(|e| ModelError::failed(format!("{}: {e}", f.display())))?;
+                let w = probe_window(&text, 1, k * st.average_from, k)
+                    .map_err(|e| ModelError::failed(format!("{}: {e}", f.display())))?;
+                match w.mean_c[0] {
+                    t if t.is_finite() => Ok(t),
+                    t => Err(ModelError::failed(format!(
+                        "{}: intake at {t} C",
+                        f.display()
+                    ))),
+                }
+            })
+            .collect::<Result<Vec<f64>, ModelError>>()?;
+        Ok(Solved {
             outputs,
-            RunTimings {
+            timings: RunTimings {
                 prepare_s,
                 solve_s,
                 parse_s: t2.elapsed().as_secs_f64(),
                 cleanup_s: 0.0,
                 energy_balance: balance,
             },
-        ))
+            server_intake_c,
+        })
     }
 
     /// Runs one program; a failed end becomes a [`ModelError`].
