@@ -378,6 +378,12 @@ pub fn run(args: SimulateArgs) -> CliResult {
             100.0 * HEAT_SOURCE_MIN_SHARE
         );
     }
+    print_servers_written(&args, &labels, &hall);
+    Ok(())
+}
+
+/// Says where `--servers` wrote the servers' air, if asked for.
+pub(super) fn print_servers_written(args: &SimulateArgs, labels: &[String], hall: &Hall) {
     if let Some(path) = &args.servers {
         println!(
             "wrote {} ({} snapshots x {} servers)",
@@ -386,5 +392,4 @@ pub fn run(args: SimulateArgs) -> CliResult {
             hall.servers().count()
         );
     }
-    Ok(())
 }

@@ -12,7 +12,9 @@ use kalibre_dc::snapshots::{self, HallSnapshot};
 use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::inlets::inlet_line;
 use super::openfoam_args::of_err;
-use super::simulate::{inlet_limit_c, load_params, print_under_read_note, SimulateArgs};
+use super::simulate::{
+    inlet_limit_c, load_params, print_servers_written, print_under_read_note, SimulateArgs,
+};
 use super::{io_err, CliError, CliResult};
 
 /// The built-in simulator's options that OpenFOAM runs do not have, by flag.
@@ -133,13 +135,6 @@ pub(super) fn run(
         hall.sensors.len(),
         root.display()
     );
-    if let Some(path) = &args.servers {
-        println!(
-            "wrote {} ({} snapshots x {} servers)",
-            path.display(),
-            labels.len(),
-            hall.servers().count()
-        );
-    }
+    print_servers_written(args, &labels, &hall);
     Ok(())
 }
