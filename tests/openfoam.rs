@@ -464,6 +464,19 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
     keys.sort();
     keys.dedup();
     assert_eq!(keys.len(), n, "a run was repeated");
+    // Every run journals its servers' intakes, so the report shows them at the best
+    // parameters without another solve.
+    let servers = hall.servers().count();
+    for run in journal_lines(&journal)
+        .iter()
+        .filter(|r| r["status"] == "ok")
+    {
+        let intakes = run["extras"]["server_intake_c"].as_array();
+        assert_eq!(intakes.map(Vec::len), Some(servers), "{run}");
+    }
+    let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
+    let per_snapshot = format!(" of {servers} above 27.0 C");
+    assert_eq!(html.matches(&per_snapshot).count(), snaps.len(), "{html}");
 
     // `kalibre diagnose` must solve with the model the calibration ran: the built-in
     // simulator, or OpenFOAM with other settings, is refused before any solve.

@@ -1,5 +1,7 @@
 //! The expensive model being calibrated.
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -60,7 +62,7 @@ impl ModelError {
 }
 
 /// What one successful model run returns: one value per output (sensor).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Outputs {
     /// One value per output, in the order of the observation's outputs.
     pub values: Vec<f64>,
@@ -68,13 +70,18 @@ pub struct Outputs {
     /// kept as the run's noise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spread: Option<Vec<f64>>,
+    /// Whatever else the run computed that is not an observed output, by name (e.g. a
+    /// CFD run's every server intake): journaled with the run, so that what an expensive
+    /// run gave is never lost. The calibration does not use it.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub extras: BTreeMap<String, Vec<f64>>,
 }
 
 impl From<Vec<f64>> for Outputs {
     fn from(values: Vec<f64>) -> Self {
         Outputs {
             values,
-            spread: None,
+            ..Default::default()
         }
     }
 }

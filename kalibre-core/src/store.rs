@@ -8,7 +8,7 @@
 //! parameter values, so a restarted calibration finds every run it already did.
 
 use std::collections::hash_map::Entry;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -50,6 +50,9 @@ pub struct RunRecord {
     /// Per-output spread of a successful run, when the model reports one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spread: Option<Vec<f64>>,
+    /// What else a successful run computed, by name ([`Outputs::extras`]).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub extras: BTreeMap<String, Vec<f64>>,
     /// Why a failed run failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<ModelError>,
@@ -64,6 +67,7 @@ impl RunRecord {
             (RunStatus::Ok, Some(values), _) => Ok(Outputs {
                 values: values.clone(),
                 spread: self.spread.clone(),
+                extras: self.extras.clone(),
             }),
             (_, _, Some(e)) => Err(e.clone()),
             _ => Err(ModelError::failed(
@@ -306,14 +310,21 @@ impl RunStore {
         result: &std::result::Result<Outputs, ModelError>,
         wall_s: f64,
     ) -> Result<RunRecord> {
-        let (status, outputs, spread, error) = match result {
+        let (status, outputs, spread, extras, error) = match result {
             Ok(o) => (
                 RunStatus::Ok,
                 Some(o.values.clone()),
                 o.spread.clone(),
+                o.extras.clone(),
                 None,
             ),
-            Err(e) => (RunStatus::Failed, None, None, Some(e.clone())),
+            Err(e) => (
+                RunStatus::Failed,
+                None,
+                None,
+                BTreeMap::new(),
+                Some(e.clone()),
+            ),
         };
         let mut inner = self.lock();
         let rec = RunRecord {
@@ -325,6 +336,7 @@ impl RunStore {
             status,
             outputs,
             spread,
+            extras,
             error,
             wall_s,
         };

@@ -59,6 +59,49 @@ fn values_round_trip_bit_exactly_and_keys_are_exact() {
     assert!(store.get("t0", &["a".into(), "c".into()], &p).is_none());
 }
 
+/// What else a run computed (`Outputs::extras`) is journaled with it, bit for bit, and a
+/// run without any writes no `extras` key (older readers see the line they know).
+#[test]
+fn extras_are_journaled_with_the_run() {
+    let dir = common::temp_dir("journal-extras");
+    let path = dir.join("runs.jsonl");
+    let intakes = vec![20.0 + 1.0 / 3.0, 1e-300, 31.7];
+    let with = Outputs {
+        values: vec![1.0, 2.0],
+        extras: [("server_intake_c".to_string(), intakes.clone())].into(),
+        ..Default::default()
+    };
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store
+            .record("t0", &names(), &[1.0, 2.0], &Ok(with.clone()), 0.5)
+            .unwrap();
+        store
+            .record("t1", &names(), &[1.0, 2.0], &ok(&[3.0, 4.0]), 0.5)
+            .unwrap();
+    }
+    let text = lines(&path);
+    assert!(
+        text[0].contains("\"extras\"") && !text[1].contains("extras"),
+        "{text:?}"
+    );
+    let store = RunStore::open(&path, "m1").unwrap();
+    let back = store
+        .get("t0", &names(), &[1.0, 2.0])
+        .unwrap()
+        .result()
+        .unwrap();
+    assert_eq!(back, with);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&back.extras["server_intake_c"]), bits(&intakes));
+    let plain = store
+        .get("t1", &names(), &[1.0, 2.0])
+        .unwrap()
+        .result()
+        .unwrap();
+    assert!(plain.extras.is_empty());
+}
+
 #[test]
 fn a_torn_last_line_is_reported_cut_and_never_fatal() {
     let dir = common::temp_dir("journal-torn");

@@ -4,8 +4,9 @@
 
 use std::time::Instant;
 
+use kalibre_core::Model;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::openfoam::{server_air_from_intakes, OpenFoamModel};
+use kalibre_dc::openfoam::{server_air_from_intakes, OpenFoamModel, SERVER_INTAKE_KEY};
 use kalibre_dc::sim::{inlet_check, setpoint_headroom_c, write_server_air};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 
@@ -96,12 +97,18 @@ pub(super) fn run(
     for snap in snaps {
         let label = &snap.state.label;
         let started = Instant::now();
-        let (out, intake_c) = model
-            .evaluate_servers(&snap.state, &params)
-            .map_err(|e| CliError::Run(format!("snapshot `{label}`: OpenFOAM: {e}")))?;
+        let failed =
+            |e: &dyn std::fmt::Display| CliError::Run(format!("snapshot `{label}`: OpenFOAM: {e}"));
+        let out = model
+            .evaluate(&snap.state, &params)
+            .map_err(|e| failed(&e))?;
+        let intake_c = out
+            .extras
+            .get(SERVER_INTAKE_KEY)
+            .ok_or_else(|| failed(&"the run sampled no server intakes"))?;
         if let Some(k) = out.values.iter().position(|v| !v.is_finite()) {
-            return Err(CliError::Run(format!(
-                "snapshot `{label}`: OpenFOAM: sensor `{}` came out as {}",
+            return Err(failed(&format!(
+                "sensor `{}` came out as {}",
                 hall.sensors[k].id, out.values[k]
             )));
         }
@@ -110,7 +117,7 @@ pub(super) fn run(
             started.elapsed().as_secs_f64()
         );
         let servers =
-            server_air_from_intakes(&hall, &snap.state, &alpha, &intake_c, model.settings())?;
+            server_air_from_intakes(&hall, &snap.state, &alpha, intake_c, model.settings())?;
         checks.push(inlet_check(&servers, limit_c, 3)?);
         if args.servers.is_some() {
             air.extend(servers);

@@ -29,7 +29,7 @@ pub use case::{CaseDir, MeshSummary};
 pub use geometry::{
     CaseExtras, CaseGeometry, CellRange, FacePatch, GapPatches, RackGap, ServerPatches,
 };
-pub use model::{OpenFoamModel, RunTimings, SUPPORTED_EFFECTS};
+pub use model::{OpenFoamModel, RunTimings, SERVER_INTAKE_KEY, SUPPORTED_EFFECTS};
 pub use params::{RunInputs, M3_S_PER_CFM};
 pub use results::{log_verdict, probe_window, ProbeWindow};
 pub use servers::server_air_from_intakes;

@@ -25,6 +25,11 @@ pub const SUPPORTED_EFFECTS: [&str; 3] = ["crac_supply_offset", "bypass", "rack_
 /// Version of the case generator: part of the fingerprint and the case directory name.
 const GENERATOR: &str = "kalibre-dc-openfoam/1";
 
+/// The name under which a run's [`Outputs::extras`] hold every server's intake air (C,
+/// hall order): flux-weighted over the intake face and averaged over the same iterations
+/// as the sensors.
+pub const SERVER_INTAKE_KEY: &str = "server_intake_c";
+
 /// What a meshed case samples beyond the sensors, in its directory name only: a case
 /// meshed before its `controlDict` sampled the server intakes lacks them, while the
 /// sensors' readings (and so the fingerprint) are unchanged.
@@ -44,14 +49,6 @@ pub struct OpenFoamModel {
     runs: RunDirs,
     fingerprint: String,
     sensor_names: Vec<String>,
-}
-
-/// One finished solve.
-struct Solved {
-    outputs: Outputs,
-    timings: RunTimings,
-    /// Every server's intake air (C), hall order.
-    server_intake_c: Vec<f64>,
 }
 
 /// What one run did, beyond its outputs (for overhead measurements and reports).
@@ -287,21 +284,6 @@ impl OpenFoamModel {
         let t0 = Instant::now();
         let inputs = self.inputs(state, params)?;
         self.solve_inputs(state, params, &inputs, t0)
-            .map(|r| (r.outputs, r.timings))
-    }
-
-    /// Runs one solve, returning the sensors' outputs and every server's intake air (C,
-    /// hall order): flux-weighted over the intake face and averaged over the same
-    /// iterations as the sensors.
-    pub fn evaluate_servers(
-        &self,
-        state: &OperatingState,
-        params: &[f64],
-    ) -> Result<(Outputs, Vec<f64>), ModelError> {
-        let t0 = Instant::now();
-        let inputs = self.inputs(state, params)?;
-        self.solve_inputs(state, params, &inputs, t0)
-            .map(|r| (r.outputs, r.server_intake_c))
     }
 
     /// Runs one solve at per-server `alpha` (cfm/W) and each effect's values (as a
@@ -320,7 +302,6 @@ impl OpenFoamModel {
             .copied()
             .collect();
         self.solve_inputs(state, &key, &inputs, t0)
-            .map(|r| (r.outputs, r.timings))
     }
 
     /// Solves `inputs` in a fresh run directory named from `key`'s values.
@@ -330,7 +311,7 @@ impl OpenFoamModel {
         key: &[f64],
         inputs: &RunInputs,
         t0: Instant,
-    ) -> Result<Solved, ModelError> {
+    ) -> Result<(Outputs, RunTimings), ModelError> {
         let key = key.iter().fold(
             u128::from_str_radix(&self.fingerprint[GENERATOR.len() + 1..], 16).unwrap_or(0),
             |h, p| h.rotate_left(13) ^ u128::from(p.to_bits()),
@@ -344,14 +325,19 @@ impl OpenFoamModel {
         if !keep {
             let t3 = Instant::now();
             let _ = std::fs::remove_dir_all(&dir);
-            if let Ok(solved) = &mut result {
-                solved.timings.cleanup_s = t3.elapsed().as_secs_f64();
+            if let Ok((_, timings)) = &mut result {
+                timings.cleanup_s = t3.elapsed().as_secs_f64();
             }
         }
         result
     }
 
-    fn run_in(&self, dir: &Path, inputs: &RunInputs, t0: Instant) -> Result<Solved, ModelError> {
+    fn run_in(
+        &self,
+        dir: &Path,
+        inputs: &RunInputs,
+        t0: Instant,
+    ) -> Result<(Outputs, RunTimings), ModelError> {
         let io = |what: &str, e: std::io::Error| ModelError::failed(format!("{what}: {e}"));
         let case = self.case.path();
         for sub in ["constant", "system"] {
@@ -447,13 +433,6 @@ impl OpenFoamModel {
                 log_tail: log_tail(&logs, 20),
             });
         }
-        let outputs = check_outputs(
-            Outputs {
-                values: window.mean_c,
-                spread: Some(window.std_c),
-            },
-            &self.sensor_names,
-        )?;
         let server_intake_c = self
             .geometry
             .servers
@@ -476,17 +455,24 @@ impl OpenFoamModel {
                 }
             })
             .collect::<Result<Vec<f64>, ModelError>>()?;
-        Ok(Solved {
+        let outputs = check_outputs(
+            Outputs {
+                values: window.mean_c,
+                spread: Some(window.std_c),
+                extras: [(SERVER_INTAKE_KEY.to_string(), server_intake_c)].into(),
+            },
+            &self.sensor_names,
+        )?;
+        Ok((
             outputs,
-            timings: RunTimings {
+            RunTimings {
                 prepare_s,
                 solve_s,
                 parse_s: t2.elapsed().as_secs_f64(),
                 cleanup_s: 0.0,
                 energy_balance: balance,
             },
-            server_intake_c,
-        })
+        ))
     }
 
     /// Runs one program; a failed end becomes a [`ModelError`].

@@ -8,8 +8,8 @@ use crate::snapshots::OperatingState;
 use crate::{Error, Result};
 
 /// The servers' air of one run of `hall` at `state`, from the per-server `alpha` (cfm/W)
-/// and the intakes OpenFOAM sampled ([`super::OpenFoamModel::evaluate_servers`]), hall
-/// order. The exhaust is the intake plus the power over the flow's heat capacity, as the
+/// and the intakes OpenFOAM sampled (a run's `extras` under [`super::SERVER_INTAKE_KEY`]),
+/// hall order. The exhaust is the intake plus the power over the flow's heat capacity, as the
 /// case heats the air behind each exhaust; an idle server blows out what it draws.
 ///
 /// ```

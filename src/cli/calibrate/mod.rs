@@ -13,10 +13,11 @@ use kalibre_core::calibrate::Report;
 use kalibre_core::external::CommandModelConfig;
 use kalibre_core::search::{Adam, DifferentialEvolution, Hybrid};
 use kalibre_core::Observe;
+use kalibre_core::{Model, RunStore};
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
-use kalibre_dc::openfoam::OpenFoamModel;
+use kalibre_dc::openfoam::{server_air_from_intakes, OpenFoamModel, SERVER_INTAKE_KEY};
 use kalibre_dc::sim::{
     inlet_check, rack_heat, server_air, InletCheck, RackHeat, RECOMMENDED_MAX_INLET_C,
 };
@@ -429,6 +430,57 @@ fn model_record(
     })
 }
 
+/// An OpenFOAM calibration's server intakes at the best parameters, per snapshot, from
+/// the runs it journaled (every OpenFOAM run samples each intake): no solve more. `None`
+/// when a run at the best parameters lacks them (journaled by an older kalibre).
+fn openfoam_intakes(
+    args: &CalibrateArgs,
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    settings: &HallCalibrationSettings,
+    report: &Report,
+    journal: &Path,
+) -> CliResult<Option<Vec<(String, InletCheck)>>> {
+    let mut hall = hall.clone();
+    if let Some(mode) = settings.alpha_mode {
+        hall.calibrate.alpha = mode;
+    }
+    let model = OpenFoamModel::new(
+        &hall,
+        args.openfoam
+            .settings(&args.out.join("openfoam"), args.grid_m)?,
+    )
+    .map_err(of_err)?;
+    let store = RunStore::open(journal, model.fingerprint())?;
+    let names: Vec<String> = report
+        .best
+        .params
+        .0
+        .iter()
+        .map(|(n, _)| n.clone())
+        .collect();
+    let params = report.best.params.values();
+    let alpha = model.layout().alpha_per_server(&params);
+    let mut checks = Vec::with_capacity(snaps.len());
+    for snap in snaps {
+        let outputs = store
+            .get(&snap.state.label, &names, &params)
+            .and_then(|run| run.result().ok());
+        let Some(intake_c) = outputs
+            .as_ref()
+            .and_then(|o| o.extras.get(SERVER_INTAKE_KEY))
+        else {
+            return Ok(None);
+        };
+        let air = server_air_from_intakes(&hall, &snap.state, &alpha, intake_c, model.settings())?;
+        checks.push((
+            snap.state.label.clone(),
+            inlet_check(&air, RECOMMENDED_MAX_INLET_C, 3)?,
+        ));
+    }
+    Ok(Some(checks))
+}
+
 /// What the calibrated built-in model says beyond the sensors.
 struct BuiltinFindings {
     /// Every server's intake per snapshot against the recommended limit.
@@ -525,8 +577,13 @@ pub fn run(args: CalibrateArgs) -> CliResult {
             let found = builtin_findings(&hall, &snaps, &settings, &report)?;
             (Some(found.intakes), Some(found.warming))
         }
-        // The built-in model's intakes and air flow would not be the calibrated model's.
-        ModelArg::Openfoam | ModelArg::Command => (None, None),
+        // OpenFOAM's flow is not the built-in model's: its own intakes, and no attribution.
+        ModelArg::Openfoam => (
+            openfoam_intakes(&args, &hall, &snaps, &settings, &report, &journal)?,
+            None,
+        ),
+        // A command model gives its sensors' readings only.
+        ModelArg::Command => (None, None),
     };
     let html = kalibre_dc::report::calibration_html(
         &hall,
