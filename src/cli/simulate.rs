@@ -116,9 +116,14 @@ pub(super) fn print_under_read_note(
 }
 
 /// `--inlet-limit-c`, or ASHRAE's recommended bound.
-pub(super) fn inlet_limit_c(args: &SimulateArgs) -> f64 {
-    args.inlet_limit_c
-        .unwrap_or(kalibre_dc::sim::RECOMMENDED_MAX_INLET_C)
+pub(super) fn inlet_limit_c(args: &SimulateArgs) -> CliResult<f64> {
+    match args.inlet_limit_c {
+        None => Ok(kalibre_dc::sim::RECOMMENDED_MAX_INLET_C),
+        Some(t) if t.is_finite() => Ok(t),
+        Some(t) => Err(CliError::Input(format!(
+            "--inlet-limit-c: expected a finite temperature in C, got {t}"
+        ))),
+    }
 }
 
 /// Reads a `--params` file: a JSON object, or a calibration's `report.json` with the model
@@ -202,7 +207,7 @@ fn finer_headrooms(
                     let air = model.server_air(&snap.state, params).map_err(|e| {
                         CliError::Run(format!("snapshot `{}` at {:.3} m: {e}", snap.state.label, base * f))
                     })?;
-                    let check = kalibre_dc::sim::inlet_check(&air, inlet_limit_c(args), 1)?;
+                    let check = kalibre_dc::sim::inlet_check(&air, inlet_limit_c(args)?, 1)?;
                     Ok(setpoint_headroom_c(&check).unwrap_or(f64::NAN))
                 })
                 .collect::<CliResult<Vec<f64>>>()?;
@@ -273,12 +278,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         (Some(p), Some((json, _))) => load_params(p, json, space)?,
         _ => space.initial(),
     };
-    if !inlet_limit_c(&args).is_finite() {
-        return Err(CliError::Input(format!(
-            "--inlet-limit-c: expected a finite temperature in C, got {}",
-            inlet_limit_c(&args)
-        )));
-    }
+    let limit_c = inlet_limit_c(&args)?;
     let mut labels = Vec::with_capacity(snaps.len());
     let mut predicted = Vec::with_capacity(snaps.len());
     let mut air = Vec::new();
@@ -315,11 +315,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
             kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
         }
         let servers = kalibre_dc::sim::server_air(&hall, state, &solution)?;
-        checks.push(kalibre_dc::sim::inlet_check(
-            &servers,
-            inlet_limit_c(&args),
-            3,
-        )?);
+        checks.push(kalibre_dc::sim::inlet_check(&servers, limit_c, 3)?);
         if args.servers.is_some() {
             air.extend(servers);
         }
