@@ -4,7 +4,9 @@ use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 
 use crate::effects::{Effect, EffectRegistry};
 use crate::hall::Hall;
-use crate::sim::{server_air, SensorInfluence, ServerAir, SimConfig, Simulator, Solution};
+use crate::sim::{
+    rack_heat, server_air, RackHeat, SensorInfluence, ServerAir, SimConfig, Simulator, Solution,
+};
 use crate::snapshots::OperatingState;
 use crate::{Error, ParamLayout, Result};
 
@@ -104,6 +106,20 @@ impl HallModel {
         let alpha = self.layout.alpha_per_server(params);
         let effects = self.effect_values(params);
         self.sim.sensor_influence(state, &alpha, &effects)
+    }
+
+    /// Solves one state at `params` and says which racks warm each sensor in its flow:
+    /// every rack's part of every sensor's warming, no cut ([`crate::sim::rack_heat`]
+    /// over [`Self::sensor_influence`]; one adjoint solve per sensor). The run comes back
+    /// too, for whatever else is read off it.
+    pub fn rack_heat(
+        &self,
+        state: &OperatingState,
+        params: &[f64],
+    ) -> Result<(Solution, Vec<RackHeat>)> {
+        let (solution, influence) = self.sensor_influence(state, params)?;
+        let rows = rack_heat(self.sim.hall(), &state.label, &solution, &influence, 0.0)?;
+        Ok((solution, rows))
     }
 
     /// Each effect with its values in `params`.

@@ -8,7 +8,7 @@ use std::sync::Mutex;
 
 use clap::Args;
 use kalibre_dc::hall::{EffectSpec, Hall};
-use kalibre_dc::sim::{rack_heat, RackHeat, SimConfig};
+use kalibre_dc::sim::{RackHeat, SimConfig};
 use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::story::{run_story, StoryEvent, StoryOutcome, StoryReport, StorySettings};
 use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
@@ -194,10 +194,10 @@ fn sensor_warming_rows(
     calibration: &kalibre_core::calibrate::Report,
 ) -> Result<Vec<RackHeat>, String> {
     let model = HallModel::new(hall, sim.clone()).map_err(|e| e.to_string())?;
-    let (solution, influence) = model
-        .sensor_influence(state, &calibration.best.params.values())
-        .map_err(|e| e.to_string())?;
-    rack_heat(hall, &state.label, &solution, &influence, 0.0).map_err(|e| e.to_string())
+    model
+        .rack_heat(state, &calibration.best.params.values())
+        .map(|(_, rows)| rows)
+        .map_err(|e| e.to_string())
 }
 
 /// Prints each step as it happens (`warming`: with a diagnosis, which racks warm each

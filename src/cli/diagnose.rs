@@ -259,16 +259,10 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     // An OpenFOAM calibration's flow is OpenFOAM's, which the built-in model does not have.
     let heat = match (args.model, snaps.first()) {
         (DiagnoseModel::Builtin, Some(first)) => {
-            let (sol, influence) = model
-                .sensor_influence(&first.state, &params)
+            let (_, rows) = model
+                .rack_heat(&first.state, &params)
                 .map_err(|e| CliError::Run(format!("snapshot `{}`: {e}", first.state.label)))?;
-            Some(kalibre_dc::sim::rack_heat(
-                &hall,
-                &first.state.label,
-                &sol,
-                &influence,
-                0.0,
-            )?)
+            Some(rows)
         }
         _ => None,
     };

@@ -290,16 +290,11 @@ pub fn run(args: SimulateArgs) -> CliResult {
             |e: &dyn std::fmt::Display| CliError::Run(format!("snapshot `{}`: {e}", state.label));
         let solution = match &args.heat_sources {
             Some(_) => {
-                let (solution, influence) = model
-                    .sensor_influence(state, &params)
-                    .map_err(|e| failed(&e))?;
-                sources.extend(kalibre_dc::sim::rack_heat(
-                    &hall,
-                    &state.label,
-                    &solution,
-                    &influence,
-                    HEAT_SOURCE_MIN_SHARE,
-                )?);
+                let (solution, rows) = model.rack_heat(state, &params).map_err(|e| failed(&e))?;
+                sources.extend(
+                    rows.into_iter()
+                        .filter(|r| r.share >= HEAT_SOURCE_MIN_SHARE),
+                );
                 solution
             }
             None => model.solve(state, &params).map_err(|e| failed(&e))?,

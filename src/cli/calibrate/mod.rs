@@ -18,9 +18,7 @@ use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
 use kalibre_dc::openfoam::{server_air_from_intakes, OpenFoamModel, SERVER_INTAKE_KEY};
-use kalibre_dc::sim::{
-    inlet_check, rack_heat, server_air, InletCheck, RackHeat, RECOMMENDED_MAX_INLET_C,
-};
+use kalibre_dc::sim::{inlet_check, server_air, InletCheck, RackHeat, RECOMMENDED_MAX_INLET_C};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
 use kalibre_dc::HallModel;
@@ -344,10 +342,7 @@ fn calibrate_with_model<'o>(
     journal: &Path,
     observers: Vec<Box<dyn Observe + 'o>>,
 ) -> CliResult<(Report, PenaltyReport)> {
-    let mut hall = hall.clone();
-    if let Some(mode) = settings.alpha_mode {
-        hall.calibrate.alpha = mode;
-    }
+    let hall = calibrated_hall(hall, settings);
     match args.model {
         ModelArg::Builtin => {
             let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)?;
@@ -391,6 +386,15 @@ fn calibrate_with_model<'o>(
             Ok((c.report, c.penalty_report))
         }
     }
+}
+
+/// The hall as calibrated: its alpha mode set to `--alpha`'s when given.
+fn calibrated_hall(hall: &Hall, settings: &HallCalibrationSettings) -> Hall {
+    let mut hall = hall.clone();
+    if let Some(mode) = settings.alpha_mode {
+        hall.calibrate.alpha = mode;
+    }
+    hall
 }
 
 /// What `report.json` records of the model, for `diagnose` and `simulate` to repeat.
@@ -441,10 +445,7 @@ fn openfoam_intakes(
     report: &Report,
     journal: &Path,
 ) -> CliResult<Option<Vec<(String, InletCheck)>>> {
-    let mut hall = hall.clone();
-    if let Some(mode) = settings.alpha_mode {
-        hall.calibrate.alpha = mode;
-    }
+    let hall = calibrated_hall(hall, settings);
     let model = OpenFoamModel::new(
         &hall,
         args.openfoam
@@ -497,10 +498,7 @@ fn builtin_findings(
     settings: &HallCalibrationSettings,
     report: &Report,
 ) -> CliResult<BuiltinFindings> {
-    let mut hall = hall.clone();
-    if let Some(mode) = settings.alpha_mode {
-        hall.calibrate.alpha = mode;
-    }
+    let hall = calibrated_hall(hall, settings);
     let model = HallModel::new(&hall, settings.sim.clone())?;
     let params = report.best.params.values();
     // The first snapshot's run comes with the adjoint solves, so it is solved once.
@@ -509,10 +507,10 @@ fn builtin_findings(
     for (k, snap) in snaps.iter().enumerate() {
         let label = &snap.state.label;
         let solution = if k == 0 {
-            let (solution, influence) = model
-                .sensor_influence(&snap.state, &params)
+            let (solution, rows) = model
+                .rack_heat(&snap.state, &params)
                 .map_err(|e| CliError::Run(format!("snapshot `{label}`: {e}")))?;
-            warming = rack_heat(&hall, label, &solution, &influence, 0.0)?;
+            warming = rows;
             solution
         } else {
             model.solve(&snap.state, &params)?
