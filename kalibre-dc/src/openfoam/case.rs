@@ -277,9 +277,12 @@ impl CaseDir {
             patches.push((p.name.clone(), faces));
         }
         let zones = read("cellZones")?;
-        for i in 0..g.servers.len() {
-            if !zones.contains(&format!("heat{i}\n")) {
-                return Err(fail(format!("cell zone `heat{i}` missing")));
+        let names = (0..g.servers.len())
+            .map(|i| format!("heat{i}"))
+            .chain(g.panels.iter().map(|p| p.name.clone()));
+        for name in names {
+            if !zones.contains(&format!("{name}\n")) {
+                return Err(fail(format!("cell zone `{name}` missing")));
             }
         }
         Ok(MeshSummary { cells, patches })

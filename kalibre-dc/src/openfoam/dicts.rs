@@ -68,19 +68,25 @@ fn face_set(s: &mut String, g: &CaseGeometry, p: &FacePatch) {
     );
 }
 
-/// `system/topoSetDict.patches`: a face set per opening and a cell zone per server's
-/// heated layer.
+/// `system/topoSetDict.patches`: a face set per opening, a cell zone per server's
+/// heated layer and one per containment panel plane.
 pub fn topo_set_patches(g: &CaseGeometry) -> String {
     let mut s = header("dictionary", "topoSetDict");
     s += "actions\n(\n";
     for p in g.patches() {
         face_set(&mut s, g, p);
     }
-    for (i, srv) in g.servers.iter().enumerate() {
-        let (lo, hi) = g.cell_box(&srv.heat_cells);
+    let zones = g
+        .servers
+        .iter()
+        .enumerate()
+        .map(|(i, srv)| (format!("heat{i}"), &srv.heat_cells))
+        .chain(g.panels.iter().map(|p| (p.name.clone(), &p.layer)));
+    for (name, cells) in zones {
+        let (lo, hi) = g.cell_box(cells);
         let _ = write!(
             s,
-            "    {{\n        name heat{i};\n        type cellZoneSet;\n        action new;\n        source boxToCell;\n        sourceInfo {{ box {} {}; }}\n    }}\n",
+            "    {{\n        name {name};\n        type cellZoneSet;\n        action new;\n        source boxToCell;\n        sourceInfo {{ box {} {}; }}\n    }}\n",
             v3(lo),
             v3(hi)
         );
@@ -210,8 +216,11 @@ pub fn turbulence() -> String {
         + "simulationType RAS;\nRAS\n{\n    RASModel kEpsilon;\n    turbulence on;\n    printCoeffs off;\n}\n"
 }
 
-/// `constant/fvOptions`: each server's heat in its cell layer, read from the run's
-/// parameter file.
+/// `constant/fvOptions`: each server's heat in its cell layer and each containment
+/// panel's resistance in its porous layer, both read from the run's parameter file. A
+/// panel resists flow along its plane's normal only, Forchheimer's `0.5 F |U| U` with
+/// `F = K / h` over the one-cell layer, so the layer drops the pressure `0.5 K u^2` of
+/// the panel ([`super::RunInputs::with_panels`]).
 pub fn fv_options(g: &CaseGeometry) -> String {
     let mut s = header("dictionary", "fvOptions");
     s += "#include \"$FOAM_CASE/0.orig/include/params\"\n\n";
@@ -222,6 +231,22 @@ pub fn fv_options(g: &CaseGeometry) -> String {
              scalarSemiImplicitSourceCoeffs\n    {{\n        selectionMode cellZone;\n        \
              cellZone heat{i};\n        volumeMode absolute;\n        \
              injectionRateSuSp\n        {{\n            T ($su_srv{i} 0);\n        }}\n    }}\n}}\n"
+        );
+    }
+    for (k, p) in g.panels.iter().enumerate() {
+        let mut f = ["0".to_string(), "0".to_string(), "0".to_string()];
+        f[p.axis] = format!("$f_panel{k}");
+        let _ = write!(
+            s,
+            "{0}\n{{\n    type explicitPorositySource;\n    active true;\n    \
+             explicitPorositySourceCoeffs\n    {{\n        selectionMode cellZone;\n        \
+             cellZone {0};\n        type DarcyForchheimer;\n        d (0 0 0);\n        \
+             f ({1} {2} {3});\n        coordinateSystem\n        {{\n            origin (0 0 0);\n            \
+             rotation {{ type none; }}\n        }}\n    }}\n}}\n",
+            p.name,
+            f[0],
+            f[1],
+            f[2]
         );
     }
     s

@@ -27,13 +27,13 @@ use thiserror::Error;
 
 pub use case::{CaseDir, MeshSummary};
 pub use geometry::{
-    CaseExtras, CaseGeometry, CellRange, FacePatch, GapPatches, RackGap, ServerPatches,
+    CaseExtras, CaseGeometry, CellRange, FacePatch, GapPatches, PanelPlane, RackGap, ServerPatches,
 };
 pub use model::{OpenFoamModel, RunTimings, SERVER_INTAKE_KEY, SUPPORTED_EFFECTS};
 pub use params::{RunInputs, M3_S_PER_CFM};
 pub use results::{log_verdict, probe_window, ProbeWindow};
 pub use servers::server_air_from_intakes;
-pub use settings::OpenFoamSettings;
+pub use settings::{panel_loss_coefficient, OpenFoamSettings, PANEL_DISCHARGE_COEFFICIENT};
 pub use solver::OpenFoamEffectSolver;
 
 /// Errors of building an OpenFOAM case (a run's failure is a

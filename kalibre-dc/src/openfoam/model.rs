@@ -18,9 +18,14 @@ use crate::snapshots::OperatingState;
 use crate::ParamLayout;
 
 /// The effect kinds the case can represent: a change of the tiles' temperature, an extra
-/// floor opening that takes part of the tiles' flow, and a gap through a rack that
-/// returns part of its exhaust to its intake.
-pub const SUPPORTED_EFFECTS: [&str; 3] = ["crac_supply_offset", "bypass", "rack_recirculation"];
+/// floor opening that takes part of the tiles' flow, a gap through a rack that returns
+/// part of its exhaust to its intake, and containment panels opened by a fraction.
+pub const SUPPORTED_EFFECTS: [&str; 4] = [
+    "crac_supply_offset",
+    "bypass",
+    "rack_recirculation",
+    "containment_leakage",
+];
 
 /// Version of the case generator: part of the fingerprint and the case directory name.
 const GENERATOR: &str = "kalibre-dc-openfoam/1";
@@ -141,17 +146,30 @@ impl OpenFoamModel {
         if extras != CaseExtras::default() {
             case_parts.push(extras_key.as_bytes());
         }
+        // Only halls with panels depend on the leak (a per-run value, so not in the case),
+        // and no other fingerprint moves.
+        let leak_key = format!(
+            "containment_leak_fraction={}",
+            settings.containment_leak_fraction
+        );
         case_parts.push(CASE_SAMPLES.as_bytes());
         let case_key = hash_hex(&case_parts);
+        let mode_key = format!("{:?}", layout.mode());
         let fingerprint = format!(
             "{GENERATOR}:{}",
-            hash_hex(&[
-                GENERATOR.as_bytes(),
-                hall_json.as_bytes(),
-                settings_json.as_bytes(),
-                effects_json.as_bytes(),
-                format!("{:?}", layout.mode()).as_bytes(),
-            ])
+            hash_hex(&{
+                let mut parts: Vec<&[u8]> = vec![
+                    GENERATOR.as_bytes(),
+                    hall_json.as_bytes(),
+                    settings_json.as_bytes(),
+                    effects_json.as_bytes(),
+                    mode_key.as_bytes(),
+                ];
+                if !geometry.panels.is_empty() {
+                    parts.push(leak_key.as_bytes());
+                }
+                parts
+            })
         );
         let case = CaseDir::open_or_build(&geometry, &settings, &case_key)?;
         if settings.np > 1 && (which("mpirun").is_none() || which("decomposePar").is_none()) {
@@ -263,6 +281,15 @@ impl OpenFoamModel {
                 })?;
             gap_fraction[i].1 += r.fraction;
         }
+        // The last opening of a side wins, as in the built-in simulator.
+        let mut panel_opened = vec![0.0; self.geometry.panels.len()];
+        for o in &mods.wall_openings {
+            for (k, p) in self.geometry.panels.iter().enumerate() {
+                if p.containment == o.containment && o.sides.contains(&p.side) {
+                    panel_opened[k] = o.open_fraction;
+                }
+            }
+        }
         RunInputs::new(
             &self.hall,
             state,
@@ -272,6 +299,7 @@ impl OpenFoamModel {
             &gap_fraction,
             &self.settings,
         )
+        .and_then(|inputs| inputs.with_panels(&panel_opened, &self.settings))
         .map_err(ModelError::InvalidParams)
     }
 

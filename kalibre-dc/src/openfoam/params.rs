@@ -5,7 +5,7 @@ use std::fmt::Write;
 use crate::hall::{Hall, SupplyKind};
 use crate::snapshots::OperatingState;
 
-use super::OpenFoamSettings;
+use super::{panel_loss_coefficient, OpenFoamSettings};
 
 /// m3/s per cfm.
 pub const M3_S_PER_CFM: f64 = 4.71947e-4;
@@ -31,6 +31,9 @@ pub struct RunInputs {
     pub opening_t_c: Vec<f64>,
     /// Flow through each recirculation gap (m3/s), in the geometry's order.
     pub gap_flow_m3_s: Vec<f64>,
+    /// Forchheimer coefficient of each containment panel plane's porous layer (1/m2,
+    /// along its normal), in the geometry's order; see [`Self::with_panels`].
+    pub panel_forchheimer_per_m2: Vec<f64>,
     /// Initial temperature of the room (C).
     pub t_init_c: f64,
     /// Total server heat (W).
@@ -118,9 +121,29 @@ impl RunInputs {
             opening_flow_m3_s: opening_share.iter().map(|s| s * floor_q).collect(),
             opening_t_c: vec![supply_t; opening_share.len()],
             gap_flow_m3_s: gap_flow,
+            panel_forchheimer_per_m2: Vec::new(),
             t_init_c: supply_t,
             heat_w: state.power_w.iter().sum(),
         })
+    }
+
+    /// Sets the containment panels' resistance: `opened` per panel plane is the open
+    /// fraction the `containment_leakage` effect gives it (0 for closed panels). As in the
+    /// built-in simulator, a plane is open by `leak + (1 - leak) opened`, with `leak` the
+    /// panels' own [`OpenFoamSettings::containment_leak_fraction`]; its one-cell porous
+    /// layer gets `F = K / h` ([`panel_loss_coefficient`]).
+    pub fn with_panels(mut self, opened: &[f64], st: &OpenFoamSettings) -> Result<Self, String> {
+        if let Some(f) = opened.iter().find(|f| !(0.0..=1.0).contains(*f)) {
+            return Err(format!(
+                "a containment panel opened by {f}; the open fraction must be in [0, 1]"
+            ));
+        }
+        let leak = st.containment_leak_fraction;
+        self.panel_forchheimer_per_m2 = opened
+            .iter()
+            .map(|o| panel_loss_coefficient(leak + (1.0 - leak) * o) / st.grid_m)
+            .collect();
+        Ok(self)
     }
 
     /// The text of `0.orig/include/params`.
@@ -149,6 +172,9 @@ impl RunInputs {
         }
         for (r, q) in self.gap_flow_m3_s.iter().enumerate() {
             let _ = writeln!(s, "q_rec{r} {q:.9e};");
+        }
+        for (k, f) in self.panel_forchheimer_per_m2.iter().enumerate() {
+            let _ = writeln!(s, "f_panel{k} {f:.9e};");
         }
         s
     }
@@ -190,6 +216,35 @@ mod tests {
             text.contains("q_byp1 ") && text.contains("t_byp0 "),
             "{text}"
         );
+    }
+
+    /// A closed panel resists as an orifice of the leak fraction, an opened one as the
+    /// built-in simulator opens it (`leak + (1 - leak) opened`), a fully open one not at
+    /// all; the resistance is per unit length over the one-cell layer.
+    #[test]
+    fn panels_resist_as_orifices_of_their_open_fraction() {
+        let (hall, state) = dev();
+        let alpha = vec![0.15; state.power_w.len()];
+        let st = OpenFoamSettings::default();
+        let inputs = RunInputs::new(&hall, &state, &alpha, &[], &[], &[], &st)
+            .unwrap()
+            .with_panels(&[0.0, 0.5, 1.0], &st)
+            .unwrap();
+        let f = &inputs.panel_forchheimer_per_m2;
+        let k = |open: f64| ((1.0 - open) / (0.61 * open)).powi(2);
+        assert!((f[0] - k(0.02) / 0.2).abs() < 1e-9 * f[0]);
+        assert!((f[1] - k(0.02 + 0.98 * 0.5) / 0.2).abs() < 1e-9 * f[0]);
+        assert_eq!(f[2], 0.0);
+        assert!(f[0] > f[1]);
+        let text = inputs.render();
+        assert!(text.contains("f_panel2 0.0"), "{text}");
+        for bad in [-0.1, 1.5, f64::NAN] {
+            let err = RunInputs::new(&hall, &state, &alpha, &[], &[], &[], &st)
+                .unwrap()
+                .with_panels(&[bad], &st)
+                .unwrap_err();
+            assert!(err.contains("open fraction must be in [0, 1]"), "{err}");
+        }
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! The hall on the OpenFOAM grid: which cells are solid, which boundary faces form each
-//! patch (server intakes and exhausts, tiles, bypass openings, returns), the heated cell
-//! layers and the probe points, all checked in Rust before any OpenFOAM program runs.
+//! patch (server intakes and exhausts, tiles, bypass openings, returns), the containment
+//! panels, the heated cell layers and the probe points, all checked in Rust before any
+//! OpenFOAM program runs.
 //!
 //! Patch names are built from indices (`srv7-in`, `tile2`, `byp0`, `ret0`) because hall ids may
 //! hold characters OpenFOAM does not accept in a word; the order is the hall's.
@@ -8,6 +9,11 @@
 use crate::hall::{Aabb, Hall, Side, SupplyKind};
 
 use super::OpenFoamError;
+
+mod panels;
+
+use panels::grid_index;
+pub use panels::PanelPlane;
 
 /// Relative tolerance for "on the grid".
 const GRID_TOL: f64 = 1e-6;
@@ -107,6 +113,8 @@ pub struct CaseGeometry {
     pub gaps: Vec<GapPatches>,
     /// Per return grille, hall order.
     pub returns: Vec<FacePatch>,
+    /// Containment panels (baffles), per containment and side.
+    pub panels: Vec<PanelPlane>,
     /// Probe points (sensor positions), hall order.
     pub probes: Vec<[f64; 3]>,
     /// Fluid cells after cutting the solids.
@@ -145,28 +153,12 @@ impl CaseGeometry {
                 reason: format!("{h} is not a positive cell size"),
             });
         }
-        if !hall.containment.is_empty() {
-            return Err(OpenFoamError::Unsupported(
-                "aisle containment (`containment` in hall.json): the OpenFOAM adapter has no \
-                 baffles yet"
-                    .into(),
-            ));
-        }
         if hall.returns.is_empty() {
             return Err(OpenFoamError::Unsupported(
                 "a hall without ceiling returns: the OpenFOAM case needs a pressure outlet".into(),
             ));
         }
-        let snap = |x: f64, field: &str| -> Result<usize, OpenFoamError> {
-            let r = x / h;
-            if (r - r.round()).abs() > GRID_TOL * r.abs().max(1.0) || r < -GRID_TOL {
-                return Err(geo(
-                    field,
-                    format!("{x} m is not on the {h} m grid (the OpenFOAM case needs edges on grid lines)"),
-                ));
-            }
-            Ok(r.round() as usize)
-        };
+        let snap = |x: f64, field: &str| grid_index(x, h, field);
         let size = hall.room.size_m;
         let mut n = [0usize; 3];
         for a in 0..3 {
@@ -226,10 +218,12 @@ impl CaseGeometry {
             openings: Vec::new(),
             gaps: Vec::new(),
             returns: Vec::new(),
+            panels: Vec::new(),
             probes: Vec::new(),
             fluid_cells,
             solid,
         };
+        g.panels = g.containment_panels(hall)?;
 
         // Face rows [lo, hi) of each gap, per rack.
         let mut gap_rows: Vec<Option<(usize, usize)>> = vec![None; hall.racks.len()];

@@ -1,6 +1,7 @@
 //! Tests of the case geometry: cell ranges, patches and gaps on the block mesh.
 
 use super::*;
+use crate::sim::WallSide;
 use std::path::Path;
 
 fn dev_hall() -> Hall {
@@ -145,4 +146,68 @@ fn off_grid_geometry_is_refused_with_the_field() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("not on the 0.25 m grid"), "{err}");
+}
+
+/// The dev hall with one containment box.
+fn contained(kind: &str, min_m: [f64; 3], max_m: [f64; 3]) -> Hall {
+    let mut h = serde_json::to_value(dev_hall()).unwrap();
+    h["containment"] = serde_json::json!([{ "kind": kind, "min_m": min_m, "max_m": max_m }]);
+    Hall::from_json_str(&h.to_string(), "contained hall.json").unwrap()
+}
+
+#[test]
+fn containment_panels_cover_the_fluid_faces_of_each_side_off_the_room_walls() {
+    // The cold aisle between the rows, up to the racks' top: two doors and a roof; its
+    // long sides are the racks' intakes, so they carry no panel.
+    let hall = contained("cold_aisle", [2.4, 1.8, 0.0], [5.4, 3.0, 2.0]);
+    let g = CaseGeometry::new(&hall, 0.2).unwrap();
+    let got: Vec<(&str, WallSide, usize, usize, usize)> = g
+        .panels
+        .iter()
+        .map(|p| (p.name.as_str(), p.side, p.axis, p.plane, p.faces))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("cont0-xmin", WallSide::MinusX, 0, 12, 6 * 10),
+            ("cont0-xmax", WallSide::PlusX, 0, 27, 6 * 10),
+            ("cont0-top", WallSide::Top, 2, 10, 15 * 6),
+        ]
+    );
+    // Each porous layer is the one cell row inside the box along its plane.
+    let top = &g.panels[2];
+    assert_eq!(top.layer.lo, [12, 9, 9]);
+    assert_eq!(top.layer.hi, [27, 15, 10]);
+    let xmin = &g.panels[0];
+    assert_eq!((xmin.layer.lo[0], xmin.layer.hi[0]), (12, 13));
+    // The cut is unchanged: panels take no cells.
+    assert_eq!(g.fluid_cells, 11_140);
+
+    // A hot aisle against the wall, up to the ceiling: its two doors and the panel
+    // above the racks' tops (z 2.0-3.0); no roof, no panel on the wall.
+    let hall = contained("hot_aisle", [2.4, 0.0, 0.0], [5.4, 0.8, 3.0]);
+    let g = CaseGeometry::new(&hall, 0.2).unwrap();
+    let got: Vec<(&str, usize)> = g
+        .panels
+        .iter()
+        .map(|p| (p.name.as_str(), p.faces))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("cont0-xmin", 4 * 15),
+            ("cont0-xmax", 4 * 15),
+            ("cont0-ymax", 15 * 5)
+        ]
+    );
+}
+
+#[test]
+fn containment_off_the_grid_is_refused_with_the_field() {
+    let hall = contained("cold_aisle", [2.4, 1.8, 0.0], [5.3, 3.0, 2.0]);
+    let err = CaseGeometry::new(&hall, 0.2).unwrap_err().to_string();
+    assert!(
+        err.contains("/containment/0/max_m/0") && err.contains("not on the 0.2 m grid"),
+        "{err}"
+    );
 }

@@ -1,0 +1,136 @@
+//! Containment panels on the grid. Each side of a containment box that is not on a room
+//! wall, floor or ceiling is a plane of panels and doors. Air crosses it through the
+//! faces between two fluid cells there (the faces a rack covers are walls or server
+//! patches already), and in the built-in simulator those faces are the panels.
+//!
+//! In the OpenFOAM case a panel is the layer of cells just inside the box on that plane,
+//! made a porous zone that resists flow along the plane's normal only (Forchheimer: the
+//! pressure drop of a sharp-edged orifice of the panels' open fraction, see
+//! [`crate::openfoam::OpenFoamSettings::containment_leak_fraction`]). A porous zone is
+//! implicit in the momentum equation; a baffle with an explicit pressure jump of that size
+//! made SIMPLE diverge within 10 iterations.
+
+use crate::hall::Hall;
+use crate::sim::WallSide;
+
+use super::{geo, CaseGeometry, CellRange, OpenFoamError, GRID_TOL};
+
+/// The sides of a containment box that can carry panels (the floor cannot): the side,
+/// its name in zone names, its normal axis and whether it is the box's maximum there.
+const SIDES: [(WallSide, &str, usize, bool); 5] = [
+    (WallSide::MinusX, "xmin", 0, false),
+    (WallSide::PlusX, "xmax", 0, true),
+    (WallSide::MinusY, "ymin", 1, false),
+    (WallSide::PlusY, "ymax", 1, true),
+    (WallSide::Top, "top", 2, true),
+];
+
+/// One plane of containment panels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PanelPlane {
+    /// Name of its porous cell zone (`cont0-xmin`).
+    pub name: String,
+    /// Index of the containment in `hall.containment`.
+    pub containment: usize,
+    /// Which side of the box (as the `containment_leakage` effect names them).
+    pub side: WallSide,
+    /// Normal axis (0 x, 1 y, 2 z).
+    pub axis: usize,
+    /// Grid line index of the plane along `axis`.
+    pub plane: usize,
+    /// Tangential extent (cell indices; the extent along `axis` is ignored).
+    pub cells: CellRange,
+    /// Faces between two fluid cells on the plane (where air can cross it).
+    pub faces: usize,
+    /// The cell layer inside the box along the plane: the porous zone.
+    pub layer: CellRange,
+}
+
+/// The grid line index of `x` (m), which must lie on the `h` grid.
+pub(super) fn grid_index(x: f64, h: f64, field: &str) -> Result<usize, OpenFoamError> {
+    let r = x / h;
+    if (r - r.round()).abs() > GRID_TOL * r.abs().max(1.0) || r < -GRID_TOL {
+        return Err(geo(
+            field,
+            format!("{x} m is not on the {h} m grid (the OpenFOAM case needs edges on grid lines)"),
+        ));
+    }
+    Ok(r.round() as usize)
+}
+
+impl CaseGeometry {
+    /// The panel planes of every containment box of `hall`, in the hall's order and the
+    /// order of [`SIDES`]; planes with no face between two fluid cells are left out.
+    pub(super) fn containment_panels(&self, hall: &Hall) -> Result<Vec<PanelPlane>, OpenFoamError> {
+        let mut out = Vec::new();
+        for (c, cb) in hall.containment.iter().enumerate() {
+            let mut range = CellRange {
+                lo: [0; 3],
+                hi: [0; 3],
+            };
+            for a in 0..3 {
+                range.lo[a] =
+                    grid_index(cb.min_m[a], self.h, &format!("/containment/{c}/min_m/{a}"))?;
+                range.hi[a] =
+                    grid_index(cb.max_m[a], self.h, &format!("/containment/{c}/max_m/{a}"))?;
+                if range.hi[a] <= range.lo[a] || range.hi[a] > self.n[a] {
+                    return Err(geo(
+                        format!("/containment/{c}"),
+                        "box is empty or outside the room on the grid",
+                    ));
+                }
+            }
+            for (side, side_name, axis, at_max) in SIDES {
+                let plane = if at_max {
+                    range.hi[axis]
+                } else {
+                    range.lo[axis]
+                };
+                if plane == 0 || plane == self.n[axis] {
+                    continue; // on a room wall or the ceiling
+                }
+                let faces = self.fluid_faces_on(axis, plane, &range);
+                if faces > 0 {
+                    let mut layer = range;
+                    if at_max {
+                        layer.lo[axis] = plane - 1;
+                    } else {
+                        layer.hi[axis] = plane + 1;
+                    }
+                    out.push(PanelPlane {
+                        name: format!("cont{c}-{side_name}"),
+                        containment: c,
+                        side,
+                        axis,
+                        plane,
+                        cells: range,
+                        faces,
+                        layer,
+                    });
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Faces on grid line `plane` of `axis`, over `range`'s tangential extent, with fluid
+    /// on both sides.
+    fn fluid_faces_on(&self, axis: usize, plane: usize, range: &CellRange) -> usize {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut count = 0;
+        for i in range.lo[u]..range.hi[u] {
+            for j in range.lo[v]..range.hi[v] {
+                let mut below = [0; 3];
+                below[axis] = plane - 1;
+                below[u] = i;
+                below[v] = j;
+                let mut above = below;
+                above[axis] = plane;
+                if !self.is_solid(below) && !self.is_solid(above) {
+                    count += 1;
+                }
+            }
+        }
+        count
+    }
+}
