@@ -56,8 +56,16 @@ use openfoam_cases::{
 struct HeldOut {
     name: &'static str,
     alpha: [f64; 3],
+    /// Aisle containment the hall has (in its `hall.json`: the user knows it).
+    contained: bool,
     effect: Option<Value>,
     expected: Option<&'static str>,
+}
+
+/// The development hall's cold aisle contained up to the racks' top (2.0 m): doors at
+/// x 2.4 and 5.4, a roof; its long sides are the racks' intakes.
+fn cold_aisle_containment() -> Value {
+    json!([{ "kind": "cold_aisle", "min_m": [2.4, 1.8, 0.0], "max_m": [5.4, 3.0, 2.0] }])
 }
 
 const TYPES: [&str; 3] = ["web", "db", "gpu"];
@@ -72,18 +80,21 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-clean",
             alpha: [0.15, 0.14, 0.11],
+            contained: false,
             effect: None,
             expected: None,
         },
         HeldOut {
             name: "ho-offset-warm",
             alpha: [0.12, 0.18, 0.14],
+            contained: false,
             effect: Some(json!({"kind": "crac_supply_offset", "offset_c": 0.8})),
             expected: Some("crac_supply_offset"),
         },
         HeldOut {
             name: "ho-slot-A2-top",
             alpha: [0.13, 0.17, 0.12],
+            contained: false,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "A2", "z_m": [1.8, 2.0], "fraction": 0.17,
             })),
@@ -92,6 +103,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-slot-A4-low",
             alpha: [0.14, 0.16, 0.13],
+            contained: false,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "A4", "z_m": [0.8, 1.0], "fraction": 0.2,
             })),
@@ -100,6 +112,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-cutout-A2",
             alpha: [0.13, 0.17, 0.12],
+            contained: false,
             effect: Some(json!({
                 "kind": "bypass", "position_m": [3.0, 0.2], "size_m": [0.6, 0.4], "fraction": 0.1,
             })),
@@ -108,6 +121,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-cutout-B4",
             alpha: [0.15, 0.14, 0.11],
+            contained: false,
             effect: Some(json!({
                 "kind": "bypass", "position_m": [4.4, 4.2], "size_m": [0.4, 0.4], "fraction": 0.08,
             })),
@@ -116,12 +130,14 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-clean-2",
             alpha: [0.11, 0.19, 0.13],
+            contained: false,
             effect: None,
             expected: None,
         },
         HeldOut {
             name: "ho-slot-A3-mid",
             alpha: [0.13, 0.17, 0.12],
+            contained: false,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "A3", "z_m": [1.0, 1.2], "fraction": 0.17,
             })),
@@ -130,6 +146,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-slot-B2-wide",
             alpha: [0.12, 0.18, 0.14],
+            contained: false,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "B2", "z_m": [1.0, 1.4], "fraction": 0.25,
             })),
@@ -138,10 +155,29 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-cutout-A4-big",
             alpha: [0.14, 0.16, 0.13],
+            contained: false,
             effect: Some(json!({
                 "kind": "bypass", "position_m": [4.2, 0.2], "size_m": [0.6, 0.4], "fraction": 0.15,
             })),
             expected: Some("bypass(behind_rack=A4)"),
+        },
+        // Session 22: the OpenFOAM case can be contained. A contained hall, clean, and
+        // the same hall with its +x door half open.
+        HeldOut {
+            name: "ho-contained-clean",
+            alpha: [0.14, 0.15, 0.12],
+            contained: true,
+            effect: None,
+            expected: None,
+        },
+        HeldOut {
+            name: "ho-contained-door-open",
+            alpha: [0.13, 0.17, 0.12],
+            contained: true,
+            effect: Some(json!({
+                "kind": "containment_leakage", "containment": 0, "sides": ["+x"], "open_fraction": 0.5,
+            })),
+            expected: Some(r#"containment_leakage(containment=0,sides=["+x"])"#),
         },
     ]
 }
@@ -164,6 +200,12 @@ fn dataset(
     }
     let mut hall: Hall = dev.hall.clone();
     hall.name = case.name.to_string();
+    if case.contained {
+        let mut h = serde_json::to_value(&hall).map_err(|e| e.to_string())?;
+        h["containment"] = cold_aisle_containment();
+        hall = Hall::from_json_str(&h.to_string(), "contained hall.json")
+            .map_err(|e| format!("{}: {e}", case.name))?;
+    }
     let mut truth_hall = hall.clone();
     if let Some(effect) = &case.effect {
         let entry = serde_json::from_value(effect.clone())

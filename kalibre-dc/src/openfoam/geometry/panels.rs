@@ -44,6 +44,9 @@ pub struct PanelPlane {
     pub faces: usize,
     /// The cell layer inside the box along the plane: the porous zone.
     pub layer: CellRange,
+    /// The cell layer outside the box along the plane: with `layer`, where turbulence is
+    /// damped, so no eddy diffusivity reaches the plane from either side.
+    pub outer: CellRange,
 }
 
 /// The grid line index of `x` (m), which must lie on the `h` grid.
@@ -91,12 +94,15 @@ impl CaseGeometry {
                 }
                 let faces = self.fluid_faces_on(axis, plane, &range);
                 if faces > 0 {
-                    let mut layer = range;
-                    if at_max {
-                        layer.lo[axis] = plane - 1;
-                    } else {
-                        layer.hi[axis] = plane + 1;
-                    }
+                    let (mut layer, mut outer) = (range, range);
+                    (layer.lo[axis], layer.hi[axis]) = match at_max {
+                        true => (plane - 1, plane),
+                        false => (plane, plane + 1),
+                    };
+                    (outer.lo[axis], outer.hi[axis]) = match at_max {
+                        true => (plane, plane + 1),
+                        false => (plane - 1, plane),
+                    };
                     out.push(PanelPlane {
                         name: format!("cont{c}-{side_name}"),
                         containment: c,
@@ -106,6 +112,7 @@ impl CaseGeometry {
                         cells: range,
                         faces,
                         layer,
+                        outer,
                     });
                 }
             }
