@@ -97,8 +97,8 @@ fn readings(model: &OpenFoamModel, state: &OperatingState, params: &[f64]) -> Ve
 }
 
 /// With the cold aisle contained, OpenFOAM keeps the exhaust out of it: the cold-aisle
-/// sensors stay near the supply where the open hall's row ends read several K warmer,
-/// and no cold sensor warms. The built-in simulator, with the same panels, agrees.
+/// sensors read the supply where the open hall's row ends read several K warmer. The
+/// built-in simulator, with the same panels, agrees.
 #[test]
 fn contained_cold_aisle_keeps_the_hot_air_out_and_matches_the_builtin_model() {
     require_openfoam();
@@ -143,13 +143,15 @@ fn contained_cold_aisle_keeps_the_hot_air_out_and_matches_the_builtin_model() {
             "{}: the contained cold aisle is {rise_with:.2} K above the supply, the open one {rise_without:.2} K",
             state.label
         );
+        // The tiles supply more than the servers draw (3.56 against 2.64 m3/s at t0), so
+        // the surplus leaves through the panels and no room air can enter: every inlet
+        // reads the supply. (A one-cell porous zone let air in at the doors' feet.)
         for &i in &cold {
             assert!(
-                with[i] <= without[i] + 0.05,
-                "{}: {} warmed from {:.2} to {:.2} C behind the panels",
+                (with[i] - supply).abs() < 0.05,
+                "{}: {} reads {:.2} C behind closed panels, the supply is {supply:.2} C",
                 state.label,
                 hall.sensors[i].id,
-                without[i],
                 with[i]
             );
         }
@@ -158,16 +160,17 @@ fn contained_cold_aisle_keeps_the_hot_air_out_and_matches_the_builtin_model() {
     }
     let m = mae(&all_of, &all_sim);
     eprintln!("contained hall, OpenFOAM against the built-in model: MAE {m:.3} C");
+    // Measured 0.100 C, nearly all of it at the hot-aisle sensors.
     assert!(
-        m < 0.5,
+        m < 0.25,
         "MAE {m:.3} C between OpenFOAM and the built-in model"
     );
 }
 
 /// The `containment_leakage` effect in the OpenFOAM case: opened doors let room air into
-/// the contained aisle's ends (its low row-end inlets warm most). The built-in
-/// simulator, with no momentum or buoyancy, hardly lets any in (0.1 K at most), but
-/// never cools the aisle by opening them either.
+/// the contained aisle's ends, where the low inlets warm; mid-aisle nothing changes. The
+/// built-in simulator, with no momentum or buoyancy, hardly lets any in, but never cools
+/// the aisle by opening them either.
 #[test]
 fn opened_doors_let_room_air_into_the_contained_aisle() {
     require_openfoam();
@@ -206,21 +209,30 @@ fn opened_doors_let_room_air_into_the_contained_aisle() {
         mean_at(&open, &cold)
     );
     assert!(
-        mean_at(&open, &cold) > mean_at(&closed, &cold) + 0.1,
+        mean_at(&open, &cold) > mean_at(&closed, &cold) + 0.04,
         "opening the doors moved the cold aisle from {:.2} to {:.2} C",
         mean_at(&closed, &cold),
         mean_at(&open, &cold)
     );
-    let row_ends =
-        ["c-A1-lo", "c-B1-lo"].map(|id| hall.sensors.iter().position(|s| s.id == id).unwrap());
-    for i in row_ends {
-        assert!(
-            open[i] > closed[i] + 0.3,
-            "{}: {:.2} C with the doors closed, {:.2} C open",
-            hall.sensors[i].id,
-            closed[i],
-            open[i]
-        );
+    // Measured: the four low inlets at the row ends warm by 0.18-0.37 K, the inlets
+    // mid-aisle by at most 0.01 K.
+    for (i, sensor) in hall.sensors.iter().enumerate() {
+        if !sensor.id.starts_with("c-") {
+            continue;
+        }
+        let row_end_low = ["A1", "A4", "B1", "B4"]
+            .iter()
+            .any(|r| sensor.id == format!("c-{r}-lo"));
+        let warming = open[i] - closed[i];
+        if row_end_low {
+            assert!(warming > 0.1, "{}: +{warming:.2} K", sensor.id);
+        } else {
+            assert!(
+                warming.abs() < 0.05,
+                "{}: {warming:+.2} K mid-aisle",
+                sensor.id
+            );
+        }
     }
     let mut previous = f64::NEG_INFINITY;
     for opened in [0.0, 0.2, 0.5, 1.0] {

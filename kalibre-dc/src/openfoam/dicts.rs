@@ -81,12 +81,7 @@ pub fn topo_set_patches(g: &CaseGeometry) -> String {
         .iter()
         .enumerate()
         .map(|(i, srv)| (format!("heat{i}"), &srv.heat_cells))
-        .chain(g.panels.iter().flat_map(|p| {
-            [
-                (p.name.clone(), &p.layer),
-                (format!("{}-outer", p.name), &p.outer),
-            ]
-        }));
+        .chain(g.panels.iter().map(|p| (p.name.clone(), &p.layer)));
     for (name, cells) in zones {
         let (lo, hi) = g.cell_box(cells);
         let _ = write!(
@@ -221,17 +216,17 @@ pub fn turbulence() -> String {
         + "simulationType RAS;\nRAS\n{\n    RASModel kEpsilon;\n    turbulence on;\n    printCoeffs off;\n}\n"
 }
 
-/// A panel is a sheet: turbulence mixing heat through its porous layer would carry heat
-/// where no air goes. So the layer's dissipation is held near `PANEL_EPSILON_M2_S3`
+/// A panel is a sheet: turbulence mixing heat through its porous zone would carry heat
+/// where no air goes. So the zone's dissipation is held near `PANEL_EPSILON_M2_S3`
 /// (relaxed at `PANEL_RELAX_PER_S`), which makes its eddy viscosity `0.09 k^2 / epsilon`
 /// negligible. (Sinking `k` instead made the epsilon equation's `epsilon / k` blow up.)
 const PANEL_EPSILON_M2_S3: f64 = 10.0;
 const PANEL_RELAX_PER_S: f64 = 100.0;
 
 /// `constant/fvOptions`: each server's heat in its cell layer and each containment
-/// panel's resistance in its porous layer, both read from the run's parameter file. A
+/// panel's resistance in its porous zone, both read from the run's parameter file. A
 /// panel resists flow along its plane's normal only, Forchheimer's `0.5 F |U| U` with
-/// `F = K / h` over the one-cell layer, so the layer drops the pressure `0.5 K u^2` of
+/// `F = K / (2 h)` over the two-cell zone, so the zone drops the pressure `0.5 K u^2` of
 /// the panel ([`super::RunInputs::with_panels`]).
 pub fn fv_options(g: &CaseGeometry) -> String {
     let mut s = header("dictionary", "fvOptions");
@@ -265,16 +260,6 @@ pub fn fv_options(g: &CaseGeometry) -> String {
             "{0}-laminar\n{{\n    type scalarSemiImplicitSource;\n    active true;\n    \
              scalarSemiImplicitSourceCoeffs\n    {{\n        selectionMode cellZone;\n        \
              cellZone {0};\n        volumeMode specific;\n        \
-             injectionRateSuSp\n        {{\n            epsilon ({1} -{2});\n        }}\n    }}\n}}\n",
-            p.name,
-            PANEL_RELAX_PER_S * PANEL_EPSILON_M2_S3,
-            PANEL_RELAX_PER_S
-        );
-        let _ = write!(
-            s,
-            "{0}-outer-laminar\n{{\n    type scalarSemiImplicitSource;\n    active true;\n    \
-             scalarSemiImplicitSourceCoeffs\n    {{\n        selectionMode cellZone;\n        \
-             cellZone {0}-outer;\n        volumeMode specific;\n        \
              injectionRateSuSp\n        {{\n            epsilon ({1} -{2});\n        }}\n    }}\n}}\n",
             p.name,
             PANEL_RELAX_PER_S * PANEL_EPSILON_M2_S3,

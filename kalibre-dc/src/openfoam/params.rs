@@ -5,6 +5,7 @@ use std::fmt::Write;
 use crate::hall::{Hall, SupplyKind};
 use crate::snapshots::OperatingState;
 
+use super::geometry::PANEL_LAYER_CELLS;
 use super::{panel_loss_coefficient, OpenFoamSettings};
 
 /// m3/s per cfm.
@@ -31,7 +32,7 @@ pub struct RunInputs {
     pub opening_t_c: Vec<f64>,
     /// Flow through each recirculation gap (m3/s), in the geometry's order.
     pub gap_flow_m3_s: Vec<f64>,
-    /// Forchheimer coefficient of each containment panel plane's porous layer (1/m2,
+    /// Forchheimer coefficient of each containment panel plane's porous zone (1/m2,
     /// along its normal), in the geometry's order; see [`Self::with_panels`].
     pub panel_forchheimer_per_m2: Vec<f64>,
     /// Initial temperature of the room (C).
@@ -130,8 +131,8 @@ impl RunInputs {
     /// Sets the containment panels' resistance: `opened` per panel plane is the open
     /// fraction the `containment_leakage` effect gives it (0 for closed panels). As in the
     /// built-in simulator, a plane is open by `leak + (1 - leak) opened`, with `leak` the
-    /// panels' own [`OpenFoamSettings::containment_leak_fraction`]; its one-cell porous
-    /// layer gets `F = K / h` ([`panel_loss_coefficient`]).
+    /// panels' own [`OpenFoamSettings::containment_leak_fraction`]; its porous zone,
+    /// `PANEL_LAYER_CELLS` cells thick, gets `F = K / (2 h)` ([`panel_loss_coefficient`]).
     pub fn with_panels(mut self, opened: &[f64], st: &OpenFoamSettings) -> Result<Self, String> {
         if let Some(f) = opened.iter().find(|f| !(0.0..=1.0).contains(*f)) {
             return Err(format!(
@@ -141,7 +142,10 @@ impl RunInputs {
         let leak = st.containment_leak_fraction;
         self.panel_forchheimer_per_m2 = opened
             .iter()
-            .map(|o| panel_loss_coefficient(leak + (1.0 - leak) * o) / st.grid_m)
+            .map(|o| {
+                panel_loss_coefficient(leak + (1.0 - leak) * o)
+                    / (PANEL_LAYER_CELLS as f64 * st.grid_m)
+            })
             .collect();
         Ok(self)
     }
@@ -220,7 +224,7 @@ mod tests {
 
     /// A closed panel resists as an orifice of the leak fraction, an opened one as the
     /// built-in simulator opens it (`leak + (1 - leak) opened`), a fully open one not at
-    /// all; the resistance is per unit length over the one-cell layer.
+    /// all; the resistance is per unit length over the two-cell zone.
     #[test]
     fn panels_resist_as_orifices_of_their_open_fraction() {
         let (hall, state) = dev();
@@ -232,8 +236,8 @@ mod tests {
             .unwrap();
         let f = &inputs.panel_forchheimer_per_m2;
         let k = |open: f64| ((1.0 - open) / (0.61 * open)).powi(2);
-        assert!((f[0] - k(0.02) / 0.2).abs() < 1e-9 * f[0]);
-        assert!((f[1] - k(0.02 + 0.98 * 0.5) / 0.2).abs() < 1e-9 * f[0]);
+        assert!((f[0] - k(0.02) / 0.4).abs() < 1e-9 * f[0]);
+        assert!((f[1] - k(0.02 + 0.98 * 0.5) / 0.4).abs() < 1e-9 * f[0]);
         assert_eq!(f[2], 0.0);
         assert!(f[0] > f[1]);
         let text = inputs.render();

@@ -13,7 +13,7 @@ use super::OpenFoamError;
 mod panels;
 
 use panels::grid_index;
-pub use panels::PanelPlane;
+pub use panels::{PanelPlane, PANEL_LAYER_CELLS};
 
 /// Relative tolerance for "on the grid".
 const GRID_TOL: f64 = 1e-6;

@@ -3,12 +3,15 @@
 //! faces between two fluid cells there (the faces a rack covers are walls or server
 //! patches already), and in the built-in simulator those faces are the panels.
 //!
-//! In the OpenFOAM case a panel is the layer of cells just inside the box on that plane,
+//! In the OpenFOAM case a panel is the two layers of cells on either side of the plane,
 //! made a porous zone that resists flow along the plane's normal only (Forchheimer: the
 //! pressure drop of a sharp-edged orifice of the panels' open fraction, see
 //! [`crate::openfoam::OpenFoamSettings::containment_leak_fraction`]). A porous zone is
 //! implicit in the momentum equation; a baffle with an explicit pressure jump of that size
-//! made SIMPLE diverge within 10 iterations.
+//! made SIMPLE diverge within 10 iterations. Two layers, because on a collocated grid the
+//! flux through a face between a porous and a free cell sees half the free cell's
+//! conductance: a one-cell zone let air through the panel plane almost freely (0.7 m/s
+//! into a closed door's foot). The plane itself lies between two porous cells.
 
 use crate::hall::Hall;
 use crate::sim::WallSide;
@@ -24,6 +27,9 @@ const SIDES: [(WallSide, &str, usize, bool); 5] = [
     (WallSide::PlusY, "ymax", 1, true),
     (WallSide::Top, "top", 2, true),
 ];
+
+/// Cells across a panel plane in its porous zone.
+pub const PANEL_LAYER_CELLS: usize = 2;
 
 /// One plane of containment panels.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,11 +48,9 @@ pub struct PanelPlane {
     pub cells: CellRange,
     /// Faces between two fluid cells on the plane (where air can cross it).
     pub faces: usize,
-    /// The cell layer inside the box along the plane: the porous zone.
+    /// The porous zone: the two cell layers on either side of the plane (see the module
+    /// docs), `PANEL_LAYER_CELLS` thick along `axis`.
     pub layer: CellRange,
-    /// The cell layer outside the box along the plane: with `layer`, where turbulence is
-    /// damped, so no eddy diffusivity reaches the plane from either side.
-    pub outer: CellRange,
 }
 
 /// The grid line index of `x` (m), which must lie on the `h` grid.
@@ -94,15 +98,9 @@ impl CaseGeometry {
                 }
                 let faces = self.fluid_faces_on(axis, plane, &range);
                 if faces > 0 {
-                    let (mut layer, mut outer) = (range, range);
-                    (layer.lo[axis], layer.hi[axis]) = match at_max {
-                        true => (plane - 1, plane),
-                        false => (plane, plane + 1),
-                    };
-                    (outer.lo[axis], outer.hi[axis]) = match at_max {
-                        true => (plane, plane + 1),
-                        false => (plane - 1, plane),
-                    };
+                    let mut layer = range;
+                    layer.lo[axis] = plane - 1;
+                    layer.hi[axis] = plane + 1;
                     out.push(PanelPlane {
                         name: format!("cont{c}-{side_name}"),
                         containment: c,
@@ -112,7 +110,6 @@ impl CaseGeometry {
                         cells: range,
                         faces,
                         layer,
-                        outer,
                     });
                 }
             }

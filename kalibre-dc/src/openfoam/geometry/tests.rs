@@ -174,14 +174,12 @@ fn containment_panels_cover_the_fluid_faces_of_each_side_off_the_room_walls() {
             ("cont0-top", WallSide::Top, 2, 10, 15 * 6),
         ]
     );
-    // Each porous layer is the one cell row inside the box along its plane.
+    // Each porous zone is the cell row on either side of its plane.
     let top = &g.panels[2];
     assert_eq!(top.layer.lo, [12, 9, 9]);
-    assert_eq!(top.layer.hi, [27, 15, 10]);
-    assert_eq!((top.outer.lo[2], top.outer.hi[2]), (10, 11));
+    assert_eq!(top.layer.hi, [27, 15, 11]);
     let xmin = &g.panels[0];
-    assert_eq!((xmin.layer.lo[0], xmin.layer.hi[0]), (12, 13));
-    assert_eq!((xmin.outer.lo[0], xmin.outer.hi[0]), (11, 12));
+    assert_eq!((xmin.layer.lo[0], xmin.layer.hi[0]), (11, 13));
     // The cut is unchanged: panels take no cells.
     assert_eq!(g.fluid_cells, 11_140);
 
