@@ -9,41 +9,11 @@ use kalibre_core::Model;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::openfoam::OpenFoamModel;
 use kalibre_dc::sim::SimConfig;
-use kalibre_dc::snapshots::{self, OperatingState};
+use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::HallModel;
 
 mod openfoam_common;
 use openfoam_common::*;
-
-/// The small hall's layout (two rows of four racks facing a middle cold aisle), without
-/// measurements, and the development hall's first two snapshots mapped onto it.
-fn small_hall_and_states() -> (Hall, Vec<OperatingState>) {
-    let dev = Hall::load(&data("of-dev-clean/hall.json")).unwrap();
-    let dev_snaps = snapshots::load_snapshots(&dev, &data("of-dev-clean/snapshots.csv")).unwrap();
-    let mut h = dev.clone();
-    h.name = "of-test-contained".into();
-    h.room.size_m = [6.0, 4.8, 2.4];
-    h.racks.retain(|r| r.position_m[0] < 4.7);
-    h.tiles.retain(|t| t.position_m[0] < 4.7);
-    h.sensors
-        .retain(|s| !s.id.contains("A5") && !s.id.contains("B5"));
-    let hall = Hall::from_json_str(&h.to_json_pretty(), "small hall.json").unwrap();
-    let dev_ids: Vec<String> = dev.servers().map(|s| s.server.id.clone()).collect();
-    let states = dev_snaps[..2]
-        .iter()
-        .map(|s| OperatingState {
-            power_w: hall
-                .servers()
-                .map(|srv| {
-                    let i = dev_ids.iter().position(|d| *d == srv.server.id).unwrap();
-                    s.state.power_w[i]
-                })
-                .collect(),
-            ..s.state.clone()
-        })
-        .collect();
-    (hall, states)
-}
 
 /// `hall` with its cold aisle contained: the box between the two rows' intakes, over the
 /// racks' length, up to the racks' top (a roof panel at 2.0 m; doors at both ends).
@@ -102,7 +72,7 @@ fn readings(model: &OpenFoamModel, state: &OperatingState, params: &[f64]) -> Ve
 #[test]
 fn contained_cold_aisle_keeps_the_hot_air_out_and_matches_the_builtin_model() {
     require_openfoam();
-    let (open_hall, states) = small_hall_and_states();
+    let (open_hall, states) = small_layout();
     let hall = with_cold_aisle_containment(&open_hall);
     let root = tmp("containment");
     let contained = OpenFoamModel::new(&hall, settings(&root)).unwrap();
@@ -174,7 +144,7 @@ fn contained_cold_aisle_keeps_the_hot_air_out_and_matches_the_builtin_model() {
 #[test]
 fn opened_doors_let_room_air_into_the_contained_aisle() {
     require_openfoam();
-    let (open_hall, states) = small_hall_and_states();
+    let (open_hall, states) = small_layout();
     let mut hall = with_cold_aisle_containment(&open_hall);
     hall.effects.push(
         serde_json::from_value(serde_json::json!({

@@ -83,24 +83,43 @@ pub fn mae(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64
 }
 
-/// The small test hall: the development hall cut to two rows of four racks in a
-/// 6.0 x 4.8 x 2.4 m room (7,120 cells at 0.2 m), snapshots t0 and t1 with the dev
-/// powers, and measurements made by OpenFOAM at the true alphas.
+/// The small test hall's layout: the development hall cut to two rows of four racks in a
+/// 6.0 x 4.8 x 2.4 m room (7,120 cells at 0.2 m), and the development snapshots t0 and
+/// t1 with its servers' powers.
+pub fn small_layout() -> (Hall, Vec<OperatingState>) {
+    let dev = Hall::load(&data("of-dev-clean/hall.json")).unwrap();
+    let dev_snaps = snapshots::load_snapshots(&dev, &data("of-dev-clean/snapshots.csv")).unwrap();
+    let mut h = dev.clone();
+    h.name = "of-test-small".into();
+    h.room.size_m = [6.0, 4.8, 2.4];
+    h.racks.retain(|r| r.position_m[0] < 4.7);
+    h.tiles.retain(|t| t.position_m[0] < 4.7);
+    h.sensors
+        .retain(|s| !s.id.contains("A5") && !s.id.contains("B5"));
+    let hall = Hall::from_json_str(&h.to_json_pretty(), "small hall.json").unwrap();
+    let dev_ids: Vec<String> = dev.servers().map(|s| s.server.id.clone()).collect();
+    let states = dev_snaps[..2]
+        .iter()
+        .map(|s| OperatingState {
+            power_w: hall
+                .servers()
+                .map(|srv| {
+                    let i = dev_ids.iter().position(|d| *d == srv.server.id).unwrap();
+                    s.state.power_w[i]
+                })
+                .collect(),
+            ..s.state.clone()
+        })
+        .collect();
+    (hall, states)
+}
+
+/// The small test hall ([`small_layout`]) with measurements made by OpenFOAM at the true
+/// alphas.
 pub fn small_hall() -> &'static (Hall, Vec<HallSnapshot>) {
     static HALL: OnceLock<(Hall, Vec<HallSnapshot>)> = OnceLock::new();
     HALL.get_or_init(|| {
-        let dev = Hall::load(&data("of-dev-clean/hall.json")).unwrap();
-        let dev_snaps =
-            snapshots::load_snapshots(&dev, &data("of-dev-clean/snapshots.csv")).unwrap();
-        let mut h = dev.clone();
-        h.name = "of-test-small".into();
-        h.room.size_m = [6.0, 4.8, 2.4];
-        h.racks.retain(|r| r.position_m[0] < 4.7);
-        h.tiles.retain(|t| t.position_m[0] < 4.7);
-        h.sensors
-            .retain(|s| !s.id.contains("A5") && !s.id.contains("B5"));
-        let hall = Hall::from_json_str(&h.to_json_pretty(), "small hall.json").unwrap();
-        let dev_ids: Vec<String> = dev.servers().map(|s| s.server.id.clone()).collect();
+        let (hall, states) = small_layout();
         let model = OpenFoamModel::new(
             &hall,
             OpenFoamSettings::default()
@@ -109,20 +128,9 @@ pub fn small_hall() -> &'static (Hall, Vec<HallSnapshot>) {
         )
         .unwrap();
         let params = true_params(&model.layout().space().names());
-        let snaps: Vec<HallSnapshot> = dev_snaps[..2]
-            .iter()
-            .map(|s| {
-                let power_w = hall
-                    .servers()
-                    .map(|srv| {
-                        let i = dev_ids.iter().position(|d| *d == srv.server.id).unwrap();
-                        s.state.power_w[i]
-                    })
-                    .collect();
-                let state = OperatingState {
-                    power_w,
-                    ..s.state.clone()
-                };
+        let snaps: Vec<HallSnapshot> = states
+            .into_iter()
+            .map(|state| {
                 let out = model.evaluate(&state, &params).unwrap();
                 HallSnapshot {
                     state,
