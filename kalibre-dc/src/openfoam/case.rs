@@ -208,7 +208,7 @@ impl CaseDir {
         self.mesh_step("createPatch", "createPatch", &["-overwrite"])?;
         let summary = self.check_mesh(g)?;
         // Fields and physics come after meshing: subsetMesh and createPatch rewrite 0/.
-        for (name, text) in dicts::fields(g, st) {
+        for (name, text) in dicts::fields(g) {
             write(&d.join("0.orig").join(name), &text)?;
         }
         write(
@@ -279,7 +279,7 @@ impl CaseDir {
         let zones = read("cellZones")?;
         let names = (0..g.servers.len())
             .map(|i| format!("heat{i}"))
-            .chain(g.panels.iter().map(|p| p.name.clone()));
+            .chain(g.panel_zones.iter().map(|z| z.name.clone()));
         for name in names {
             if !zones.contains(&format!("{name}\n")) {
                 return Err(fail(format!("cell zone `{name}` missing")));

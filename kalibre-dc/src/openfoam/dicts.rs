@@ -69,7 +69,7 @@ fn face_set(s: &mut String, g: &CaseGeometry, p: &FacePatch) {
 }
 
 /// `system/topoSetDict.patches`: a face set per opening, a cell zone per server's
-/// heated layer and one per containment panel plane.
+/// heated layer and the containment panels' porous zones.
 pub fn topo_set_patches(g: &CaseGeometry) -> String {
     let mut s = header("dictionary", "topoSetDict");
     s += "actions\n(\n";
@@ -80,16 +80,22 @@ pub fn topo_set_patches(g: &CaseGeometry) -> String {
         .servers
         .iter()
         .enumerate()
-        .map(|(i, srv)| (format!("heat{i}"), &srv.heat_cells))
-        .chain(g.panels.iter().map(|p| (p.name.clone(), &p.layer)));
+        .map(|(i, srv)| (format!("heat{i}"), std::slice::from_ref(&srv.heat_cells)))
+        .chain(
+            g.panel_zones
+                .iter()
+                .map(|z| (z.name.clone(), z.runs.as_slice())),
+        );
     for (name, cells) in zones {
-        let (lo, hi) = g.cell_box(cells);
         let _ = write!(
             s,
-            "    {{\n        name {name};\n        type cellZoneSet;\n        action new;\n        source boxToCell;\n        sourceInfo {{ box {} {}; }}\n    }}\n",
-            v3(lo),
-            v3(hi)
+            "    {{\n        name {name};\n        type cellZoneSet;\n        action new;\n        source boxToCell;\n        sourceInfo\n        {{\n            boxes\n            (\n"
         );
+        for r in cells {
+            let (lo, hi) = g.cell_box(r);
+            let _ = writeln!(s, "                {} {}", v3(lo), v3(hi));
+        }
+        s += "            );\n        }\n    }\n";
     }
     s += ");\n";
     s
@@ -240,9 +246,10 @@ pub fn fv_options(g: &CaseGeometry) -> String {
              injectionRateSuSp\n        {{\n            T ($su_srv{i} 0);\n        }}\n    }}\n}}\n"
         );
     }
-    for (k, p) in g.panels.iter().enumerate() {
-        let mut f = ["0".to_string(), "0".to_string(), "0".to_string()];
-        f[p.axis] = format!("$f_panel{k}");
+    for z in &g.panel_zones {
+        let f = z
+            .axes
+            .map(|k| k.map_or_else(|| "0".to_string(), |k| format!("$f_panel{k}")));
         let _ = write!(
             s,
             "{0}\n{{\n    type explicitPorositySource;\n    active true;\n    \
@@ -250,7 +257,7 @@ pub fn fv_options(g: &CaseGeometry) -> String {
              cellZone {0};\n        type DarcyForchheimer;\n        d (0 0 0);\n        \
              f ({1} {2} {3});\n        coordinateSystem\n        {{\n            origin (0 0 0);\n            \
              rotation {{ type none; }}\n        }}\n    }}\n}}\n",
-            p.name,
+            z.name,
             f[0],
             f[1],
             f[2]
@@ -261,7 +268,7 @@ pub fn fv_options(g: &CaseGeometry) -> String {
              scalarSemiImplicitSourceCoeffs\n    {{\n        selectionMode cellZone;\n        \
              cellZone {0};\n        volumeMode specific;\n        \
              injectionRateSuSp\n        {{\n            epsilon ({1} -{2});\n        }}\n    }}\n}}\n",
-            p.name,
+            z.name,
             PANEL_RELAX_PER_S * PANEL_EPSILON_M2_S3,
             PANEL_RELAX_PER_S
         );
@@ -350,10 +357,9 @@ fn lines(items: &[&str]) -> String {
 }
 
 /// The field files of `0.orig`, as (file name, text).
-pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, String)> {
+pub fn fields(g: &CaseGeometry) -> Vec<(&'static str, String)> {
     let vol_s = "volScalarField";
     let vol_v = "volVectorField";
-    let back = st.return_backflow_c;
     let u = field(
         vol_v,
         "U",
@@ -432,8 +438,8 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
                 let _ = p;
                 lines(&[
                     "type inletOutlet;",
-                    &format!("inletValue uniform {back};"),
-                    &format!("value uniform {back};"),
+                    "inletValue uniform $t_return;",
+                    "value uniform $t_return;",
                 ])
             }
         },
@@ -447,8 +453,12 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
         "0",
         &zero_flux,
         &|_, role| match role {
-            // Returns all sit at the ceiling, so one fixed p_rgh is one fixed p.
-            PatchRole::Return => lines(&["type fixedValue;", "value uniform 0;"]),
+            // Returns all sit at the ceiling, so one p_rgh is one p. Total pressure: air
+            // flowing back in loses its dynamic head, as from a plenum. With a fixed
+            // static pressure a contained hot aisle drew 25 C air back in at 8 m/s.
+            PatchRole::Return => {
+                lines(&["type totalPressure;", "p0 uniform 0;", "value uniform 0;"])
+            }
             _ => zero_flux.clone(),
         },
         g,

@@ -13,7 +13,7 @@ use super::OpenFoamError;
 mod panels;
 
 use panels::grid_index;
-pub use panels::{PanelPlane, PANEL_LAYER_CELLS};
+pub use panels::{PanelPlane, PanelZone, PANEL_LAYER_CELLS};
 
 /// Relative tolerance for "on the grid".
 const GRID_TOL: f64 = 1e-6;
@@ -113,8 +113,10 @@ pub struct CaseGeometry {
     pub gaps: Vec<GapPatches>,
     /// Per return grille, hall order.
     pub returns: Vec<FacePatch>,
-    /// Containment panels (baffles), per containment and side.
+    /// Containment panel planes, per containment and side.
     pub panels: Vec<PanelPlane>,
+    /// The panels' porous cell zones (disjoint).
+    pub panel_zones: Vec<PanelZone>,
     /// Probe points (sensor positions), hall order.
     pub probes: Vec<[f64; 3]>,
     /// Fluid cells after cutting the solids.
@@ -219,11 +221,13 @@ impl CaseGeometry {
             gaps: Vec::new(),
             returns: Vec::new(),
             panels: Vec::new(),
+            panel_zones: Vec::new(),
             probes: Vec::new(),
             fluid_cells,
             solid,
         };
         g.panels = g.containment_panels(hall)?;
+        g.panel_zones = g.panel_zones();
 
         // Face rows [lo, hi) of each gap, per rack.
         let mut gap_rows: Vec<Option<(usize, usize)>> = vec![None; hall.racks.len()];

@@ -53,6 +53,22 @@ pub struct PanelPlane {
     pub layer: CellRange,
 }
 
+/// A porous cell zone of the panels: cells that resist flow along each axis by the same
+/// panel planes. Where two planes meet (a door and the roof, a door and the panel above
+/// the racks) a cell lies in both planes' layers, and OpenFOAM gives a cell one zone
+/// only, so such cells get a zone of their own that resists along both normals: with
+/// one plane's zone alone, air went round the corner through them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PanelZone {
+    /// Cell zone name (`panels0`, `panels1`, ...).
+    pub name: String,
+    /// Per axis, the index in [`CaseGeometry::panels`] of the plane whose resistance
+    /// applies along it.
+    pub axes: [Option<usize>; 3],
+    /// The zone's fluid cells, as runs along x.
+    pub runs: Vec<CellRange>,
+}
+
 /// The grid line index of `x` (m), which must lie on the `h` grid.
 pub(super) fn grid_index(x: f64, h: f64, field: &str) -> Result<usize, OpenFoamError> {
     let r = x / h;
@@ -115,6 +131,47 @@ impl CaseGeometry {
             }
         }
         Ok(out)
+    }
+
+    /// The panels' porous zones (see [`PanelZone`]), in a fixed order.
+    pub(super) fn panel_zones(&self) -> Vec<PanelZone> {
+        let mut by_cell: std::collections::BTreeMap<[usize; 3], [Option<usize>; 3]> =
+            Default::default();
+        for (k, p) in self.panels.iter().enumerate() {
+            let r = &p.layer;
+            for z in r.lo[2]..r.hi[2] {
+                for y in r.lo[1]..r.hi[1] {
+                    for x in r.lo[0]..r.hi[0] {
+                        if self.is_solid([x, y, z]) {
+                            continue;
+                        }
+                        // Keyed (z, y, x) so that runs along x come out in order.
+                        by_cell.entry([z, y, x]).or_default()[p.axis].get_or_insert(k);
+                    }
+                }
+            }
+        }
+        let mut zones: std::collections::BTreeMap<[Option<usize>; 3], Vec<CellRange>> =
+            Default::default();
+        for ([z, y, x], axes) in by_cell {
+            let runs = zones.entry(axes).or_default();
+            match runs.last_mut() {
+                Some(run) if run.lo[1] == y && run.lo[2] == z && run.hi[0] == x => run.hi[0] += 1,
+                _ => runs.push(CellRange {
+                    lo: [x, y, z],
+                    hi: [x + 1, y + 1, z + 1],
+                }),
+            }
+        }
+        zones
+            .into_iter()
+            .enumerate()
+            .map(|(i, (axes, runs))| PanelZone {
+                name: format!("panels{i}"),
+                axes,
+                runs,
+            })
+            .collect()
     }
 
     /// Faces on grid line `plane` of `axis`, over `range`'s tangential extent, with fluid

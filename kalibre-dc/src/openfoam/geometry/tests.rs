@@ -182,6 +182,26 @@ fn containment_panels_cover_the_fluid_faces_of_each_side_off_the_room_walls() {
     assert_eq!((xmin.layer.lo[0], xmin.layer.hi[0]), (11, 13));
     // The cut is unchanged: panels take no cells.
     assert_eq!(g.fluid_cells, 11_140);
+    // Disjoint porous zones: each plane's own cells, and where a door's layer meets the
+    // roof's (one cell row each, 6 cells across the aisle) a zone resisting both normals.
+    let zones: Vec<([Option<usize>; 3], usize)> = g
+        .panel_zones
+        .iter()
+        .map(|z| {
+            let cells = z.runs.iter().map(|r| r.hi[0] - r.lo[0]).sum();
+            (z.axes, cells)
+        })
+        .collect();
+    assert_eq!(
+        zones,
+        [
+            ([None, None, Some(2)], 180 - 2 * 6),
+            ([Some(0), None, None], 120 - 6),
+            ([Some(0), None, Some(2)], 6),
+            ([Some(1), None, None], 120 - 6),
+            ([Some(1), None, Some(2)], 6),
+        ]
+    );
 
     // A hot aisle against the wall, up to the ceiling: its two doors and the panel
     // above the racks' tops (z 2.0-3.0); no roof, no panel on the wall.
