@@ -18,6 +18,17 @@ use openfoam_common::*;
 /// `hall` with its cold aisle contained: the box between the two rows' intakes, over the
 /// racks' length, up to the racks' top (a roof panel at 2.0 m; doors at both ends).
 fn with_cold_aisle_containment(hall: &Hall) -> Hall {
+    let [x0, x1] = rows_x(hall);
+    with_containment(
+        hall,
+        serde_json::json!([
+            { "kind": "cold_aisle", "min_m": [x0, 1.8, 0.0], "max_m": [x1, 3.0, 2.0] }
+        ]),
+    )
+}
+
+/// The x extent (m) of the racks' rows.
+fn rows_x(hall: &Hall) -> [f64; 2] {
     let x0 = hall
         .racks
         .iter()
@@ -28,11 +39,24 @@ fn with_cold_aisle_containment(hall: &Hall) -> Hall {
         .iter()
         .map(|r| r.position_m[0] + r.size_m[0])
         .fold(0.0, f64::max);
+    [x0, x1]
+}
+
+/// `hall` with `containment` (its `hall.json` entry).
+fn with_containment(hall: &Hall, containment: serde_json::Value) -> Hall {
     let mut h = serde_json::to_value(hall).unwrap();
-    h["containment"] = serde_json::json!([
-        { "kind": "cold_aisle", "min_m": [x0, 1.8, 0.0], "max_m": [x1, 3.0, 2.0] }
-    ]);
+    h["containment"] = containment;
     Hall::from_json_str(&h.to_string(), "contained hall.json").unwrap()
+}
+
+/// Each panel plane of `model`'s case and its faces.
+fn panel_faces(model: &OpenFoamModel) -> Vec<(&str, usize)> {
+    model
+        .geometry()
+        .panels
+        .iter()
+        .map(|p| (p.name.as_str(), p.faces))
+        .collect()
 }
 
 fn cold_sensors(hall: &Hall) -> Vec<usize> {
@@ -77,12 +101,7 @@ fn contained_cold_aisle_keeps_the_hot_air_out_and_matches_the_builtin_model() {
     let root = tmp("containment");
     let contained = OpenFoamModel::new(&hall, settings(&root)).unwrap();
     let open = OpenFoamModel::new(&open_hall, settings(&root)).unwrap();
-    let panels: Vec<(&str, usize)> = contained
-        .geometry()
-        .panels
-        .iter()
-        .map(|p| (p.name.as_str(), p.faces))
-        .collect();
+    let panels = panel_faces(&contained);
     // Doors at both ends (1.2 x 2.0 m) and the roof (2.4 x 1.2 m); the long sides are
     // the racks' intakes.
     assert_eq!(
@@ -221,31 +240,18 @@ fn opened_doors_let_room_air_into_the_contained_aisle() {
 fn contained_hot_aisles_keep_the_exhaust_from_the_inlets() {
     require_openfoam();
     let (open_hall, states) = small_layout();
-    let x0 = open_hall
-        .racks
-        .iter()
-        .map(|r| r.position_m[0])
-        .fold(f64::INFINITY, f64::min);
-    let x1 = open_hall
-        .racks
-        .iter()
-        .map(|r| r.position_m[0] + r.size_m[0])
-        .fold(0.0, f64::max);
-    let mut h = serde_json::to_value(&open_hall).unwrap();
-    h["containment"] = serde_json::json!([
-        { "kind": "hot_aisle", "min_m": [x0, 0.0, 0.0], "max_m": [x1, 0.8, 2.4] },
-        { "kind": "hot_aisle", "min_m": [x0, 4.0, 0.0], "max_m": [x1, 4.8, 2.4] },
-    ]);
-    let hall = Hall::from_json_str(&h.to_string(), "hot-contained hall.json").unwrap();
+    let [x0, x1] = rows_x(&open_hall);
+    let hall = with_containment(
+        &open_hall,
+        serde_json::json!([
+            { "kind": "hot_aisle", "min_m": [x0, 0.0, 0.0], "max_m": [x1, 0.8, 2.4] },
+            { "kind": "hot_aisle", "min_m": [x0, 4.0, 0.0], "max_m": [x1, 4.8, 2.4] },
+        ]),
+    );
     let root = tmp("hot-containment");
     let contained = OpenFoamModel::new(&hall, settings(&root)).unwrap();
     let open = OpenFoamModel::new(&open_hall, settings(&root)).unwrap();
-    let panels: Vec<(&str, usize)> = contained
-        .geometry()
-        .panels
-        .iter()
-        .map(|p| (p.name.as_str(), p.faces))
-        .collect();
+    let panels = panel_faces(&contained);
     // Doors (0.8 x 2.4 m) and the panel above each row (2.4 x 0.4 m); the wall and the
     // ceiling carry none.
     assert_eq!(
