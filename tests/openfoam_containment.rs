@@ -198,13 +198,13 @@ fn opened_doors_let_room_air_into_the_contained_aisle() {
         mean_at(&open, &cold)
     );
     assert!(
-        mean_at(&open, &cold) > mean_at(&closed, &cold) + 0.04,
+        mean_at(&open, &cold) > mean_at(&closed, &cold) + 0.025,
         "opening the doors moved the cold aisle from {:.2} to {:.2} C",
         mean_at(&closed, &cold),
         mean_at(&open, &cold)
     );
-    // Measured: the four low inlets at the row ends warm by 0.18-0.37 K, the inlets
-    // mid-aisle by at most 0.01 K.
+    // Measured: the four low inlets at the row ends warm by 0.11-0.24 K (the mean by
+    // 0.054 K), the inlets mid-aisle by at most 0.01 K. The thresholds are about half.
     for (i, sensor) in hall.sensors.iter().enumerate() {
         if !sensor.id.starts_with("c-") {
             continue;
@@ -214,7 +214,7 @@ fn opened_doors_let_room_air_into_the_contained_aisle() {
             .any(|r| sensor.id == format!("c-{r}-lo"));
         let warming = open[i] - closed[i];
         if row_end_low {
-            assert!(warming > 0.1, "{}: +{warming:.2} K", sensor.id);
+            assert!(warming > 0.05, "{}: +{warming:.2} K", sensor.id);
         } else {
             assert!(
                 warming.abs() < 0.05,
