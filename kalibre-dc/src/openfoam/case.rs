@@ -208,7 +208,7 @@ impl CaseDir {
         self.mesh_step("createPatch", "createPatch", &["-overwrite"])?;
         let summary = self.check_mesh(g)?;
         // Fields and physics come after meshing: subsetMesh and createPatch rewrite 0/.
-        for (name, text) in dicts::fields(g) {
+        for (name, text) in dicts::fields(g, st) {
             write(&d.join("0.orig").join(name), &text)?;
         }
         write(

@@ -357,8 +357,9 @@ fn lines(items: &[&str]) -> String {
 }
 
 /// The field files of `0.orig`, as (file name, text).
-pub fn fields(g: &CaseGeometry) -> Vec<(&'static str, String)> {
+pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, String)> {
     let vol_s = "volScalarField";
+    let back = st.return_backflow_c;
     let vol_v = "volVectorField";
     let u = field(
         vol_v,
@@ -438,8 +439,8 @@ pub fn fields(g: &CaseGeometry) -> Vec<(&'static str, String)> {
                 let _ = p;
                 lines(&[
                     "type inletOutlet;",
-                    "inletValue uniform $t_return;",
-                    "value uniform $t_return;",
+                    &format!("inletValue uniform {back};"),
+                    &format!("value uniform {back};"),
                 ])
             }
         },
@@ -453,12 +454,8 @@ pub fn fields(g: &CaseGeometry) -> Vec<(&'static str, String)> {
         "0",
         &zero_flux,
         &|_, role| match role {
-            // Returns all sit at the ceiling, so one p_rgh is one p. Total pressure: air
-            // flowing back in loses its dynamic head, as from a plenum. With a fixed
-            // static pressure a contained hot aisle drew 25 C air back in at 8 m/s.
-            PatchRole::Return => {
-                lines(&["type totalPressure;", "p0 uniform 0;", "value uniform 0;"])
-            }
+            // Returns all sit at the ceiling, so one fixed p_rgh is one fixed p.
+            PatchRole::Return => lines(&["type fixedValue;", "value uniform 0;"]),
             _ => zero_flux.clone(),
         },
         g,

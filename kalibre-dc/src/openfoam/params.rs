@@ -37,8 +37,6 @@ pub struct RunInputs {
     pub panel_forchheimer_per_m2: Vec<f64>,
     /// Initial temperature of the room (C).
     pub t_init_c: f64,
-    /// Temperature of air flowing back in through a return (C).
-    pub t_return_c: f64,
     /// Total server heat (W).
     pub heat_w: f64,
 }
@@ -126,12 +124,6 @@ impl RunInputs {
             gap_flow_m3_s: gap_flow,
             panel_forchheimer_per_m2: Vec::new(),
             t_init_c: supply_t,
-            // All the supply comes back through the returns, carrying the servers' heat.
-            t_return_c: st.return_backflow_c.unwrap_or(if floor_q > 0.0 {
-                supply_t + state.power_w.iter().sum::<f64>() / (rho_cp * floor_q)
-            } else {
-                supply_t
-            }),
             heat_w: state.power_w.iter().sum(),
         })
     }
@@ -162,7 +154,6 @@ impl RunInputs {
     pub fn render(&self) -> String {
         let mut s = String::from("// Written by kalibre for one run.\n");
         let _ = writeln!(s, "t_init {:.9e};", self.t_init_c);
-        let _ = writeln!(s, "t_return {:.9e};", self.t_return_c);
         let _ = writeln!(s, "k_in {K_IN:e};\nepsilon_in {EPSILON_IN:e};");
         for (i, (q, su)) in self
             .server_flow_m3_s

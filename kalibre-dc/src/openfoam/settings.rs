@@ -24,10 +24,7 @@ use super::OpenFoamError;
 /// | `containment_leak_fraction` | 0.02 | open fraction of closed containment panels and doors, the built-in simulator's default: a panel drops the pressure of a sharp-edged orifice of that open area ([`panel_loss_coefficient`]) |
 ///
 /// Physical constants follow the development datasets: rho 1.2 kg/m3, cp 1005 J/(kg K),
-/// beta 3.3e-3 1/K, TRef 25 C, nu 1.5e-5 m2/s. Air flowing back in through a return comes
-/// from the return plenum: by default at the plenum's mixed temperature, the supply plus
-/// the servers' heat over the supply flow, per run (`return_backflow_c` fixes it instead;
-/// the development datasets used 25 C, and on their halls it makes no difference).
+/// beta 3.3e-3 1/K, TRef 25 C, nu 1.5e-5 m2/s, return backflow at 25 C.
 #[derive(Debug, Clone, Serialize)]
 pub struct OpenFoamSettings {
     /// Cell size (m).
@@ -50,9 +47,8 @@ pub struct OpenFoamSettings {
     pub t_ref_c: f64,
     /// Kinematic viscosity (m2/s).
     pub nu_m2_s: f64,
-    /// Temperature of air flowing back in through a return (C); `None`: the return
-    /// plenum's mixed temperature in each run.
-    pub return_backflow_c: Option<f64>,
+    /// Temperature of air flowing back in through a return (C).
+    pub return_backflow_c: f64,
     /// Wall-clock limit per run.
     #[serde(skip)]
     pub timeout: Duration,
@@ -104,7 +100,7 @@ impl Default for OpenFoamSettings {
             beta_1_k: 3.3e-3,
             t_ref_c: 25.0,
             nu_m2_s: 1.5e-5,
-            return_backflow_c: None,
+            return_backflow_c: 25.0,
             timeout: Duration::from_secs(600),
             energy_tolerance: 0.05,
             project_dir: PathBuf::from("/usr/share/openfoam"),
