@@ -115,8 +115,9 @@ impl CaseGeometry {
                 let faces = self.fluid_faces_on(axis, plane, &range);
                 if faces > 0 {
                     let mut layer = range;
-                    layer.lo[axis] = plane - 1;
-                    layer.hi[axis] = plane + 1;
+                    // Half the zone on each side: the plane lies between porous cells.
+                    layer.lo[axis] = plane.saturating_sub(PANEL_LAYER_CELLS / 2);
+                    layer.hi[axis] = (plane + PANEL_LAYER_CELLS / 2).min(self.n[axis]);
                     out.push(PanelPlane {
                         name: format!("cont{c}-{side_name}"),
                         containment: c,
