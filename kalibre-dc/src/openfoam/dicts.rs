@@ -398,10 +398,14 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
                 &format!("volumetricFlowRate $q_rec{r};"),
                 "value uniform (0 0 0);",
             ]),
+            // A CRAC's fan only draws: a face where the flow would turn inward is held
+            // at rest. With inflow allowed (generator 1), the rolling cell of a
+            // contained hot aisle drew 25 C air back in at 8 m/s (docs/models.md).
             PatchRole::Return => {
                 let _ = p;
                 lines(&[
-                    "type pressureInletOutletVelocity;",
+                    "type inletOutlet;",
+                    "inletValue uniform (0 0 0);",
                     "value uniform (0 0 0);",
                 ])
             }

@@ -28,7 +28,7 @@ pub const SUPPORTED_EFFECTS: [&str; 4] = [
 ];
 
 /// Version of the case generator: part of the fingerprint and the case directory name.
-const GENERATOR: &str = "kalibre-dc-openfoam/1";
+const GENERATOR: &str = "kalibre-dc-openfoam/3";
 
 /// The name under which a run's [`Outputs::extras`] hold every server's intake air (C,
 /// hall order): flux-weighted over the intake face and averaged over the same iterations

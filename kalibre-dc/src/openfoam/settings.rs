@@ -47,7 +47,9 @@ pub struct OpenFoamSettings {
     pub t_ref_c: f64,
     /// Kinematic viscosity (m2/s).
     pub nu_m2_s: f64,
-    /// Temperature of air flowing back in through a return (C).
+    /// Temperature a return's face takes where the flow turns inward (C). Returns let
+    /// no air in (their velocity is held at zero there), so this only closes the
+    /// temperature boundary of such faces.
     pub return_backflow_c: f64,
     /// Wall-clock limit per run.
     #[serde(skip)]
