@@ -57,7 +57,8 @@ struct HeldOut {
     name: &'static str,
     alpha: [f64; 3],
     /// Aisle containment the hall has (in its `hall.json`: the user knows it).
-    contained: bool,
+    /// The hall's `containment` entries, if any.
+    containment: Option<fn() -> Value>,
     effect: Option<Value>,
     expected: Option<&'static str>,
 }
@@ -66,6 +67,15 @@ struct HeldOut {
 /// x 2.4 and 5.4, a roof; its long sides are the racks' intakes.
 fn cold_aisle_containment() -> Value {
     json!([{ "kind": "cold_aisle", "min_m": [2.4, 1.8, 0.0], "max_m": [5.4, 3.0, 2.0] }])
+}
+
+/// Both hot aisles contained up to the ceiling (3.0 m), with the return grilles above
+/// them inside: doors at x 2.4 and 5.4, a panel above each row.
+fn hot_aisle_containment() -> Value {
+    json!([
+        { "kind": "hot_aisle", "min_m": [2.4, 0.0, 0.0], "max_m": [5.4, 0.8, 3.0] },
+        { "kind": "hot_aisle", "min_m": [2.4, 4.0, 0.0], "max_m": [5.4, 4.8, 3.0] },
+    ])
 }
 
 const TYPES: [&str; 3] = ["web", "db", "gpu"];
@@ -80,21 +90,21 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-clean",
             alpha: [0.15, 0.14, 0.11],
-            contained: false,
+            containment: None,
             effect: None,
             expected: None,
         },
         HeldOut {
             name: "ho-offset-warm",
             alpha: [0.12, 0.18, 0.14],
-            contained: false,
+            containment: None,
             effect: Some(json!({"kind": "crac_supply_offset", "offset_c": 0.8})),
             expected: Some("crac_supply_offset"),
         },
         HeldOut {
             name: "ho-slot-A2-top",
             alpha: [0.13, 0.17, 0.12],
-            contained: false,
+            containment: None,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "A2", "z_m": [1.8, 2.0], "fraction": 0.17,
             })),
@@ -103,7 +113,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-slot-A4-low",
             alpha: [0.14, 0.16, 0.13],
-            contained: false,
+            containment: None,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "A4", "z_m": [0.8, 1.0], "fraction": 0.2,
             })),
@@ -112,7 +122,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-cutout-A2",
             alpha: [0.13, 0.17, 0.12],
-            contained: false,
+            containment: None,
             effect: Some(json!({
                 "kind": "bypass", "position_m": [3.0, 0.2], "size_m": [0.6, 0.4], "fraction": 0.1,
             })),
@@ -121,7 +131,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-cutout-B4",
             alpha: [0.15, 0.14, 0.11],
-            contained: false,
+            containment: None,
             effect: Some(json!({
                 "kind": "bypass", "position_m": [4.4, 4.2], "size_m": [0.4, 0.4], "fraction": 0.08,
             })),
@@ -130,14 +140,14 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-clean-2",
             alpha: [0.11, 0.19, 0.13],
-            contained: false,
+            containment: None,
             effect: None,
             expected: None,
         },
         HeldOut {
             name: "ho-slot-A3-mid",
             alpha: [0.13, 0.17, 0.12],
-            contained: false,
+            containment: None,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "A3", "z_m": [1.0, 1.2], "fraction": 0.17,
             })),
@@ -146,7 +156,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-slot-B2-wide",
             alpha: [0.12, 0.18, 0.14],
-            contained: false,
+            containment: None,
             effect: Some(json!({
                 "kind": "rack_recirculation", "rack": "B2", "z_m": [1.0, 1.4], "fraction": 0.25,
             })),
@@ -155,7 +165,7 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-cutout-A4-big",
             alpha: [0.14, 0.16, 0.13],
-            contained: false,
+            containment: None,
             effect: Some(json!({
                 "kind": "bypass", "position_m": [4.2, 0.2], "size_m": [0.6, 0.4], "fraction": 0.15,
             })),
@@ -166,18 +176,35 @@ fn cases() -> Vec<HeldOut> {
         HeldOut {
             name: "ho-contained-clean",
             alpha: [0.14, 0.15, 0.12],
-            contained: true,
+            containment: Some(cold_aisle_containment),
             effect: None,
             expected: None,
         },
         HeldOut {
             name: "ho-contained-door-open",
             alpha: [0.13, 0.17, 0.12],
-            contained: true,
+            containment: Some(cold_aisle_containment),
             effect: Some(json!({
                 "kind": "containment_leakage", "containment": 0, "sides": ["+x"], "open_fraction": 0.5,
             })),
             expected: Some(r#"containment_leakage(containment=0,sides=["+x"])"#),
+        },
+        // Session 23: the returns take no inflow, so hot aisles can be contained too.
+        HeldOut {
+            name: "ho-hot-contained-clean",
+            alpha: [0.12, 0.16, 0.13],
+            containment: Some(hot_aisle_containment),
+            effect: None,
+            expected: None,
+        },
+        HeldOut {
+            name: "ho-hot-contained-door-open",
+            alpha: [0.15, 0.15, 0.11],
+            containment: Some(hot_aisle_containment),
+            effect: Some(json!({
+                "kind": "containment_leakage", "containment": 1, "sides": ["-x"], "open_fraction": 0.5,
+            })),
+            expected: Some(r#"containment_leakage(containment=1,sides=["-x"])"#),
         },
     ]
 }
@@ -200,9 +227,9 @@ fn dataset(
     }
     let mut hall: Hall = dev.hall.clone();
     hall.name = case.name.to_string();
-    if case.contained {
+    if let Some(containment) = case.containment {
         let mut h = serde_json::to_value(&hall).map_err(|e| e.to_string())?;
-        h["containment"] = cold_aisle_containment();
+        h["containment"] = containment();
         hall = Hall::from_json_str(&h.to_string(), "contained hall.json")
             .map_err(|e| format!("{}: {e}", case.name))?;
     }
