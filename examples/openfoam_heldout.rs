@@ -56,8 +56,7 @@ use openfoam_cases::{
 struct HeldOut {
     name: &'static str,
     alpha: [f64; 3],
-    /// Aisle containment the hall has (in its `hall.json`: the user knows it).
-    /// The hall's `containment` entries, if any.
+    /// The hall's aisle containment entries, if any (in its `hall.json`: the user knows it).
     containment: Option<fn() -> Value>,
     effect: Option<Value>,
     expected: Option<&'static str>,
