@@ -24,7 +24,8 @@ use super::OpenFoamError;
 /// | `containment_leak_fraction` | 0.02 | open fraction of closed containment panels and doors, the built-in simulator's default: a panel drops the pressure of a sharp-edged orifice of that open area ([`panel_loss_coefficient`]) |
 ///
 /// Physical constants follow the development datasets: rho 1.2 kg/m3, cp 1005 J/(kg K),
-/// beta 3.3e-3 1/K, TRef 25 C, nu 1.5e-5 m2/s, return backflow at 25 C.
+/// beta 3.3e-3 1/K, TRef 25 C, nu 1.5e-5 m2/s. Returns take no inflow (25 C closes the
+/// temperature boundary where the flow would turn inward).
 #[derive(Debug, Clone, Serialize)]
 pub struct OpenFoamSettings {
     /// Cell size (m).
