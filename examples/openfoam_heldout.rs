@@ -12,7 +12,8 @@
 //! processes per solve, default 1), `--only NAME[,NAME]` (a subset of the cases),
 //! `--variants N` (default 0: per dataset also N fresh noise draws from the noise-free
 //! readings, and the same draws with 4 seeded random sensors removed, as
-//! `diagnosis_variants` does for the development data; no OpenFOAM solve).
+//! `diagnosis_variants` does for the development data; no OpenFOAM solve), `--sweep
+//! blanking` (instead of the cases: the development hall's blanking slot at each rack).
 //!
 //! The development data (`data/openfoam/of-dev-*`) were tuned against: the diagnosis's
 //! settings were chosen on them. These cases were not. Each is written as a dataset in
@@ -44,169 +45,17 @@ use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde_json::{json, Value};
 
+#[path = "openfoam_cases/heldout.rs"]
+mod heldout;
 #[path = "openfoam_cases/mod.rs"]
 mod openfoam_cases;
+use heldout::{blanking_sweep, cases, HeldOut};
 use openfoam_cases::{
     calibrate_as_cli, cases as variant_cases, gauss, write_json, Case, CaseData, Dataset, NOISE_C,
     REMOVED_SENSORS,
 };
 
-/// One held-out case: true alphas (web, db, gpu in cfm/W), the hidden effect as a
-/// `hall.json` effect entry, and the hypothesis the diagnosis should put on top.
-struct HeldOut {
-    name: &'static str,
-    alpha: [f64; 3],
-    /// The hall's aisle containment entries, if any (in its `hall.json`: the user knows it).
-    containment: Option<fn() -> Value>,
-    effect: Option<Value>,
-    expected: Option<&'static str>,
-}
-
-/// The development hall's cold aisle contained up to the racks' top (2.0 m): doors at
-/// x 2.4 and 5.4, a roof; its long sides are the racks' intakes.
-fn cold_aisle_containment() -> Value {
-    json!([{ "kind": "cold_aisle", "min_m": [2.4, 1.8, 0.0], "max_m": [5.4, 3.0, 2.0] }])
-}
-
-/// Both hot aisles contained up to the ceiling (3.0 m), with the return grilles above
-/// them inside: doors at x 2.4 and 5.4, a panel above each row.
-fn hot_aisle_containment() -> Value {
-    json!([
-        { "kind": "hot_aisle", "min_m": [2.4, 0.0, 0.0], "max_m": [5.4, 0.8, 3.0] },
-        { "kind": "hot_aisle", "min_m": [2.4, 4.0, 0.0], "max_m": [5.4, 4.8, 3.0] },
-    ])
-}
-
 const TYPES: [&str; 3] = ["web", "db", "gpu"];
-
-/// The cases. Geometry (`data/openfoam/README.md`): racks 0.6 m wide at x = 2.4 ... 4.8;
-/// row A y 0.8-1.8 (hot aisle y 0-0.8 behind it), row B y 3.0-4.0 (hot aisle y 4.0-4.8);
-/// each rack's servers span z 0-1.0 and 1.0-2.0. The development data hide an offset of
-/// -1 C, a slot through B4 at z 1.0-1.2 and a cutout behind B3 at 10 %; these differ in
-/// sign, rack, row, height and size, and no cutout sits exactly on a candidate's strip.
-fn cases() -> Vec<HeldOut> {
-    vec![
-        HeldOut {
-            name: "ho-clean",
-            alpha: [0.15, 0.14, 0.11],
-            containment: None,
-            effect: None,
-            expected: None,
-        },
-        HeldOut {
-            name: "ho-offset-warm",
-            alpha: [0.12, 0.18, 0.14],
-            containment: None,
-            effect: Some(json!({"kind": "crac_supply_offset", "offset_c": 0.8})),
-            expected: Some("crac_supply_offset"),
-        },
-        HeldOut {
-            name: "ho-slot-A2-top",
-            alpha: [0.13, 0.17, 0.12],
-            containment: None,
-            effect: Some(json!({
-                "kind": "rack_recirculation", "rack": "A2", "z_m": [1.8, 2.0], "fraction": 0.17,
-            })),
-            expected: Some("rack_recirculation(rack=A2)"),
-        },
-        HeldOut {
-            name: "ho-slot-A4-low",
-            alpha: [0.14, 0.16, 0.13],
-            containment: None,
-            effect: Some(json!({
-                "kind": "rack_recirculation", "rack": "A4", "z_m": [0.8, 1.0], "fraction": 0.2,
-            })),
-            expected: Some("rack_recirculation(rack=A4)"),
-        },
-        HeldOut {
-            name: "ho-cutout-A2",
-            alpha: [0.13, 0.17, 0.12],
-            containment: None,
-            effect: Some(json!({
-                "kind": "bypass", "position_m": [3.0, 0.2], "size_m": [0.6, 0.4], "fraction": 0.1,
-            })),
-            expected: Some("bypass(behind_rack=A2)"),
-        },
-        HeldOut {
-            name: "ho-cutout-B4",
-            alpha: [0.15, 0.14, 0.11],
-            containment: None,
-            effect: Some(json!({
-                "kind": "bypass", "position_m": [4.4, 4.2], "size_m": [0.4, 0.4], "fraction": 0.08,
-            })),
-            expected: Some("bypass(behind_rack=B4)"),
-        },
-        HeldOut {
-            name: "ho-clean-2",
-            alpha: [0.11, 0.19, 0.13],
-            containment: None,
-            effect: None,
-            expected: None,
-        },
-        HeldOut {
-            name: "ho-slot-A3-mid",
-            alpha: [0.13, 0.17, 0.12],
-            containment: None,
-            effect: Some(json!({
-                "kind": "rack_recirculation", "rack": "A3", "z_m": [1.0, 1.2], "fraction": 0.17,
-            })),
-            expected: Some("rack_recirculation(rack=A3)"),
-        },
-        HeldOut {
-            name: "ho-slot-B2-wide",
-            alpha: [0.12, 0.18, 0.14],
-            containment: None,
-            effect: Some(json!({
-                "kind": "rack_recirculation", "rack": "B2", "z_m": [1.0, 1.4], "fraction": 0.25,
-            })),
-            expected: Some("rack_recirculation(rack=B2)"),
-        },
-        HeldOut {
-            name: "ho-cutout-A4-big",
-            alpha: [0.14, 0.16, 0.13],
-            containment: None,
-            effect: Some(json!({
-                "kind": "bypass", "position_m": [4.2, 0.2], "size_m": [0.6, 0.4], "fraction": 0.15,
-            })),
-            expected: Some("bypass(behind_rack=A4)"),
-        },
-        // Session 22: the OpenFOAM case can be contained. A contained hall, clean, and
-        // the same hall with its +x door half open.
-        HeldOut {
-            name: "ho-contained-clean",
-            alpha: [0.14, 0.15, 0.12],
-            containment: Some(cold_aisle_containment),
-            effect: None,
-            expected: None,
-        },
-        HeldOut {
-            name: "ho-contained-door-open",
-            alpha: [0.13, 0.17, 0.12],
-            containment: Some(cold_aisle_containment),
-            effect: Some(json!({
-                "kind": "containment_leakage", "containment": 0, "sides": ["+x"], "open_fraction": 0.5,
-            })),
-            expected: Some(r#"containment_leakage(containment=0,sides=["+x"])"#),
-        },
-        // Session 23: the returns take no inflow, so hot aisles can be contained too.
-        HeldOut {
-            name: "ho-hot-contained-clean",
-            alpha: [0.12, 0.16, 0.13],
-            containment: Some(hot_aisle_containment),
-            effect: None,
-            expected: None,
-        },
-        HeldOut {
-            name: "ho-hot-contained-door-open",
-            alpha: [0.15, 0.15, 0.11],
-            containment: Some(hot_aisle_containment),
-            effect: Some(json!({
-                "kind": "containment_leakage", "containment": 1, "sides": ["-x"], "open_fraction": 0.5,
-            })),
-            expected: Some(r#"containment_leakage(containment=1,sides=["-x"])"#),
-        },
-    ]
-}
 
 /// The seed of a case's noise.
 fn noise_seed(index: usize) -> u64 {
@@ -380,7 +229,7 @@ fn evaluate(
     let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
         .map_err(|e| format!("diagnosis: {e}"))?;
     let top = d.diagnosis.significant().next();
-    let verdict = match (top, case.expected) {
+    let verdict = match (top, case.expected.as_deref()) {
         (None, None) => "pass",
         (None, Some(_)) => "miss",
         (Some(h), Some(e)) if h.name == e => "pass",
@@ -389,9 +238,11 @@ fn evaluate(
     let hyps = &d.diagnosis.hypotheses;
     let rank = case
         .expected
+        .as_deref()
         .and_then(|e| hyps.iter().position(|h| h.name == e).map(|i| i + 1));
     let expected = case
         .expected
+        .as_deref()
         .and_then(|e| hyps.iter().find(|h| h.name == e));
     let summary = |h: &kalibre::core::diagnose::HypothesisResult| {
         json!({
@@ -424,6 +275,7 @@ struct Options {
     np: u32,
     only: Option<Vec<String>>,
     variants: usize,
+    sweep: bool,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -433,6 +285,7 @@ fn parse_args() -> Result<Options, String> {
         np: 1,
         only: None,
         variants: 0,
+        sweep: false,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
@@ -450,6 +303,8 @@ fn parse_args() -> Result<Options, String> {
                     .ok_or_else(|| format!("--np needs a whole number >= 1, got `{value}`"))?
             }
             "--only" => o.only = Some(value.split(',').map(str::to_string).collect()),
+            "--sweep" if value == "blanking" => o.sweep = true,
+            "--sweep" => return Err(format!("--sweep: only `blanking` is known, got `{value}`")),
             "--variants" => {
                 o.variants = value
                     .parse()
@@ -457,7 +312,7 @@ fn parse_args() -> Result<Options, String> {
             }
             _ => {
                 return Err(format!(
-                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N)"
+                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking)"
                 ))
             }
         }
@@ -481,10 +336,15 @@ fn run(o: &Options) -> Result<(), String> {
         .with_cache_root(of_root)
         .check()
         .map_err(|e| e.to_string())?;
-    let all = cases();
+    // The sweep's datasets take other noise seeds than the cases'.
+    let (all, first_index) = if o.sweep {
+        (blanking_sweep(&dev.hall), 1000)
+    } else {
+        (cases(), 0)
+    };
     if let Some(only) = &o.only {
-        if let Some(bad) = only.iter().find(|n| !all.iter().any(|c| c.name == *n)) {
-            let names: Vec<&str> = all.iter().map(|c| c.name).collect();
+        if let Some(bad) = only.iter().find(|n| !all.iter().any(|c| c.name == **n)) {
+            let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
             return Err(format!(
                 "--only: no case `{bad}` (cases: {})",
                 names.join(", ")
@@ -492,14 +352,15 @@ fn run(o: &Options) -> Result<(), String> {
         }
     }
     let mut records = Vec::new();
-    for (i, case) in all.iter().enumerate() {
+    for (k, case) in all.iter().enumerate() {
+        let i = first_index + k;
         if o.only
             .as_ref()
-            .is_some_and(|only| !only.iter().any(|n| n == case.name))
+            .is_some_and(|only| !only.contains(&case.name))
         {
             continue;
         }
-        let dir = o.work.join(case.name);
+        let dir = o.work.join(&case.name);
         let data = dataset(case, i, &dev, &dir, &settings)?;
         for variant in variant_cases(o.variants) {
             let t = Instant::now();
