@@ -80,6 +80,10 @@ impl HallCalibrationSettings {
     /// stalls a few tenths of a degree above what the model can reach), each sensor
     /// weighed by how far the grid check moves it (`numerical_weighting`: the grid's own
     /// error at a few sensors would otherwise set the alphas of the types they see).
+    /// The best run is judged by its MAE plus the temperature-rise prior there
+    /// (`prior_in_best`): a run whose lower MAE needs rises the prior rules out must not
+    /// become the trust region's centre (on OpenFOAM data it held a calibration at half
+    /// the true alphas; docs/experiments.md, session 25).
     pub fn loop_defaults() -> Settings {
         Settings {
             seed: 1,
@@ -92,6 +96,7 @@ impl HallCalibrationSettings {
             trust_region: Some(0.1),
             polish_iterations: 8,
             numerical_weighting: true,
+            prior_in_best: true,
             ..Settings::default()
         }
     }

@@ -20,7 +20,7 @@ mod uncertainty;
 
 pub use numerical::NumericalCheck;
 pub use report::{
-    Best, Errors, Initial, IterationRecord, NamedValues, Report, Residual, RunCounts,
+    Best, Errors, Initial, IterationRecord, NamedValues, PassedOver, Report, Residual, RunCounts,
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
 };
 pub use settings::Settings;
@@ -154,7 +154,8 @@ where
             observers: &self.observers,
             pool: pool.as_ref(),
         };
-        let mut state = State::default();
+        let judge = self.regularizer.filter(|_| st.prior_in_best);
+        let mut state = State::judged_with(judge.map(|r| (r, st.regularizer_weight)));
 
         // The initial design.
         let design_phys: Vec<Vec<f64>> = design_units
@@ -558,9 +559,12 @@ where
             }
             None => (Vec::new(), None),
         };
+        let passed_over = state.best.as_ref().and_then(|b| state.passed_over(b));
         let best = state.best.ok_or_else(|| {
             Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
         })?;
+        let prior = state.prior.map(|_| best.rank - best.score);
+        let prior = prior.filter(|p| p.is_finite());
         let residuals = report::residual_rows(obs, &best.outputs, numerical_weights.as_deref());
         Ok(Report {
             schema: REPORT_SCHEMA.into(),
@@ -573,6 +577,8 @@ where
                 max_abs_c: best.validation.overall.max_abs,
                 score: best.score,
                 params: NamedValues::new(&names, &best.params),
+                prior,
+                passed_over,
             },
             uncertainty,
             uncertainty_slopes,

@@ -274,7 +274,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 .map(|(u, d)| (u + d).clamp(0.0, 1.0))
                 .collect();
             let params = space.from_unit(&unit)?;
-            let before = state.best.as_ref().map(|b| b.score);
+            let before = state.best.as_ref().map(|b| b.rank);
             iteration += 1;
             let t = Instant::now();
             let results = self
@@ -300,7 +300,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                     improved
                 }
                 None => {
-                    state.best.as_ref().map(|b| b.score) < before
+                    state.best.as_ref().map(|b| b.rank) < before
                         || before.is_none() && state.best.is_some()
                 }
             };

@@ -192,6 +192,25 @@ pub struct Best {
     pub score: f64,
     /// Parameters by name.
     pub params: NamedValues,
+    /// When the prior judges the best run too ([`super::Settings::prior_in_best`]): the
+    /// weighted regulariser at these parameters, in the score's units.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<f64>,
+    /// A run with a lower score that the prior ruled out: its iteration, score and prior.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub passed_over: Option<PassedOver>,
+}
+
+/// A run with a lower score than the best one, passed over for the prior's cost there.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PassedOver {
+    /// Iteration that ran it (0: the initial design).
+    pub iteration: usize,
+    /// Its score (default: overall MAE).
+    pub score: f64,
+    /// The weighted regulariser at its parameters.
+    pub prior: f64,
 }
 
 /// The model at the initial parameter values, and the initial design.

@@ -27,6 +27,7 @@ use crate::{Error, Result};
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
 /// | `robust_nu` | none | the data term's likelihood: none is the paper's mean squared error; `nu` a Student-t with `nu` degrees of freedom (4 is the usual robust choice), its scale fitted to the residuals, in the polish (reweighted Levenberg-Marquardt) and the uncertainty, so that a few outputs the model cannot match do not set the parameters; the iterations' search keeps the squared error (it finds the basin) | finite, > 0 |
 /// | `numerical_weighting` | false | with numerical variants ([`crate::Calibrator::with_numerical_variant`]) and a polish: the variants run at the loop's best before the polish, and the polish weighs each measured output by `s^2 / (s^2 + u^2)`, `u` its largest change over the variants and `s^2` the noise variance that leaves the weighted residuals their degrees of freedom (generalised least squares with the numerics as a per-output error); the uncertainty uses the same weights | bool |
+/// | `prior_in_best` | false | with a regulariser: judge which run is the best by its score plus the weighted regulariser at its parameters (the run's own value of what the search minimises, with the score for the misfit), so that a run whose lower error comes from parameters the prior rules out does not become the search's centre | bool |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, > 0 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -83,6 +84,10 @@ pub struct Settings {
     /// numerical variants leave it trustworthy. Missing in older reports: false.
     #[serde(default)]
     pub numerical_weighting: bool,
+    /// Judge the best run by its score plus the weighted regulariser. Missing in older
+    /// reports: false.
+    #[serde(default)]
+    pub prior_in_best: bool,
 }
 
 impl Default for Settings {
@@ -108,6 +113,7 @@ impl Default for Settings {
             polish_iterations: 0,
             robust_nu: None,
             numerical_weighting: false,
+            prior_in_best: false,
         }
     }
 }

@@ -267,7 +267,7 @@ mod tests {
         ]
     }
 
-    fn state_with(points: &[[f64; 2]], c: f64) -> State {
+    fn state_with(points: &[[f64; 2]], c: f64) -> State<'static> {
         let mut st = State::default();
         for p in points {
             st.ok_units.push(p.to_vec());
@@ -353,6 +353,7 @@ mod tests {
             unit: vec![0.4, 0.6],
             params: vec![0.4, 0.6],
             score: 0.0,
+            rank: 0.0,
             validation: Default::default(),
             outputs: vec![model(&[0.4, 0.6], 0.0)],
         };

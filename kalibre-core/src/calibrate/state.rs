@@ -1,9 +1,10 @@
 //! What the loop accumulates: run counts, training samples, which points ran and failed,
 //! and the best point so far.
 
+use super::report::PassedOver;
 use super::runner::RunResult;
 use super::RunCounts;
-use crate::{Observations, Sample, Validation, Validator};
+use crate::{Observations, Regularizer, Sample, Validation, Validator};
 
 /// The best point so far.
 pub(crate) struct BestPoint {
@@ -11,6 +12,9 @@ pub(crate) struct BestPoint {
     pub(crate) unit: Vec<f64>,
     pub(crate) params: Vec<f64>,
     pub(crate) score: f64,
+    /// What points are compared by: the score, plus the weighted prior when
+    /// [`crate::Settings::prior_in_best`] is set.
+    pub(crate) rank: f64,
     pub(crate) validation: Validation,
     pub(crate) outputs: Vec<Vec<f64>>,
 }
@@ -24,7 +28,7 @@ pub(crate) struct PointEval {
 
 /// Everything the loop accumulates.
 #[derive(Default)]
-pub(crate) struct State {
+pub(crate) struct State<'r> {
     pub(crate) samples: Vec<Sample>,
     pub(crate) ok_units: Vec<Vec<f64>>,
     /// Per successful point (as `ok_units`): physical parameters and outputs per snapshot.
@@ -35,9 +39,49 @@ pub(crate) struct State {
     /// While set, `absorb` books runs but leaves the best point to [`State::promote`]:
     /// the weighted polish's optimum is not the lowest MAE.
     pub(crate) best_held: bool,
+    /// The regulariser and its weight, when the best point is judged with the prior.
+    pub(crate) prior: Option<(&'r dyn Regularizer, f64)>,
+    /// The lowest-score complete run: iteration, score and rank (what the report says
+    /// when the prior passed it over).
+    pub(crate) lowest: Option<(usize, f64, f64)>,
 }
 
-impl State {
+impl<'r> State<'r> {
+    /// An empty state whose best run is judged with `prior` (regulariser, weight) too.
+    pub(crate) fn judged_with(prior: Option<(&'r dyn Regularizer, f64)>) -> Self {
+        State {
+            prior,
+            ..State::default()
+        }
+    }
+
+    /// The lowest-score run when the prior passed it over for `best`.
+    pub(crate) fn passed_over(&self, best: &BestPoint) -> Option<PassedOver> {
+        let (iteration, score, rank) = self.lowest?;
+        (score < best.score && rank > best.rank && rank.is_finite()).then_some(PassedOver {
+            iteration,
+            score,
+            prior: rank - score,
+        })
+    }
+
+    /// A point's rank: its score plus, when the prior judges too, the weighted prior at
+    /// its parameters (both in the score's units for the DC prior: kelvin). A prior that
+    /// is not finite there ranks the point last.
+    fn rank(&self, score: f64, params: &[f64]) -> f64 {
+        match self.prior {
+            Some((r, w)) if w > 0.0 => {
+                let prior = w * r.value(params);
+                if prior.is_finite() {
+                    score + prior
+                } else {
+                    f64::INFINITY
+                }
+            }
+            _ => score,
+        }
+    }
+
     /// Books one point's runs: counts, training samples, validation and the best point.
     pub(crate) fn absorb<S, V: Validator>(
         &mut self,
@@ -83,15 +127,18 @@ impl State {
         self.ok_runs.push((params.to_vec(), outputs.clone()));
         let validation = validator.validate(obs, &outputs);
         let score = validator.score(&validation);
-        if !self.best_held
-            && score.is_finite()
-            && self.best.as_ref().is_none_or(|b| score < b.score)
+        let rank = self.rank(score, params);
+        if score.is_finite() && self.lowest.is_none_or(|(_, s, _)| score < s) {
+            self.lowest = Some((iteration, score, rank));
+        }
+        if !self.best_held && score.is_finite() && self.best.as_ref().is_none_or(|b| rank < b.rank)
         {
             self.best = Some(BestPoint {
                 iteration,
                 unit: unit.to_vec(),
                 params: params.to_vec(),
                 score,
+                rank,
                 validation: validation.clone(),
                 outputs,
             });
@@ -119,13 +166,83 @@ impl State {
         }
         let validation = validator.validate(obs, &outputs);
         let score = validator.score(&validation);
+        let rank = self.rank(score, params);
         self.best = Some(BestPoint {
             iteration,
             unit: unit.to_vec(),
             params: params.to_vec(),
             score,
+            rank,
             validation,
             outputs,
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{ErrorMetrics, OutputInfo, Snapshot};
+
+    /// A prior that costs 10 K per unit of the first parameter above 0.5.
+    struct Above;
+    impl Regularizer for Above {
+        fn value_and_gradient(&self, p: &[f64]) -> (f64, Vec<f64>) {
+            let over = (p[0] - 0.5).max(0.0);
+            (10.0 * over, vec![if over > 0.0 { 10.0 } else { 0.0 }])
+        }
+    }
+
+    fn run(value: f64) -> Vec<RunResult> {
+        vec![RunResult {
+            result: Ok(vec![value].into()),
+            cached: false,
+        }]
+    }
+
+    /// Books a low-error run where the prior binds, then a worse one where it does not;
+    /// returns the best point's iteration.
+    fn best_iteration(prior: Option<(&dyn Regularizer, f64)>) -> (usize, f64, f64) {
+        let obs = Observations::new(
+            vec![OutputInfo {
+                name: "s".into(),
+                group: "cold".into(),
+            }],
+            vec![Snapshot {
+                label: "t0".into(),
+                scenario: (),
+                measured: vec![Some(20.0)],
+            }],
+        )
+        .unwrap();
+        let mut state = State::judged_with(prior);
+        // MAE 0.5 at a parameter 0.1 above the prior's edge (1 K of prior).
+        state.absorb(&ErrorMetrics, &obs, 1, &[0.6], &[0.6], run(20.5));
+        // MAE 0.8 within the prior.
+        state.absorb(&ErrorMetrics, &obs, 2, &[0.4], &[0.4], run(19.2));
+        let b = state.best.as_ref().unwrap();
+        let passed = state.passed_over(b);
+        if b.iteration == 2 {
+            let p = passed.expect("the lower-error run was passed over");
+            assert_eq!(p.iteration, 1);
+            assert!((p.score - 0.5).abs() < 1e-12 && (p.prior - 1.0).abs() < 1e-9);
+        } else {
+            assert!(passed.is_none());
+        }
+        (b.iteration, b.score, b.rank)
+    }
+
+    #[test]
+    fn the_prior_judges_the_best_run_only_when_asked() {
+        let (it, score, rank) = best_iteration(None);
+        assert_eq!(it, 1);
+        assert!((score - 0.5).abs() < 1e-12 && (rank - score).abs() < 1e-12);
+        let (it, score, rank) = best_iteration(Some((&Above, 1.0)));
+        assert_eq!(it, 2, "0.5 C + 1 K of prior loses to 0.8 C");
+        assert!((score - 0.8).abs() < 1e-12 && (rank - 0.8).abs() < 1e-12);
+        // A light prior leaves the lower error the best: 0.5 + 0.2 < 0.8.
+        let (it, _, rank) = best_iteration(Some((&Above, 0.2)));
+        assert_eq!(it, 1);
+        assert!((rank - 0.7).abs() < 1e-12);
     }
 }

@@ -418,6 +418,7 @@ mod tests {
             unit: unit.to_vec(),
             params: unit.to_vec(),
             score: 0.0,
+            rank: 0.0,
             validation: Default::default(),
             outputs: vec![s.predict(&(), &unit)],
         };

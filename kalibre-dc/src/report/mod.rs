@@ -193,6 +193,17 @@ pub fn calibration_html(
             prior.servers_below, prior.servers_above, prior.range_c[0], prior.range_c[1]
         );
     }
+    if let Some(p) = &report.best.passed_over {
+        let _ = write!(
+            h,
+            "<p class=\"note\">A run with a lower MAE ({:.3} C, iteration {}) was not taken as the best: \
+             the temperature-rise prior costs {:.2} K there, against {:.2} K here.</p>",
+            p.score,
+            p.iteration,
+            p.prior,
+            report.best.prior.unwrap_or(0.0)
+        );
+    }
     let residual = mean_residual_per_sensor(hall, report);
     let scale = residual
         .iter()

@@ -124,7 +124,8 @@ pub struct CalibrateArgs {
     /// Adam steps after differential evolution.
     #[arg(long = "adam-steps", default_value_t = 100)]
     adam_steps: usize,
-    /// Weight of the temperature-rise prior in the search (the paper: 1; 0 turns it off).
+    /// Weight of the temperature-rise prior in the search and in judging which run is the
+    /// best (the paper: 1; 0 turns it off).
     #[arg(long = "rise-weight", default_value_t = 1.0)]
     rise_weight: f64,
     /// Plausible server temperature rise range, `LOW,HIGH` in C (the paper: 5,15; real
