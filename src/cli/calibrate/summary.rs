@@ -185,15 +185,8 @@ pub(super) fn print_summary(
             penalty.violations.len()
         );
     }
-    if let Some(p) = &report.best.passed_over {
-        println!(
-            "  note: a run with a lower MAE ({:.3} C, iteration {}) was not taken as the best: \
-             the temperature-rise prior costs {:.2} K there, against {:.2} K here",
-            p.score,
-            p.iteration,
-            p.prior,
-            report.best.prior.unwrap_or(0.0)
-        );
+    if let Some(text) = kalibre_dc::report::passed_over_text(report) {
+        println!("  note: {text}");
     }
     if report.settings.robust_nu.is_some() && report.settings.polish_iterations == 0 {
         println!(
