@@ -410,6 +410,18 @@ fn table4_paper_loop_runs_the_loop_rows_in_algorithm_1() {
     // Another loop: the trajectories differ.
     assert_ne!(a.mae_after_10_c, b.mae_after_10_c);
     assert!(table4::markdown(std::slice::from_ref(&paper)).contains("in the paper's loop"));
+    // Algorithm 1 keeps the run with the lowest error: kalibre's rule for halls (error
+    // plus the rise prior) must not leak into it.
+    let mut st = HallCalibrationSettings::default();
+    assert!(
+        st.core.prior_in_best,
+        "kalibre's loop ranks by error plus prior"
+    );
+    experiments::use_paper_loop(&mut st).unwrap();
+    assert!(
+        !st.core.prior_in_best,
+        "the paper's loop ranks by error alone"
+    );
 }
 
 #[test]

@@ -115,13 +115,16 @@ pub fn setup_with_alpha(
 
 /// The paper's Algorithm 1 in place of kalibre's loop: the whole box, the surrogate as
 /// fitted, every run weighted alike (a repeated proposal still moves on rather than
-/// stopping), the paper's rise prior, and DE then Adam without kalibre's local phase.
+/// stopping), the best run by its error alone, the paper's rise prior, and DE then Adam
+/// without kalibre's local phase.
 pub fn use_paper_loop(st: &mut HallCalibrationSettings) -> Result<()> {
     st.core.trust_region = None;
     st.core.output_correction = false;
     st.core.linear_correction = false;
     st.core.stall_step = None;
     st.core.focus = None;
+    // Algorithm 1 keeps the run with the lowest error, whatever the prior says there.
+    st.core.prior_in_best = false;
     st.penalty = PenaltySettings::paper();
     st.searcher = st
         .searcher
