@@ -47,8 +47,8 @@ const VARIANTS: &[(&str, &str)] = &[
     ),
     ("no-prior", "no temperature-rise prior"),
     (
-        "prior-in-best",
-        "the best run judged by its MAE plus the weighted temperature-rise prior (session 25)",
+        "best-by-mae",
+        "the best run judged by its MAE alone, not MAE plus the weighted rise prior (before session 25)",
     ),
     (
         "no-geometry-steps",
@@ -133,7 +133,7 @@ fn variant(name: &str) -> Option<HallCalibrationSettings> {
         "vertical-0.5-adjacency" => s.surrogate.adjacency.server_vertical_scale = 0.5,
         "paper-prior" => s.penalty = PenaltySettings::paper(),
         "no-prior" => s.penalty.weight = 0.0,
-        "prior-in-best" => s.core.prior_in_best = true,
+        "best-by-mae" => s.core.prior_in_best = false,
         "no-geometry-steps" => s.core.stall_step = None,
         "trust-region-0.3" => s.core.trust_region = Some(0.3),
         "local-recirculation" => {
