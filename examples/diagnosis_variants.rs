@@ -19,7 +19,10 @@
 //! best parameters once per setting, as `kalibre diagnose` does. Settings: `gaussian`
 //! (least squares, no single-output check: the diagnosis before Student-t), `student-t 4,
 //! no single-output check`, `default` (`HallDiagnosisSettings::default()`: Student-t
-//! nu 4 and the single-output check), `student-t 2` and `student-t 8` (with the check).
+//! nu 4 and the single-output check), `student-t 2` and `student-t 8` (with the check),
+//! `refit 3` and `refit 8` (the default with the 3 or 8 leading hypotheses refit with
+//! the model, `HallDiagnosisSettings::refit_top`). `--settings 'NAME;NAME'` runs only
+//! the named settings.
 //!
 //! Verdicts per case and setting: `pass` when the top significant hypothesis is the
 //! expected one (for `clean`: nothing significant), `miss` when nothing is significant
@@ -46,35 +49,42 @@ use openfoam_cases::{
 };
 
 /// A diagnosis setting: `(robust_nu, single_output_check)` over the library's
-/// `DiagnoseSettings::default()`, or none to keep the defaults as they are.
+/// `DiagnoseSettings::default()`, or none to keep the defaults as they are, and how many
+/// leading hypotheses are refit with the model (`HallDiagnosisSettings::refit_top`).
 struct Setting {
     name: &'static str,
     overrides: Option<(Option<f64>, bool)>,
+    refit_top: usize,
     quick: bool,
 }
 
 const fn setting(
     name: &'static str,
     overrides: Option<(Option<f64>, bool)>,
+    refit_top: usize,
     quick: bool,
 ) -> Setting {
     Setting {
         name,
         overrides,
+        refit_top,
         quick,
     }
 }
 
-const SETTINGS: [Setting; 5] = [
-    setting("gaussian", Some((None, false)), true),
+const SETTINGS: [Setting; 7] = [
+    setting("gaussian", Some((None, false)), 0, true),
     setting(
         "student-t 4, no single-output check",
         Some((Some(4.0), false)),
+        0,
         false,
     ),
-    setting("default", None, true),
-    setting("student-t 2", Some((Some(2.0), true)), false),
-    setting("student-t 8", Some((Some(8.0), true)), false),
+    setting("default", None, 0, true),
+    setting("student-t 2", Some((Some(2.0), true)), 0, false),
+    setting("student-t 8", Some((Some(8.0), true)), 0, false),
+    setting("refit 3", None, 3, false),
+    setting("refit 8", None, 8, false),
 ];
 
 /// Calibrates one case as `kalibre calibrate` does by default, journal and report in
@@ -99,6 +109,7 @@ fn run_case(
             ds.diagnose.robust_nu = nu;
             ds.diagnose.single_output_check = check;
         }
+        ds.refit_top = s.refit_top;
         let d = diagnose_hall(hall, snaps, &params, &registry, &ds)
             .map_err(|e| format!("diagnosis ({}): {e}", s.name))?;
         let top = d.diagnosis.significant().next();
@@ -118,6 +129,7 @@ fn run_case(
         verdicts.push(json!({
             "setting": s.name, "robust_nu": ds.diagnose.robust_nu,
             "single_output_check": ds.diagnose.single_output_check,
+            "refit_top": ds.refit_top,
             "verdict": verdict, "top_significant": top,
             "significant": d.diagnosis.significant().count(),
             "mae_c": d.diagnosis.mae, "noise_sigma_c": d.diagnosis.noise_sigma,
@@ -148,6 +160,7 @@ struct Options {
     data: PathBuf,
     variants: usize,
     quick: bool,
+    settings: Option<Vec<String>>,
 }
 
 fn parse_args() -> Options {
@@ -157,6 +170,7 @@ fn parse_args() -> Options {
         data: PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/openfoam")),
         variants: 6,
         quick: false,
+        settings: None,
     };
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     o.quick = args.iter().any(|a| a == "--quick");
@@ -164,9 +178,9 @@ fn parse_args() -> Options {
     let mut i = 0;
     while i < args.len() {
         let flag = args[i].as_str();
-        let known = ["--out", "--work", "--data", "--variants"].contains(&flag);
+        let known = ["--out", "--work", "--data", "--variants", "--settings"].contains(&flag);
         if !known {
-            eprintln!("unknown argument `{flag}` (use --out FILE, --work DIR, --data DIR, --variants N, --quick)");
+            eprintln!("unknown argument `{flag}` (use --out FILE, --work DIR, --data DIR, --variants N, --settings 'NAME;NAME', --quick)");
             std::process::exit(2);
         }
         let Some(value) = args.get(i + 1).cloned() else {
@@ -177,6 +191,18 @@ fn parse_args() -> Options {
             "--out" => o.out = PathBuf::from(&value),
             "--work" => o.work = PathBuf::from(&value),
             "--data" => o.data = PathBuf::from(&value),
+            "--settings" => {
+                let names: Vec<String> = value.split(';').map(|n| n.trim().to_string()).collect();
+                if let Some(bad) = names.iter().find(|n| SETTINGS.iter().all(|s| s.name != *n)) {
+                    let known: Vec<&str> = SETTINGS.iter().map(|s| s.name).collect();
+                    eprintln!(
+                        "--settings: no setting `{bad}` (settings: {})",
+                        known.join("; ")
+                    );
+                    std::process::exit(2)
+                }
+                o.settings = Some(names);
+            }
             _ => {
                 o.variants = value.parse().unwrap_or_else(|_| {
                     eprintln!("--variants needs a whole number >= 0, got `{value}`");
@@ -194,7 +220,13 @@ fn parse_args() -> Options {
 
 fn run(o: &Options) -> Result<(), String> {
     let started = Instant::now();
-    let settings: Vec<&Setting> = SETTINGS.iter().filter(|s| s.quick || !o.quick).collect();
+    let settings: Vec<&Setting> = SETTINGS
+        .iter()
+        .filter(|s| match &o.settings {
+            Some(names) => names.iter().any(|n| n == s.name),
+            None => s.quick || !o.quick,
+        })
+        .collect();
     let cases = cases(o.variants);
     let total = DATASETS.len() * cases.len();
     let mut records = Vec::new();

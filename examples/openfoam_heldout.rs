@@ -13,7 +13,9 @@
 //! `--variants N` (default 0: per dataset also N fresh noise draws from the noise-free
 //! readings, and the same draws with 4 seeded random sensors removed, as
 //! `diagnosis_variants` does for the development data; no OpenFOAM solve), `--sweep
-//! blanking` (instead of the cases: the development hall's blanking slot at each rack).
+//! blanking` (instead of the cases: the development hall's blanking slot at each rack),
+//! `--refit K` (the diagnosis refits its K leading hypotheses with the built-in model,
+//! `HallDiagnosisSettings::refit_top`; default 0, as `kalibre diagnose`).
 //!
 //! The development data (`data/openfoam/of-dev-*`) were tuned against: the diagnosis's
 //! settings were chosen on them. These cases were not. Each is written as a dataset in
@@ -219,11 +221,13 @@ fn evaluate(
     snaps: &[HallSnapshot],
     footprint_mae_c: &Value,
     work: &Path,
+    refit_top: usize,
 ) -> Result<Value, String> {
     let (cal, cal_settings) = calibrate_as_cli(hall, snaps, work)?;
     let params = cal.report.best.params.values();
     let ds = HallDiagnosisSettings {
         sim: cal_settings.sim.clone(),
+        refit_top,
         ..HallDiagnosisSettings::default()
     };
     let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
@@ -262,6 +266,8 @@ fn evaluate(
         "first_three": hyps.iter().take(3).map(summary).collect::<Vec<_>>(),
         "footprint_mae_c": footprint_mae_c,
         "diagnosis_mae_c": d.diagnosis.mae,
+        "refit_top": refit_top,
+        "refits": d.refits,
         "calibration": {
             "best_mae_c": cal.report.best.mae_c, "model_runs": cal.report.runs.total,
             "params": cal.report.best.params,
@@ -276,6 +282,7 @@ struct Options {
     only: Option<Vec<String>>,
     variants: usize,
     sweep: bool,
+    refit_top: usize,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -286,6 +293,7 @@ fn parse_args() -> Result<Options, String> {
         only: None,
         variants: 0,
         sweep: false,
+        refit_top: 0,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
@@ -310,9 +318,14 @@ fn parse_args() -> Result<Options, String> {
                     .parse()
                     .map_err(|_| format!("--variants needs a whole number >= 0, got `{value}`"))?
             }
+            "--refit" => {
+                o.refit_top = value
+                    .parse()
+                    .map_err(|_| format!("--refit needs a whole number >= 0, got `{value}`"))?
+            }
             _ => {
                 return Err(format!(
-                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking)"
+                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking, --refit K)"
                 ))
             }
         }
@@ -377,7 +390,7 @@ fn run(o: &Options) -> Result<(), String> {
                 _ => dir.join(variant.slug()),
             };
             let footprint = &data.truth["footprint"]["mae_c"];
-            let mut record = evaluate(case, &hall, &snaps, footprint, &work)
+            let mut record = evaluate(case, &hall, &snaps, footprint, &work, o.refit_top)
                 .map_err(|e| format!("{}, {}: {e}", case.name, variant.label()))?;
             eprintln!(
                 "{}, {}: {} (top {}, expected rank {}), {:.0} s",

@@ -392,6 +392,29 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         }
         assert!(parts_k <= total_k * (1.0 + 1e-9), "{w}");
     }
+    // `--refit 1` runs the leading hypothesis with the model and says what it ran.
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--json", "--refit", "1", "--refit-iterations", "2"])
+        .arg("--calibration")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let d: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    let refits = d["refits"].as_array().expect("refits");
+    assert_eq!(refits.len(), 1, "{d}");
+    let steps = refits[0]["steps"].as_array().unwrap();
+    assert!((1..=2).contains(&steps.len()), "{d}");
+    for s in steps {
+        assert!(s["model_mae_c"].as_f64().is_some_and(|m| m > 0.0), "{s}");
+        assert!(
+            s["effect_value"].as_f64().is_some_and(f64::is_finite),
+            "{s}"
+        );
+    }
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--refit", "1", "--refit-iterations", "0"])
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "--refit-iterations: must be at least 1 with --refit");
     // The same geometry under another name is another hall: refused.
     let o = run(on_dataset("diagnose", "of-dev-crac-offset")
         .arg("--calibration")

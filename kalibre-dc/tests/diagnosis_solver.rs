@@ -1,7 +1,10 @@
 //! The diagnosis over any [`EffectSolver`]: candidates of kinds the solver cannot
 //! represent are listed as not tried, a candidate whose run fails is dropped and listed,
-//! a failed base run is an error, and the built-in simulator through the trait gives the
-//! same diagnosis as `diagnose_hall`.
+//! a failed base run is an error, a failed refit run is recorded and leaves the ranking
+//! linearised, and the built-in simulator through the trait gives the same diagnosis as
+//! `diagnose_hall`.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use kalibre_dc::diagnosis::{
     diagnose_hall, diagnose_hall_with, EffectSolver, HallDiagnosis, HallDiagnosisSettings,
@@ -20,6 +23,10 @@ struct Restricted {
     fail_bypass_behind: Option<String>,
     /// Runs without any effect fail (the base and the calibrated parameters' steps).
     fail_base: bool,
+    /// Every run after this many fails.
+    fail_after: Option<usize>,
+    /// Runs so far.
+    calls: AtomicUsize,
 }
 
 impl EffectSolver for Restricted {
@@ -37,6 +44,10 @@ impl EffectSolver for Restricted {
         alpha: &[f64],
         effects: &[(&dyn Effect, &[f64])],
     ) -> Result<Vec<f64>> {
+        let call = self.calls.fetch_add(1, Ordering::SeqCst);
+        if self.fail_after.is_some_and(|n| call >= n) {
+            return Err(Error::Simulation("the refit's run diverged".into()));
+        }
         if self.fail_base && effects.is_empty() {
             return Err(Error::Simulation("the base run diverged".into()));
         }
@@ -91,6 +102,8 @@ fn restricted(s: &Synthesised) -> Restricted {
         kinds: vec!["crac_supply_offset", "bypass"],
         fail_bypass_behind: None,
         fail_base: false,
+        fail_after: None,
+        calls: AtomicUsize::new(0),
     }
 }
 
@@ -185,4 +198,57 @@ fn a_hall_effect_the_solver_cannot_represent_is_refused() {
         err.contains("`rack_recirculation` cannot be represented by a restricted solver"),
         "{err}"
     );
+}
+
+#[test]
+fn a_failed_refit_run_is_recorded_and_the_ranking_stays_linearised() {
+    let (s, params) = demo();
+    let counting = restricted(&s);
+    let linear = run(&s, &params, &counting).unwrap();
+    // The ranking's own solves (the refined grid's are another solver's).
+    let ranking_solves = counting.calls.load(Ordering::SeqCst);
+    let settings = HallDiagnosisSettings {
+        refit_top: 2,
+        ..HallDiagnosisSettings::default()
+    };
+    let refit = |solver: &Restricted| {
+        diagnose_hall_with(
+            &s.hall,
+            &s.snapshots,
+            &params,
+            &EffectRegistry::builtin(),
+            &settings,
+            solver,
+        )
+        .unwrap()
+    };
+
+    let failing = Restricted {
+        fail_after: Some(ranking_solves),
+        ..restricted(&s)
+    };
+    let d = refit(&failing);
+    assert_eq!(d.diagnosis, linear.diagnosis);
+    assert_eq!(d.refits.len(), 2);
+    for r in &d.refits {
+        assert!(r.steps.is_empty(), "{r:?}");
+        let why = r.stopped.as_deref().unwrap_or("");
+        assert!(why.contains("the refit's run diverged"), "{why}");
+    }
+    assert_eq!(d.to_json()["refits"].as_array().map(Vec::len), Some(2));
+
+    // With every run succeeding, each refit runs its steps, one solve per snapshot each.
+    let working = restricted(&s);
+    let d = refit(&working);
+    let steps: usize = d.refits.iter().map(|r| r.steps.len()).sum();
+    assert!(steps >= 2, "{:?}", d.refits);
+    assert_eq!(
+        working.calls.load(Ordering::SeqCst),
+        ranking_solves + steps * s.snapshots.len()
+    );
+    // The offset stays the finding, and its refit lands near the truth (-1 C).
+    let top = d.diagnosis.significant().next().expect("significant");
+    assert_eq!(top.name, "crac_supply_offset");
+    let fitted = top.fitted.values()[0];
+    assert!((fitted + 1.0).abs() < 0.2, "{fitted}");
 }

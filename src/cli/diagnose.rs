@@ -72,6 +72,16 @@ pub struct DiagnoseArgs {
     /// the next `kalibre calibrate --hall FILE`. Not written when nothing is significant.
     #[arg(long = "write-hall", value_name = "FILE")]
     write_hall: Option<PathBuf>,
+    /// Refit the K leading hypotheses with the model itself before the final ranking:
+    /// each is run at its fitted point (the calibrated parameters moved with it), and its
+    /// linearisation replaced by the secant through that run. For large effects that the
+    /// calibration has half absorbed into its parameters. Costs K x --refit-iterations
+    /// solves per snapshot.
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    refit: usize,
+    /// Runs of each refit hypothesis (one solve per snapshot each).
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    refit_iterations: usize,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -222,6 +232,14 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     };
     settings.diagnose.single_output_check = !args.no_single_output_check;
     settings.diagnose.robust_nu = robust_nu;
+    if args.refit > 0 && args.refit_iterations == 0 {
+        return Err(CliError::Input(
+            "--refit-iterations: must be at least 1 with --refit (each refit runs the model)"
+                .into(),
+        ));
+    }
+    settings.refit_top = args.refit;
+    settings.refit_iterations = args.refit_iterations;
     if args.model == DiagnoseModel::Openfoam {
         // Larger steps than the built-in simulator's: a solve's sensor values are window
         // means of oscillating probes, so a step must move them well beyond that scatter;
@@ -306,6 +324,28 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
     }
     print_unexplained(&d.diagnosis);
+    if !d.refits.is_empty() {
+        println!(
+            "\nrefit with the model (each run: the effect's value, the model's MAE there; \
+             `worse`: not better than the best point before it, so the next step was halved):"
+        );
+        for r in &d.refits {
+            let steps: Vec<String> = r
+                .steps
+                .iter()
+                .map(|s| {
+                    let worse = if s.accepted { "" } else { " worse" };
+                    format!("{:.4}: {:.3} C{worse}", s.effect_value, s.model_mae_c)
+                })
+                .collect();
+            let stopped = r
+                .stopped
+                .as_ref()
+                .map(|w| format!(" (stopped: {w})"))
+                .unwrap_or_default();
+            println!("  {:<48} {}{stopped}", r.name, steps.join(", "));
+        }
+    }
     if !d.not_tried.is_empty() {
         println!("\nnot tried:");
         for n in &d.not_tried {

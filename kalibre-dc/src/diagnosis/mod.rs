@@ -3,8 +3,10 @@
 //! the calibrated model itself, see [`EffectSolver`]), each effect kind
 //! supplies its candidate placements, and `kalibre_core::diagnose` ranks them.
 
+mod refit;
 mod solver;
 
+pub use refit::{Refit, RefitStep};
 pub use solver::EffectSolver;
 
 use ndarray::Array2;
@@ -30,6 +32,8 @@ use crate::{Error, ParamLayout, Result};
 /// | `unit_step` | 0.01 | finite-difference step of calibrated parameters (unit box) |
 /// | `effect_step` | 0.05 | finite-difference step of effect parameters (share of their range) |
 /// | `refine_factor` | 0.5 | the model's own discretisation error, estimated by one more solve per snapshot on a grid this much finer, is each sensor's model uncertainty (no hypothesis earns credit for what the grid alone could produce); none: no such solve (nor when the solver offers no finer grid) |
+/// | `refit_top` | 0 | how many leading one-parameter hypotheses are refit with the solver itself (secant steps at their fitted point; `refit` module) before the final ranking |
+/// | `refit_iterations` | 4 | runs per refit hypothesis (one solve per snapshot each): a step towards its fitted point, halved after a run that reads worse than its best point |
 /// | `diagnose` | [`DiagnoseSettings::default`] | ranking, significance, held-out check |
 #[derive(Debug, Clone)]
 pub struct HallDiagnosisSettings {
@@ -41,6 +45,10 @@ pub struct HallDiagnosisSettings {
     pub effect_step: f64,
     /// Cell size of the refined grid relative to `sim.cell_m` (in (0, 1)), or none.
     pub refine_factor: Option<f64>,
+    /// How many leading hypotheses are refit with the solver (0: none).
+    pub refit_top: usize,
+    /// Secant steps per refit hypothesis.
+    pub refit_iterations: usize,
     /// The generic diagnosis settings.
     pub diagnose: DiagnoseSettings,
 }
@@ -52,6 +60,8 @@ impl Default for HallDiagnosisSettings {
             unit_step: 0.01,
             effect_step: 0.05,
             refine_factor: Some(0.5),
+            refit_top: 0,
+            refit_iterations: 4,
             diagnose: DiagnoseSettings::default(),
         }
     }
@@ -68,6 +78,8 @@ pub struct HallDiagnosis {
     /// Candidates that were not tried, and why (a kind the solver cannot represent, or
     /// a failed run).
     pub not_tried: Vec<NotTried>,
+    /// The leading hypotheses refit with the solver (`refit_top`), and what they ran.
+    pub refits: Vec<Refit>,
 }
 
 /// Candidates left out of a diagnosis.
@@ -130,6 +142,9 @@ impl HallDiagnosis {
                 .iter()
                 .map(|h| json!({"name": h.name, "bic_above_best": h.delta_bic - best.delta_bic}))
                 .collect();
+        }
+        if !self.refits.is_empty() {
+            doc["refits"] = json!(self.refits);
         }
         if !self.not_tried.is_empty() {
             doc["not_tried"] = self
@@ -410,7 +425,7 @@ pub fn diagnose_hall_with(
             residuals = residuals.with_uncertainty(uncertainty)?;
         }
     }
-    let mut hypotheses = Vec::with_capacity(candidates.len());
+    let mut ranked: Vec<refit::Candidate> = Vec::with_capacity(candidates.len());
     for (c, (spec, e)) in candidates.iter().enumerate() {
         let ps = e.parameters();
         let name = candidate_name(spec);
@@ -449,9 +464,28 @@ pub fn diagnose_hall_with(
                 block(cols)
             })
             .collect();
-        hypotheses.push(Hypothesis::from_snapshots(name, hp, &obs, &blocks)?);
+        ranked.push(refit::Candidate {
+            effect: e.as_ref(),
+            hypothesis: Hypothesis::from_snapshots(name, hp, &obs, &blocks)?,
+        });
     }
-    let diagnosis = diagnose(&residuals, &hypotheses, &settings.diagnose)?;
+    let hypotheses: Vec<Hypothesis> = ranked.iter().map(|c| c.hypothesis.clone()).collect();
+    let mut diagnosis = diagnose(&residuals, &hypotheses, &settings.diagnose)?;
+    let mut refits = Vec::new();
+    if settings.refit_top > 0 && settings.refit_iterations > 0 {
+        let lin = refit::Linearisation {
+            layout: &layout,
+            space,
+            effects: &effects,
+            params,
+            obs: &obs,
+            states: &states,
+            base: &base,
+            jac: &jac,
+            residuals: &residuals,
+        };
+        (diagnosis, refits) = refit::refit_leading(&lin, &mut ranked, diagnosis, settings, solver)?;
+    }
     let suggestions = diagnosis
         .hypotheses
         .iter()
@@ -477,5 +511,6 @@ pub fn diagnose_hall_with(
         diagnosis,
         suggestions,
         not_tried,
+        refits,
     })
 }
