@@ -350,6 +350,7 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
             "explained_fraction",
             "predicted_mae_c",
             "significant",
+            "refuted_by_model_runs",
             "inert",
             "identifiable",
         ] {

@@ -145,6 +145,25 @@ fn missing_effect_ranks_first_with_its_amount_and_the_noise_floor() {
 }
 
 #[test]
+fn a_hypothesis_refuted_by_the_models_runs_is_listed_but_never_significant() {
+    let p = Problem::new(11, 3, 40);
+    let res = p.residuals(0.5);
+    let settings = DiagnoseSettings::new();
+    let mut hyps = p.hypotheses();
+    let plain = diagnose(&res, &hyps, &settings).unwrap();
+    assert!(find(&plain, "b").significant && !find(&plain, "b").refuted);
+    for h in hyps.iter_mut().filter(|h| h.name == "b") {
+        h.refuted = true;
+    }
+    let d = diagnose(&res, &hyps, &settings).unwrap();
+    let b = find(&d, "b");
+    assert!(b.refuted && !b.significant, "{b:?}");
+    // The fit and the figures are the linearisation's, as before.
+    assert_eq!(b.delta_bic, find(&plain, "b").delta_bic);
+    assert!(d.significant().all(|h| h.name != "b"), "{d:#?}");
+}
+
+#[test]
 fn estimated_noise_is_close_on_clean_residuals_and_nothing_is_significant() {
     for seed in [1, 2, 3, 4, 5] {
         let p = Problem::new(seed, 3, 40);

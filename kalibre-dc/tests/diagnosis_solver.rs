@@ -248,7 +248,15 @@ fn a_failed_refit_run_is_recorded_and_the_ranking_stays_linearised() {
     );
     // The offset stays the finding, and its refit lands near the truth (-1 C).
     let top = d.diagnosis.significant().next().expect("significant");
-    assert_eq!(top.name, "crac_supply_offset");
+    assert_eq!(top.name, "crac_supply_offset", "{:?}", d.refits);
     let fitted = top.fitted.values()[0];
     assert!((fitted + 1.0).abs() < 0.2, "{fitted}");
+    // Fitted below its absence, the offset is run there, and the runs confirm it.
+    let offset = d.refits.iter().find(|r| r.name == top.name).expect("refit");
+    assert!(
+        offset.steps.iter().all(|s| s.effect_value < 0.0),
+        "{offset:?}"
+    );
+    assert!(offset.steps.iter().any(|s| s.accepted), "{offset:?}");
+    assert!(!top.refuted);
 }

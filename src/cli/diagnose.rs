@@ -307,7 +307,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         println!("  no significant missing effect");
     }
     for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
-        let flags = hypothesis_flags(h.significant, h.inert, h.identifiable);
+        let flags = hypothesis_flags(h.significant, h.refuted, h.inert, h.identifiable);
         println!(
             "  {:<48} explains {:>4.0}%  predicted MAE {:.3} C  {}",
             h.name,
@@ -545,9 +545,15 @@ fn worst_sensors_json(
 }
 
 /// A hypothesis's flags in words, e.g. `significant, not identifiable`.
-pub(super) fn hypothesis_flags(significant: bool, inert: bool, identifiable: bool) -> String {
+pub(super) fn hypothesis_flags(
+    significant: bool,
+    refuted: bool,
+    inert: bool,
+    identifiable: bool,
+) -> String {
     [
         (significant, "significant"),
+        (refuted, "refuted by its model runs"),
         (inert, "inert"),
         (!identifiable, "not identifiable"),
     ]

@@ -291,6 +291,10 @@ pub struct Hypothesis {
     pub params: Vec<HypothesisParam>,
     /// Rows x its parameters.
     pub jacobian: Array2<f64>,
+    /// The model's own runs contradict the linearisation (a caller that ran the model
+    /// towards the fit found no point better than the current parameters): never
+    /// significant, whatever its columns predict.
+    pub refuted: bool,
 }
 
 impl Hypothesis {
@@ -304,6 +308,7 @@ impl Hypothesis {
             name: name.into(),
             params,
             jacobian,
+            refuted: false,
         }
     }
 

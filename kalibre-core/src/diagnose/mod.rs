@@ -29,7 +29,8 @@
 //!   falls by at least the threshold, the predicted MAE is below the current parameters'
 //!   own refit (least squares can trade a few large residuals for many small ones), the
 //!   fitted values lie within the parameters' ranges
-//!   (a negative leak is no explanation), and it is neither inert nor in the span of `J`;
+//!   (a negative leak is no explanation), it is neither inert nor in the span of `J`, nor
+//!   refuted by the caller's own model runs ([`Hypothesis::refuted`]);
 //!   it passes the **single-output check** (with any one output left out, the others
 //!   still prefer it: BIC change below 0, so no one sensor carries it alone);
 //!   among alternatives collinear with each other only the best is significant (the
@@ -192,6 +193,10 @@ pub struct HypothesisResult {
     pub held_out_improvement: f64,
     /// Significant: see the module documentation.
     pub significant: bool,
+    /// The caller's model runs contradicted it ([`Hypothesis::refuted`]), so it is not
+    /// significant.
+    #[serde(default)]
+    pub refuted: bool,
     /// The outputs hardly move over its parameter range.
     pub inert: bool,
     /// The data can tell it apart from the current parameters and other hypotheses.
@@ -381,7 +386,8 @@ pub fn diagnose(
             && held_out_improvement >= settings.min_held_out_improvement
             && !inert
             && alone[i]
-            && in_range;
+            && in_range
+            && !h.refuted;
         let single_output_delta_bic = if significant && settings.single_output_check {
             let worst = jackknife::worst_delta_bic(
                 &lik,
@@ -412,6 +418,7 @@ pub fn diagnose(
             delta_bic,
             held_out_improvement,
             significant,
+            refuted: h.refuted,
             inert,
             identifiable,
             independence: perps[i].independence,

@@ -109,6 +109,7 @@ impl HallDiagnosis {
                     "explained_fraction": h.explained_fraction,
                     "predicted_mae_c": h.predicted_mae,
                     "significant": h.significant,
+                    "refuted_by_model_runs": h.refuted,
                     "inert": h.inert,
                     "identifiable": h.identifiable,
                     "delta_bic": h.delta_bic,

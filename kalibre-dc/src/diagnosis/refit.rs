@@ -13,7 +13,8 @@
 //! Ranked again with those columns, each refit hypothesis is scored at a point the model
 //! has actually run, against the same no-effect refit as before. A few such steps are a
 //! secant (quasi-Newton) iteration on the effect's size; each costs one solve per snapshot
-//! and hypothesis.
+//! and hypothesis. A hypothesis none of whose runs reads better than the calibrated model
+//! is refuted ([`Hypothesis::refuted`]): listed, never significant.
 
 use ndarray::Array2;
 use rayon::prelude::*;
@@ -144,9 +145,16 @@ pub(super) fn refit_leading(
             let t = share[k];
             let min_dq = 0.5 * settings.effect_step * (param.upper - param.lower);
             let q_fit = absent(param) + dq;
-            let q = (from_q + t * (q_fit - from_q))
-                .max(absent(param) + min_dq)
-                .clamp(param.lower, param.upper);
+            // The effect at least `min_dq` from absent, on the fit's side of it (an
+            // offset may be fitted below its absence, a leak only above).
+            let side = if dq < 0.0 { -1.0 } else { 1.0 };
+            let towards = from_q + t * (q_fit - from_q);
+            let q = if side * (towards - absent(param)) < min_dq {
+                absent(param) + side * min_dq
+            } else {
+                towards
+            }
+            .clamp(param.lower, param.upper);
             let p: Vec<f64> = lin
                 .params
                 .iter()
@@ -226,6 +234,14 @@ pub(super) fn refit_leading(
                 Hypothesis::from_snapshots(old.name.clone(), old.params.clone(), lin.obs, &blocks)?;
             best[k] = (p, q, mae);
             share[k] = 1.0;
+        }
+        // A hypothesis every one of whose runs, towards its fit, read worse than the
+        // calibrated model is refuted by the model itself: its linearisation promised an
+        // improvement the model does not give.
+        for (k, &c) in picked.iter().enumerate() {
+            let steps = &refits[k].steps;
+            candidates[c].hypothesis.refuted =
+                !steps.is_empty() && steps.iter().all(|s| !s.accepted);
         }
         let hypotheses: Vec<Hypothesis> = candidates.iter().map(|c| c.hypothesis.clone()).collect();
         diagnosis = diagnose(lin.residuals, &hypotheses, &settings.diagnose)?;
