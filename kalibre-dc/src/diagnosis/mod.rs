@@ -190,6 +190,23 @@ fn absent(p: &kalibre_core::Param) -> f64 {
     0.0_f64.clamp(p.lower, p.upper)
 }
 
+/// The finite-difference step of an effect parameter: `effect_step` of its range.
+fn effect_step_size(settings: &HallDiagnosisSettings, p: &kalibre_core::Param) -> f64 {
+    settings.effect_step * (p.upper - p.lower)
+}
+
+/// The hall's effects with their values, as a solver takes them.
+fn effect_list<'a>(
+    effects: &'a [Box<dyn Effect>],
+    values: &'a [Vec<f64>],
+) -> Vec<(&'a dyn Effect, &'a [f64])> {
+    effects
+        .iter()
+        .zip(values)
+        .map(|(e, v)| (e.as_ref(), v.as_slice()))
+        .collect()
+}
+
 /// The name of a hypothesis parameter: unique across candidates and distinct from the
 /// calibrated `<kind>/<param>` of an effect the hall already has.
 fn hypothesis_param(candidate: &str, param: &str) -> String {
@@ -330,7 +347,7 @@ pub fn diagnose_hall_with(
             let v: Vec<f64> = e
                 .parameters()
                 .iter()
-                .map(|p| absent(p) + settings.effect_step * (p.upper - p.lower))
+                .map(|p| absent(p) + effect_step_size(settings, p))
                 .collect();
             jobs.push(Job {
                 snapshot: s,
@@ -344,11 +361,7 @@ pub fn diagnose_hall_with(
     let outputs: Vec<Result<Vec<f64>>> = jobs
         .par_iter()
         .map(|job| {
-            let mut list: Vec<(&dyn Effect, &[f64])> = effects
-                .iter()
-                .zip(&job.effects)
-                .map(|(e, v)| (e.as_ref(), v.as_slice()))
-                .collect();
+            let mut list = effect_list(&effects, &job.effects);
             if let Some((c, v)) = &job.extra {
                 list.push((candidates[*c].1.as_ref(), v.as_slice()));
             }
@@ -401,11 +414,7 @@ pub fn diagnose_hall_with(
             )));
         }
         if let Some(fine) = solver.refined(factor)? {
-            let list: Vec<(&dyn Effect, &[f64])> = effects
-                .iter()
-                .zip(&values0)
-                .map(|(e, v)| (e.as_ref(), v.as_slice()))
-                .collect();
+            let list = effect_list(&effects, &values0);
             let fine_out: Vec<Vec<f64>> = states
                 .par_iter()
                 .map(|st| fine.solve(st, &alpha0, &list))
@@ -454,13 +463,7 @@ pub fn diagnose_hall_with(
                 // candidates of the built-in kinds have one parameter each.
                 let cols = ps
                     .iter()
-                    .map(|p| {
-                        column(
-                            s,
-                            1 + steps.len() + c,
-                            settings.effect_step * (p.upper - p.lower),
-                        )
-                    })
+                    .map(|p| column(s, 1 + steps.len() + c, effect_step_size(settings, p)))
                     .collect();
                 block(cols)
             })

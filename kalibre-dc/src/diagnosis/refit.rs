@@ -23,7 +23,7 @@ use serde::Serialize;
 use kalibre_core::diagnose::{diagnose, Diagnosis, Hypothesis, Residuals};
 use kalibre_core::{Observations, ParamSpace};
 
-use super::{absent, HallDiagnosisSettings};
+use super::{absent, effect_list, effect_step_size, HallDiagnosisSettings};
 use crate::effects::Effect;
 use crate::snapshots::OperatingState;
 use crate::{ParamLayout, Result};
@@ -92,7 +92,7 @@ pub(super) fn refit_leading(
     let picked: Vec<usize> = diagnosis
         .hypotheses
         .iter()
-        .filter(|h| h.in_range && !h.inert && h.fitted.0.len() == 1)
+        .filter(|h| h.in_range && !h.inert)
         .filter_map(|h| index_of(&h.name))
         .filter(|&c| candidates[c].effect.parameters().len() == 1)
         .take(settings.refit_top)
@@ -143,7 +143,7 @@ pub(super) fn refit_leading(
             }
             let (from_p, from_q, _) = &best[k];
             let t = share[k];
-            let min_dq = 0.5 * settings.effect_step * (param.upper - param.lower);
+            let min_dq = 0.5 * effect_step_size(settings, param);
             let q_fit = absent(param) + dq;
             // The effect at least `min_dq` from absent, on the fit's side of it (an
             // offset may be fitted below its absence, a leak only above).
@@ -181,12 +181,7 @@ pub(super) fn refit_leading(
                 let vals: Vec<Vec<f64>> = (0..lin.effects.len())
                     .map(|e| lin.layout.effect_values(p, e).to_vec())
                     .collect();
-                let mut list: Vec<(&dyn Effect, &[f64])> = lin
-                    .effects
-                    .iter()
-                    .zip(&vals)
-                    .map(|(e, v)| (e.as_ref(), v.as_slice()))
-                    .collect();
+                let mut list = effect_list(lin.effects, &vals);
                 let qv = [*q];
                 list.push((candidates[picked[*k]].effect, &qv));
                 solver.solve(lin.states[s], &lin.layout.alpha_per_server(p), &list)
