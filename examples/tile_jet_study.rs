@@ -12,6 +12,7 @@
 //!   hall with tiles spanning the whole 1.2 m aisle (1.0 m/s);
 //! - four operating states: the development snapshots t0-t2 (fan 0.9-1.0, supply 92-104 %
 //!   of the servers' draw) and t1 at fan 0.8 (83 %);
+//! - two kinds of release: a fixed lift, and (session 28) a jet consumed from below;
 //! - the 24 development sensors, and 27 probes: three columns of seven heights in front
 //!   of racks A1, A3 and A5, and three heights at each end of the cold aisle.
 //!
@@ -38,6 +39,10 @@ const DEV: &str = "data/openfoam/of-dev-clean";
 struct Rule {
     name: &'static str,
     lift: Option<(f64, f64, Option<f64>)>,
+    /// A jet consumed from below (session 28): from this height up, each band releases
+    /// what the facing racks' intakes draw there, until the tile's supply runs out; what
+    /// is left rises over the racks (released in the 0.4 m above the tallest rack).
+    draw_matched_from_m: Option<f64>,
 }
 
 fn rules() -> Vec<Rule> {
@@ -45,22 +50,42 @@ fn rules() -> Vec<Rule> {
         Rule {
             name: "floor (the model)",
             lift: None,
+            draw_matched_from_m: None,
         },
         Rule {
             name: "0-rack top",
             lift: Some((0.2, 0.0, None)),
+            draw_matched_from_m: None,
         },
         Rule {
             name: "0.2 m-rack top",
             lift: Some((0.2, 0.2, None)),
+            draw_matched_from_m: None,
         },
         Rule {
             name: "0.4 m-rack top",
             lift: Some((0.2, 0.4, None)),
+            draw_matched_from_m: None,
         },
         Rule {
             name: "0.8-1.6 m (from 0-0.4 m)",
             lift: Some((0.4, 0.8, Some(1.6))),
+            draw_matched_from_m: None,
+        },
+        Rule {
+            name: "draw-matched from 0 m",
+            lift: None,
+            draw_matched_from_m: Some(0.0),
+        },
+        Rule {
+            name: "draw-matched from 0.2 m",
+            lift: None,
+            draw_matched_from_m: Some(0.2),
+        },
+        Rule {
+            name: "draw-matched from 0.4 m",
+            lift: None,
+            draw_matched_from_m: Some(0.4),
         },
     ]
 }
@@ -130,6 +155,82 @@ fn lifted_supply(hall: &Hall, state: &OperatingState, lift: (f64, f64, Option<f6
             },
             flow_m3_s: supply_m3_s * weight(t) / total,
         });
+    }
+    mods
+}
+
+/// The jet consumed from below: per tile and 0.2 m band from `from_m` to the tallest
+/// rack's top, a link releasing what the servers facing the tile draw in that band
+/// (their flow spread evenly over their height, shared between the tiles in front of
+/// them by x overlap), while the tile's supply lasts; the rest over the racks.
+fn draw_matched_supply(hall: &Hall, state: &OperatingState, alpha: &[f64], from_m: f64) -> SimMods {
+    const BAND_M: f64 = 0.2;
+    const FACING_M: f64 = 0.5;
+    let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
+    let supply_m3_s: f64 = hall
+        .cracs
+        .iter()
+        .zip(&state.fan_speed)
+        .map(|(c, f)| c.rated_flow_m3_s * f)
+        .sum();
+    let weight = |t: &kalibre_dc::hall::Tile| t.size_m[0] * t.size_m[1] * t.open_fraction;
+    let total: f64 = hall.tiles.iter().map(weight).sum();
+    let overlap = |a0: f64, a1: f64, b0: f64, b1: f64| (a1.min(b1) - a0.max(b0)).max(0.0);
+    let mut mods = SimMods::new(hall.cracs.len());
+    let n_bands = ((rack_top_m - from_m) / BAND_M).round().max(1.0) as usize;
+    for t in &hall.tiles {
+        let ([x, y], [sx, sy]) = (t.position_m, t.size_m);
+        let mut left = supply_m3_s * weight(t) / total;
+        let mut draw = vec![0.0; n_bands];
+        for s in hall.servers() {
+            let b = s.bounds();
+            let face = kalibre_dc::hall::face_centre(&b, s.rack.inlet);
+            let (axis, _) = s.rack.inlet.axis_sign();
+            let other = 1 - axis;
+            let (t0, t1) = if axis == 1 { (y, y + sy) } else { (x, x + sx) };
+            let near = face[axis] >= t0 - FACING_M && face[axis] <= t1 + FACING_M;
+            let (o0, o1) = if other == 0 { (x, x + sx) } else { (y, y + sy) };
+            let share = overlap(b.min[other], b.max[other], o0, o1) / (b.max[other] - b.min[other]);
+            if !near || share <= 0.0 {
+                continue;
+            }
+            let q = alpha[s.index] * state.power_w[s.index] * kalibre_dc::sim::M3_S_PER_CFM * share;
+            let h = b.max[2] - b.min[2];
+            for (k, d) in draw.iter_mut().enumerate() {
+                let z0 = from_m + k as f64 * BAND_M;
+                *d += q * overlap(b.min[2], b.max[2], z0, z0 + BAND_M) / h;
+            }
+        }
+        let floor_box = Aabb {
+            min: [x, y, 0.0],
+            max: [x + sx, y + sy, 0.2],
+        };
+        for (k, d) in draw.iter().enumerate() {
+            let q = d.min(left);
+            if q <= 0.0 {
+                break;
+            }
+            left -= q;
+            let z0 = from_m + k as f64 * BAND_M;
+            mods.air_links.push(AirLink {
+                from: floor_box,
+                to: Aabb {
+                    min: [x, y, z0],
+                    max: [x + sx, y + sy, z0 + BAND_M],
+                },
+                flow_m3_s: q,
+            });
+        }
+        if left > 0.0 {
+            mods.air_links.push(AirLink {
+                from: floor_box,
+                to: Aabb {
+                    min: [x, y, rack_top_m],
+                    max: [x + sx, y + sy, (rack_top_m + 0.4).min(hall.room.size_m[2])],
+                },
+                flow_m3_s: left,
+            });
+        }
     }
     mods
 }
@@ -224,9 +325,10 @@ fn run(o: &Options) -> Result<(), String> {
             let (mut probe_sum, mut probe_n) = (0.0, 0.0);
             let mut columns = Vec::new();
             for (state, of) in states.iter().zip(&openfoam) {
-                let mods = match rule.lift {
-                    Some(lift) => lifted_supply(&hall, state, lift),
-                    None => SimMods::new(hall.cracs.len()),
+                let mods = match (rule.lift, rule.draw_matched_from_m) {
+                    (Some(lift), _) => lifted_supply(&hall, state, lift),
+                    (None, Some(from_m)) => draw_matched_supply(&hall, state, &alpha, from_m),
+                    (None, None) => SimMods::new(hall.cracs.len()),
                 };
                 let sol = sim
                     .solve_with_mods(state, &alpha, &mods)
