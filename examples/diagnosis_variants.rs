@@ -124,6 +124,7 @@ fn run_case(
             json!({
                 "name": h.name, "fitted": h.fitted, "delta_bic": h.delta_bic,
                 "single_output_delta_bic": h.single_output_delta_bic,
+                "carried_by": h.carried_by,
             })
         });
         verdicts.push(json!({

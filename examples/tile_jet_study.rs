@@ -129,10 +129,9 @@ fn true_alpha(server_type: &str) -> f64 {
     }
 }
 
-/// One forced link per tile lifting its share of the supply, for `state`.
-fn lifted_supply(hall: &Hall, state: &OperatingState, lift: (f64, f64, Option<f64>)) -> SimMods {
-    let (from_top_m, to_bottom_m, to_top_m) = lift;
-    let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
+/// Each tile's share of the supply in `state` (m3/s): the CRACs' flow split by open area,
+/// as the simulator splits it.
+fn tile_flows_m3_s(hall: &Hall, state: &OperatingState) -> Vec<f64> {
     let supply_m3_s: f64 = hall
         .cracs
         .iter()
@@ -141,8 +140,19 @@ fn lifted_supply(hall: &Hall, state: &OperatingState, lift: (f64, f64, Option<f6
         .sum();
     let weight = |t: &kalibre_dc::hall::Tile| t.size_m[0] * t.size_m[1] * t.open_fraction;
     let total: f64 = hall.tiles.iter().map(weight).sum();
+    hall.tiles
+        .iter()
+        .map(|t| supply_m3_s * weight(t) / total)
+        .collect()
+}
+
+/// One forced link per tile lifting its share of the supply, for `state`.
+fn lifted_supply(hall: &Hall, state: &OperatingState, lift: (f64, f64, Option<f64>)) -> SimMods {
+    let (from_top_m, to_bottom_m, to_top_m) = lift;
+    let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
+    let tile_flow_m3_s = tile_flows_m3_s(hall, state);
     let mut mods = SimMods::new(hall.cracs.len());
-    for t in &hall.tiles {
+    for (t, flow_m3_s) in hall.tiles.iter().zip(tile_flow_m3_s) {
         let ([x, y], [sx, sy]) = (t.position_m, t.size_m);
         mods.air_links.push(AirLink {
             from: Aabb {
@@ -153,7 +163,7 @@ fn lifted_supply(hall: &Hall, state: &OperatingState, lift: (f64, f64, Option<f6
                 min: [x, y, to_bottom_m],
                 max: [x + sx, y + sy, to_top_m.unwrap_or(rack_top_m)],
             },
-            flow_m3_s: supply_m3_s * weight(t) / total,
+            flow_m3_s,
         });
     }
     mods
@@ -167,20 +177,12 @@ fn draw_matched_supply(hall: &Hall, state: &OperatingState, alpha: &[f64], from_
     const BAND_M: f64 = 0.2;
     const FACING_M: f64 = 0.5;
     let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
-    let supply_m3_s: f64 = hall
-        .cracs
-        .iter()
-        .zip(&state.fan_speed)
-        .map(|(c, f)| c.rated_flow_m3_s * f)
-        .sum();
-    let weight = |t: &kalibre_dc::hall::Tile| t.size_m[0] * t.size_m[1] * t.open_fraction;
-    let total: f64 = hall.tiles.iter().map(weight).sum();
+    let tile_flow_m3_s = tile_flows_m3_s(hall, state);
     let overlap = |a0: f64, a1: f64, b0: f64, b1: f64| (a1.min(b1) - a0.max(b0)).max(0.0);
     let mut mods = SimMods::new(hall.cracs.len());
     let n_bands = ((rack_top_m - from_m) / BAND_M).round().max(1.0) as usize;
-    for t in &hall.tiles {
+    for (t, mut left) in hall.tiles.iter().zip(tile_flow_m3_s) {
         let ([x, y], [sx, sy]) = (t.position_m, t.size_m);
-        let mut left = supply_m3_s * weight(t) / total;
         let mut draw = vec![0.0; n_bands];
         for s in hall.servers() {
             let b = s.bounds();

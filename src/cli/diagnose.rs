@@ -318,6 +318,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         if h.significant {
             let entry = serde_json::to_string(s).unwrap_or_default();
             println!("    add to hall.json \"effects\": {entry}");
+        } else if let Some(sensor) = &h.carried_by {
+            let entry = serde_json::to_string(s).unwrap_or_default();
+            println!(
+                "    rests on one sensor, {sensor}: without it the others do not prefer it \
+                 (a faulty sensor, or the model's own error there, looks the same)"
+            );
+            println!("    if {sensor} reads right, add to hall.json \"effects\": {entry}");
         }
         if significant.first().is_some_and(|best| best.name == h.name) {
             print_close_alternatives(&d.diagnosis, h);
@@ -404,14 +411,30 @@ fn print_close_alternatives(d: &Diagnosis, best: &HypothesisResult) {
     if close.is_empty() {
         return;
     }
-    let names: Vec<String> = close
-        .iter()
-        .map(|h| format!("{} (BIC {:+.1})", h.name, h.delta_bic - best.delta_bic))
-        .collect();
-    println!(
-        "    the data hardly tell it from (BIC within {CLOSE_ALTERNATIVE_BIC:.0}): {}",
-        names.join(", ")
-    );
+    let describe = |h: &&HypothesisResult| {
+        let why = match &h.carried_by {
+            Some(sensor) => format!(", rests on {sensor} alone"),
+            None => String::new(),
+        };
+        format!("{} (BIC {:+.1}{why})", h.name, h.delta_bic - best.delta_bic)
+    };
+    // Those with a lower BIC than the best are not significant for another reason (one
+    // sensor carries them, say): they fit better, which is not "hardly told apart".
+    let (better, near): (Vec<_>, Vec<_>) = close.iter().partition(|h| h.delta_bic < best.delta_bic);
+    if !near.is_empty() {
+        let names: Vec<String> = near.iter().map(describe).collect();
+        println!(
+            "    the data hardly tell it from (BIC within {CLOSE_ALTERNATIVE_BIC:.0}): {}",
+            names.join(", ")
+        );
+    }
+    if !better.is_empty() {
+        let names: Vec<String> = better.iter().map(describe).collect();
+        println!(
+            "    fit better, but are not significant: {}",
+            names.join(", ")
+        );
+    }
 }
 
 /// The sensors no candidate explains: the model's own error there, or a faulty sensor.
@@ -424,8 +447,20 @@ pub(super) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
          the ranking above counts them little):"
     );
     for u in &d.unexplained {
+        // A candidate may explain it and still not count: one that rests on it alone.
+        let resting: Vec<&str> = d
+            .hypotheses
+            .iter()
+            .filter(|h| h.carried_by.as_deref() == Some(u.output.as_str()))
+            .map(|h| h.name.as_str())
+            .collect();
+        let note = if resting.is_empty() {
+            String::new()
+        } else {
+            format!(" ({} rests on it alone)", resting.join(", "))
+        };
         println!(
-            "  {:<12} model minus measurement {:+.2} C on average, {:.1} noise scales",
+            "  {:<12} model minus measurement {:+.2} C on average, {:.1} noise scales{note}",
             u.output, u.mean_residual, u.rms_scales
         );
     }

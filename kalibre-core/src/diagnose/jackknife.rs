@@ -24,7 +24,8 @@ fn without(cols: &[Vec<f64>], r: &[f64], out: &[usize]) -> (Vec<Vec<f64>>, Vec<f
 }
 
 /// The largest BIC change (hypothesis against the current parameters alone, both refit)
-/// over the problems with one output's rows left out; `+inf` with fewer than two outputs.
+/// over the problems with one output's rows left out, and the index (into `by_output`)
+/// of the output left out there; `(+inf, None)` with fewer than two outputs.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn worst_delta_bic(
     lik: &Likelihood,
@@ -35,22 +36,24 @@ pub(crate) fn worst_delta_bic(
     by_output: &[Vec<usize>],
     scale: Option<f64>,
     floor: f64,
-) -> f64 {
+) -> (f64, Option<usize>) {
     if by_output.len() < 2 {
-        return f64::INFINITY;
+        return (f64::INFINITY, None);
     }
     let p = jcols.len();
     let mut all = jcols.to_vec();
     all.extend(hcols.iter().cloned());
-    let mut worst = f64::NEG_INFINITY;
-    for out in by_output {
+    let mut worst = (f64::NEG_INFINITY, None);
+    for (o, out) in by_output.iter().enumerate() {
         let (j, rr) = without(jcols, r, out);
         let (a, _) = without(&all, r, out);
         let base = lik.fit(&j, &rr, &ridge[..p], scale, floor);
         let fit = lik.fit(&a, &rr, ridge, scale, floor);
         let k = fit.rank.saturating_sub(base.rank);
         let d = fit.deviance + k as f64 * (rr.len() as f64).ln() - base.deviance;
-        worst = worst.max(d);
+        if d > worst.0 {
+            worst = (d, Some(o));
+        }
     }
     worst
 }
@@ -81,7 +84,11 @@ mod tests {
         let lik = Likelihood::new(Some(4.0));
         let worst =
             |h: &[f64]| worst_delta_bic(&lik, &[], &[h.to_vec()], &[0.0], &r, &by, Some(0.05), 0.0);
-        assert!(worst(&spike) >= 0.0, "spike: {}", worst(&spike));
-        assert!(worst(&shared) < -50.0, "shared: {}", worst(&shared));
+        let (spike_worst, spike_carrier) = worst(&spike);
+        assert!(spike_worst >= 0.0, "spike: {spike_worst}");
+        // Output 4, the one the spike rests on, is the one whose absence undoes it.
+        assert_eq!(spike_carrier, Some(4));
+        let (shared_worst, _) = worst(&shared);
+        assert!(shared_worst < -50.0, "shared: {shared_worst}");
     }
 }

@@ -220,6 +220,12 @@ pub struct HypothesisResult {
     /// hypothesis that passes every other test (none otherwise, or with the check off).
     #[serde(default)]
     pub single_output_delta_bic: Option<f64>,
+    /// The output this hypothesis rests on when the single-output check alone stops it:
+    /// without that output (all its snapshots) the others no longer prefer it. A local
+    /// effect seen by one sensor looks like this, and so does a faulty sensor or the
+    /// model's own error there; only a look at that sensor tells them apart.
+    #[serde(default)]
+    pub carried_by: Option<String>,
 }
 
 fn columns(m: &ndarray::Array2<f64>) -> Vec<Vec<f64>> {
@@ -388,8 +394,9 @@ pub fn diagnose(
             && alone[i]
             && in_range
             && !h.refuted;
+        let mut carried_by = None;
         let single_output_delta_bic = if significant && settings.single_output_check {
-            let worst = jackknife::worst_delta_bic(
+            let (worst, worst_output) = jackknife::worst_delta_bic(
                 &lik,
                 &jcols,
                 &hcols[i],
@@ -400,6 +407,11 @@ pub fn diagnose(
                 floor,
             );
             significant = worst < 0.0;
+            if !significant {
+                carried_by = worst_output
+                    .and_then(|o| by_output[o].first())
+                    .map(|&row| output_names[row].to_string());
+            }
             Some(worst)
         } else {
             None
@@ -429,6 +441,7 @@ pub fn diagnose(
             in_range,
             current_change: NamedValues::new(res.params(), &sol.x[..p]),
             single_output_delta_bic,
+            carried_by,
         });
         fits_left.push((sol.e, sol.scale));
     }

@@ -115,6 +115,7 @@ impl HallDiagnosis {
                     "delta_bic": h.delta_bic,
                     "held_out_improvement": h.held_out_improvement,
                     "single_output_delta_bic": h.single_output_delta_bic,
+                    "carried_by": h.carried_by,
                     "suggestion": s,
                 })
             })
