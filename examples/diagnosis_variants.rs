@@ -8,7 +8,8 @@
 //!
 //! Options: `--out FILE` (JSON, default `out/diagnosis_variants.json`), `--work DIR`
 //! (calibration outputs, default `out/diagnosis_variants/`), `--variants N` (default 6),
-//! `--data DIR` (default the workspace's `data/openfoam`), `--quick` (N = 1, settings
+//! `--data DIR` (default the workspace's `data/openfoam`), `--layout2` (the second
+//! layout's datasets, `data/openfoam-layout2/ol2-*`, instead), `--quick` (N = 1, settings
 //! `gaussian` and `default` only, for a smoke run; it overrides `--variants`).
 //!
 //! Cases per dataset: `original` (as stored); `noise k` (k = 1..N: every `sensor_c`
@@ -45,7 +46,8 @@ use serde_json::{json, Value};
 #[path = "openfoam_cases/mod.rs"]
 mod openfoam_cases;
 use openfoam_cases::{
-    calibrate_as_cli, cases, write_json, CaseData, Dataset, DATASETS, NOISE_C, REMOVED_SENSORS,
+    calibrate_as_cli, cases, write_json, CaseData, Dataset, DATASETS, LAYOUT2_DATASETS, NOISE_C,
+    REMOVED_SENSORS,
 };
 
 /// A diagnosis setting: `(robust_nu, single_output_check)` over the library's
@@ -162,6 +164,7 @@ struct Options {
     variants: usize,
     quick: bool,
     settings: Option<Vec<String>>,
+    datasets: &'static [(&'static str, Option<&'static str>)],
 }
 
 fn parse_args() -> Options {
@@ -172,16 +175,25 @@ fn parse_args() -> Options {
         variants: 6,
         quick: false,
         settings: None,
+        datasets: &DATASETS,
     };
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     o.quick = args.iter().any(|a| a == "--quick");
-    args.retain(|a| a != "--quick");
+    let layout2 = args.iter().any(|a| a == "--layout2");
+    args.retain(|a| a != "--quick" && a != "--layout2");
+    if layout2 {
+        o.datasets = &LAYOUT2_DATASETS;
+        o.data = PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/data/openfoam-layout2"
+        ));
+    }
     let mut i = 0;
     while i < args.len() {
         let flag = args[i].as_str();
         let known = ["--out", "--work", "--data", "--variants", "--settings"].contains(&flag);
         if !known {
-            eprintln!("unknown argument `{flag}` (use --out FILE, --work DIR, --data DIR, --variants N, --settings 'NAME;NAME', --quick)");
+            eprintln!("unknown argument `{flag}` (use --out FILE, --work DIR, --data DIR, --layout2, --variants N, --settings 'NAME;NAME', --quick)");
             std::process::exit(2);
         }
         let Some(value) = args.get(i + 1).cloned() else {
@@ -229,11 +241,11 @@ fn run(o: &Options) -> Result<(), String> {
         })
         .collect();
     let cases = cases(o.variants);
-    let total = DATASETS.len() * cases.len();
+    let total = o.datasets.len() * cases.len();
     let mut records = Vec::new();
     // By (setting, dataset): the table's rows in order.
     let mut summary: BTreeMap<(usize, usize), Tally> = BTreeMap::new();
-    for (di, (dataset, expected)) in DATASETS.iter().enumerate() {
+    for (di, (dataset, expected)) in o.datasets.iter().enumerate() {
         let data = Dataset::load(&o.data.join(dataset))?;
         for &case in &cases {
             let t = Instant::now();
@@ -294,12 +306,12 @@ fn run(o: &Options) -> Result<(), String> {
         println!(
             "| {} | {} | {} | {pass} | {miss} | {wrong} | {} |",
             settings[*si].name,
-            DATASETS[*di].0,
+            o.datasets[*di].0,
             pass + miss + wrong,
             names.join(", ")
         );
         rows.push(json!({
-            "setting": settings[*si].name, "dataset": DATASETS[*di].0, "cases": pass + miss + wrong,
+            "setting": settings[*si].name, "dataset": o.datasets[*di].0, "cases": pass + miss + wrong,
             "pass": pass, "miss": miss, "wrong": wrong, "wrong_names": names,
         }));
     }

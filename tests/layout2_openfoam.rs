@@ -66,8 +66,9 @@ fn builtin_model_at_the_true_alphas_is_near_openfoam_on_the_second_layout() {
     for snap in &snaps {
         let sol = sim.solve(&snap.state, &alpha, &[]).unwrap();
         for (sensor, model_c) in hall.sensors.iter().zip(sol.sensor_c()) {
-            let key = format!("{}/{}", snap.state.label, sensor.id);
-            let openfoam_c = t["sensor_c_noise_free"][&key].as_f64().unwrap();
+            let openfoam_c = t["snapshots"][&snap.state.label]["sensor_c_noise_free"][&sensor.id]
+                .as_f64()
+                .unwrap();
             sum += (model_c - openfoam_c).abs();
             n += 1.0;
         }

@@ -159,7 +159,9 @@ def main():
             'noise': {'distribution': 'gaussian', 'sigma_c': NOISE_C, 'seed': 1,
                       'rng': 'python random.Random(seed).gauss, snapshot by snapshot in sensor order'},
             'openfoam': 'kalibre simulate --model openfoam (1000 SIMPLE iterations, adapter defaults)',
-            'sensor_c_noise_free': {f'{l}/{i}': v for (l, i), v in sorted(clean.items())},
+            # As in the development data's truth.json.
+            'snapshots': {l: {'sensor_c_noise_free': {s[0]: clean[(l, s[0])] for s in SENSORS}}
+                          for l in ('t0', 't1', 't2')},
         }
         with open(os.path.join(d, 'truth.json'), 'w') as f:
             json.dump(truth, f, indent=1)

@@ -21,6 +21,16 @@ pub const DATASETS: [(&str, Option<&str>); 4] = [
     ("of-dev-blanking", Some("rack_recirculation(rack=B4)")),
     ("of-dev-bypass", Some("bypass(behind_rack=B3)")),
 ];
+/// The second layout's datasets (`data/openfoam-layout2`, session 28). On its one plenum a
+/// single CRAC's offset reaches every tile mixed with the others' supply, so the
+/// hall-wide offset is the form the data can identify (the per-CRAC ones are listed as
+/// indistinguishable from it); the cutout lies across the `behind_rack` strip of A07.
+pub const LAYOUT2_DATASETS: [(&str, Option<&str>); 4] = [
+    ("ol2-clean", None),
+    ("ol2-offset-crac2", Some("crac_supply_offset")),
+    ("ol2-slot-A05", Some("rack_recirculation(rack=A05)")),
+    ("ol2-cutout-A07", Some("bypass(behind_rack=A07)")),
+];
 /// The noise of the stored data (README), so that a variant is another draw of the same.
 pub const NOISE_C: f64 = 0.15;
 pub const REMOVED_SENSORS: usize = 4;
