@@ -33,61 +33,49 @@ use serde_json::{json, Value};
 /// The development data this study starts from.
 const DEV: &str = "data/openfoam/of-dev-clean";
 
-/// Where a rule releases a tile's supply: `None` keeps the floor injection; otherwise the
-/// link takes the supply's flow from the tile's cells up to `from_top_m` and releases it
-/// over `to_m` (`None` as the upper end: the tallest rack's height).
-struct Rule {
-    name: &'static str,
-    lift: Option<(f64, f64, Option<f64>)>,
+/// Where a rule releases each tile's supply.
+#[derive(Clone, Copy)]
+enum Release {
+    /// The model's own floor injection.
+    Floor,
+    /// A link takes the supply's flow from the tile's cells up to `from_top_m` and
+    /// releases it over `to_bottom_m` to `to_top_m` (`None`: the tallest rack's height).
+    Lift {
+        from_top_m: f64,
+        to_bottom_m: f64,
+        to_top_m: Option<f64>,
+    },
     /// A jet consumed from below (session 28): from this height up, each band releases
     /// what the facing racks' intakes draw there, until the tile's supply runs out; what
     /// is left rises over the racks (released in the 0.4 m above the tallest rack).
-    draw_matched_from_m: Option<f64>,
+    DrawMatched { from_m: f64 },
+}
+
+struct Rule {
+    name: &'static str,
+    release: Release,
 }
 
 fn rules() -> Vec<Rule> {
-    vec![
-        Rule {
-            name: "floor (the model)",
-            lift: None,
-            draw_matched_from_m: None,
-        },
-        Rule {
-            name: "0-rack top",
-            lift: Some((0.2, 0.0, None)),
-            draw_matched_from_m: None,
-        },
-        Rule {
-            name: "0.2 m-rack top",
-            lift: Some((0.2, 0.2, None)),
-            draw_matched_from_m: None,
-        },
-        Rule {
-            name: "0.4 m-rack top",
-            lift: Some((0.2, 0.4, None)),
-            draw_matched_from_m: None,
-        },
-        Rule {
-            name: "0.8-1.6 m (from 0-0.4 m)",
-            lift: Some((0.4, 0.8, Some(1.6))),
-            draw_matched_from_m: None,
-        },
-        Rule {
-            name: "draw-matched from 0 m",
-            lift: None,
-            draw_matched_from_m: Some(0.0),
-        },
-        Rule {
-            name: "draw-matched from 0.2 m",
-            lift: None,
-            draw_matched_from_m: Some(0.2),
-        },
-        Rule {
-            name: "draw-matched from 0.4 m",
-            lift: None,
-            draw_matched_from_m: Some(0.4),
-        },
+    let lift = |from_top_m, to_bottom_m, to_top_m| Release::Lift {
+        from_top_m,
+        to_bottom_m,
+        to_top_m,
+    };
+    let draw_matched = |from_m| Release::DrawMatched { from_m };
+    [
+        ("floor (the model)", Release::Floor),
+        ("0-rack top", lift(0.2, 0.0, None)),
+        ("0.2 m-rack top", lift(0.2, 0.2, None)),
+        ("0.4 m-rack top", lift(0.2, 0.4, None)),
+        ("0.8-1.6 m (from 0-0.4 m)", lift(0.4, 0.8, Some(1.6))),
+        ("draw-matched from 0 m", draw_matched(0.0)),
+        ("draw-matched from 0.2 m", draw_matched(0.2)),
+        ("draw-matched from 0.4 m", draw_matched(0.4)),
     ]
+    .into_iter()
+    .map(|(name, release)| Rule { name, release })
+    .collect()
 }
 
 /// The development hall, or the variant with tiles spanning the cold aisle, with probes.
@@ -147,8 +135,13 @@ fn tile_flows_m3_s(hall: &Hall, state: &OperatingState) -> Vec<f64> {
 }
 
 /// One forced link per tile lifting its share of the supply, for `state`.
-fn lifted_supply(hall: &Hall, state: &OperatingState, lift: (f64, f64, Option<f64>)) -> SimMods {
-    let (from_top_m, to_bottom_m, to_top_m) = lift;
+fn lifted_supply(
+    hall: &Hall,
+    state: &OperatingState,
+    from_top_m: f64,
+    to_bottom_m: f64,
+    to_top_m: Option<f64>,
+) -> SimMods {
     let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
     let tile_flow_m3_s = tile_flows_m3_s(hall, state);
     let mut mods = SimMods::new(hall.cracs.len());
@@ -327,10 +320,16 @@ fn run(o: &Options) -> Result<(), String> {
             let (mut probe_sum, mut probe_n) = (0.0, 0.0);
             let mut columns = Vec::new();
             for (state, of) in states.iter().zip(&openfoam) {
-                let mods = match (rule.lift, rule.draw_matched_from_m) {
-                    (Some(lift), _) => lifted_supply(&hall, state, lift),
-                    (None, Some(from_m)) => draw_matched_supply(&hall, state, &alpha, from_m),
-                    (None, None) => SimMods::new(hall.cracs.len()),
+                let mods = match rule.release {
+                    Release::Floor => SimMods::new(hall.cracs.len()),
+                    Release::Lift {
+                        from_top_m,
+                        to_bottom_m,
+                        to_top_m,
+                    } => lifted_supply(&hall, state, from_top_m, to_bottom_m, to_top_m),
+                    Release::DrawMatched { from_m } => {
+                        draw_matched_supply(&hall, state, &alpha, from_m)
+                    }
                 };
                 let sol = sim
                     .solve_with_mods(state, &alpha, &mods)

@@ -7,7 +7,11 @@
 //! resting on that sensor rather than dropped in silence. The clean hall's false
 //! positive and the missed cutout are measured in the docs, not asserted.
 
+mod cli_support;
+
 use std::path::{Path, PathBuf};
+
+use cli_support::{kalibre, run, stderr, tmp};
 
 use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosis, HallDiagnosisSettings};
@@ -132,44 +136,27 @@ fn a_slot_seen_by_one_sensor_is_reported_as_resting_on_that_sensor() {
 
 #[test]
 fn the_cli_says_which_sensor_a_hypothesis_rests_on() {
-    let dir = std::env::temp_dir().join(format!("kalibre-layout2-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = tmp("layout2-slot");
     let (hall, snaps) = (
         data("ol2-slot-A05/hall.json"),
         data("ol2-slot-A05/snapshots.csv"),
     );
-    let kalibre = || std::process::Command::new(env!("CARGO_BIN_EXE_kalibre"));
-    let cal = kalibre()
-        .arg("calibrate")
-        .arg("--hall")
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(dir.join("cal"))
-        .output()
-        .unwrap();
-    assert!(
-        cal.status.success(),
-        "{}",
-        String::from_utf8_lossy(&cal.stderr)
-    );
-    let out = kalibre()
-        .arg("diagnose")
-        .arg("--hall")
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
+    let on_slot = |command: &str| {
+        let mut c = kalibre();
+        c.arg(command)
+            .arg("--hall")
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(&snaps);
+        c
+    };
+    let cal = run(on_slot("calibrate").arg("--out").arg(dir.join("cal")));
+    assert!(cal.status.success(), "{}", stderr(&cal));
+    let out = run(on_slot("diagnose")
         .arg("--calibration")
-        .arg(dir.join("cal"))
-        .output()
-        .unwrap();
+        .arg(dir.join("cal")));
+    assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     assert!(
         text.contains("rests on one sensor, c-A05-11")
             && text.contains(r#"if c-A05-11 reads right, add to hall.json "effects": {"kind":"rack_recirculation""#)

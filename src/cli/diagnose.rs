@@ -315,16 +315,18 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             h.predicted_mae,
             flags
         );
+        let entry = || serde_json::to_string(s).unwrap_or_default();
         if h.significant {
-            let entry = serde_json::to_string(s).unwrap_or_default();
-            println!("    add to hall.json \"effects\": {entry}");
+            println!("    add to hall.json \"effects\": {}", entry());
         } else if let Some(sensor) = &h.carried_by {
-            let entry = serde_json::to_string(s).unwrap_or_default();
             println!(
                 "    rests on one sensor, {sensor}: without it the others do not prefer it \
                  (a faulty sensor, or the model's own error there, looks the same)"
             );
-            println!("    if {sensor} reads right, add to hall.json \"effects\": {entry}");
+            println!(
+                "    if {sensor} reads right, add to hall.json \"effects\": {}",
+                entry()
+            );
         }
         if significant.first().is_some_and(|best| best.name == h.name) {
             print_close_alternatives(&d.diagnosis, h);
