@@ -22,8 +22,10 @@
 //! no single-output check`, `default` (`HallDiagnosisSettings::default()`: Student-t
 //! nu 4 and the single-output check), `student-t 2` and `student-t 8` (with the check),
 //! `refit 3` and `refit 8` (the default with the 3 or 8 leading hypotheses refit with
-//! the model, `HallDiagnosisSettings::refit_top`). `--settings 'NAME;NAME'` runs only
-//! the named settings.
+//! the model, `HallDiagnosisSettings::refit_top`), `ambiguity`, `model form` and
+//! `ambiguity and model form` (the default with session 29's options:
+//! `DiagnoseSettings::ambiguity_check`, `HallDiagnosisSettings::model_form`).
+//! `--settings 'NAME;NAME'` runs only the named settings.
 //!
 //! Verdicts per case and setting: `pass` when the top significant hypothesis is the
 //! expected one (for `clean`: nothing significant), `miss` when nothing is significant
@@ -74,7 +76,7 @@ const fn setting(
     }
 }
 
-const SETTINGS: [Setting; 7] = [
+const SETTINGS: [Setting; 10] = [
     setting("gaussian", Some((None, false)), 0, true),
     setting(
         "student-t 4, no single-output check",
@@ -87,6 +89,9 @@ const SETTINGS: [Setting; 7] = [
     setting("student-t 8", Some((Some(8.0), true)), 0, false),
     setting("refit 3", None, 3, false),
     setting("refit 8", None, 8, false),
+    setting("ambiguity", None, 0, false),
+    setting("model form", None, 0, false),
+    setting("ambiguity and model form", None, 0, false),
 ];
 
 /// Calibrates one case as `kalibre calibrate` does by default, journal and report in
@@ -112,6 +117,9 @@ fn run_case(
             ds.diagnose.single_output_check = check;
         }
         ds.refit_top = s.refit_top;
+        // Session 29's options, one at a time or both.
+        ds.diagnose.ambiguity_check = s.name.starts_with("ambiguity");
+        ds.model_form = s.name.ends_with("model form");
         let d = diagnose_hall(hall, snaps, &params, &registry, &ds)
             .map_err(|e| format!("diagnosis ({}): {e}", s.name))?;
         let top = d.diagnosis.significant().next();
@@ -131,6 +139,7 @@ fn run_case(
         });
         verdicts.push(json!({
             "setting": s.name, "robust_nu": ds.diagnose.robust_nu,
+            "ambiguity_check": ds.diagnose.ambiguity_check, "model_form": ds.model_form,
             "single_output_check": ds.diagnose.single_output_check,
             "refit_top": ds.refit_top,
             "verdict": verdict, "top_significant": top,

@@ -15,7 +15,10 @@
 //! `diagnosis_variants` does for the development data; no OpenFOAM solve), `--sweep
 //! blanking` (instead of the cases: the development hall's blanking slot at each rack),
 //! `--refit K` (the diagnosis refits its K leading hypotheses with the built-in model,
-//! `HallDiagnosisSettings::refit_top`; default 0, as `kalibre diagnose`).
+//! `HallDiagnosisSettings::refit_top`; default 0, as `kalibre diagnose`), `--ambiguity
+//! on|off` and `--model-form on|off` (the diagnosis's ambiguity check and model-form
+//! uncertainty, `DiagnoseSettings::ambiguity_check` and
+//! `HallDiagnosisSettings::model_form`; default: as `kalibre diagnose`).
 //!
 //! The development data (`data/openfoam/of-dev-*`) were tuned against: the diagnosis's
 //! settings were chosen on them. These cases were not. Each is written as a dataset in
@@ -221,15 +224,22 @@ fn evaluate(
     snaps: &[HallSnapshot],
     footprint_mae_c: &Value,
     work: &Path,
-    refit_top: usize,
+    o: &Options,
 ) -> Result<Value, String> {
     let (cal, cal_settings) = calibrate_as_cli(hall, snaps, work)?;
     let params = cal.report.best.params.values();
-    let ds = HallDiagnosisSettings {
+    let mut ds = HallDiagnosisSettings {
         sim: cal_settings.sim.clone(),
-        refit_top,
+        refit_top: o.refit_top,
         ..HallDiagnosisSettings::default()
     };
+    if let Some(on) = o.ambiguity {
+        ds.diagnose.ambiguity_check = on;
+    }
+    if let Some(on) = o.model_form {
+        ds.model_form = on;
+    }
+    let refit_top = o.refit_top;
     let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
         .map_err(|e| format!("diagnosis: {e}"))?;
     let top = d.diagnosis.significant().next();
@@ -267,6 +277,9 @@ fn evaluate(
         "footprint_mae_c": footprint_mae_c,
         "diagnosis_mae_c": d.diagnosis.mae,
         "refit_top": refit_top,
+        "ambiguity_check": ds.diagnose.ambiguity_check,
+        "model_form": ds.model_form,
+        "ambiguous_with": hyps.first().map(|h| h.ambiguous_with.clone()),
         "refits": d.refits,
         "calibration": {
             "best_mae_c": cal.report.best.mae_c, "model_runs": cal.report.runs.total,
@@ -283,6 +296,16 @@ struct Options {
     variants: usize,
     sweep: bool,
     refit_top: usize,
+    ambiguity: Option<bool>,
+    model_form: Option<bool>,
+}
+
+fn on_off(flag: &str, value: &str) -> Result<bool, String> {
+    match value {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("{flag} needs `on` or `off`, got `{value}`")),
+    }
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -294,6 +317,8 @@ fn parse_args() -> Result<Options, String> {
         variants: 0,
         sweep: false,
         refit_top: 0,
+        ambiguity: None,
+        model_form: None,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
@@ -323,9 +348,11 @@ fn parse_args() -> Result<Options, String> {
                     .parse()
                     .map_err(|_| format!("--refit needs a whole number >= 0, got `{value}`"))?
             }
+            "--ambiguity" => o.ambiguity = Some(on_off(flag, value)?),
+            "--model-form" => o.model_form = Some(on_off(flag, value)?),
             _ => {
                 return Err(format!(
-                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking, --refit K)"
+                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking, --refit K, --ambiguity on|off, --model-form on|off)"
                 ))
             }
         }
@@ -390,7 +417,7 @@ fn run(o: &Options) -> Result<(), String> {
                 _ => dir.join(variant.slug()),
             };
             let footprint = &data.truth["footprint"]["mae_c"];
-            let mut record = evaluate(case, &hall, &snaps, footprint, &work, o.refit_top)
+            let mut record = evaluate(case, &hall, &snaps, footprint, &work, o)
                 .map_err(|e| format!("{}, {}: {e}", case.name, variant.label()))?;
             eprintln!(
                 "{}, {}: {} (top {}, expected rank {}), {:.0} s",

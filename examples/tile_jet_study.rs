@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 use kalibre::dc::openfoam::{OpenFoamModel, OpenFoamSettings};
 use kalibre_core::Model;
 use kalibre_dc::hall::{Aabb, Hall};
-use kalibre_dc::sim::{AirLink, SimConfig, SimMods, Simulator};
+use kalibre_dc::sim::{jets, AirLink, SimConfig, SimMods, Simulator};
 use kalibre_dc::snapshots::{load_snapshots, OperatingState};
 use serde_json::{json, Value};
 
@@ -117,23 +117,6 @@ fn true_alpha(server_type: &str) -> f64 {
     }
 }
 
-/// Each tile's share of the supply in `state` (m3/s): the CRACs' flow split by open area,
-/// as the simulator splits it.
-fn tile_flows_m3_s(hall: &Hall, state: &OperatingState) -> Vec<f64> {
-    let supply_m3_s: f64 = hall
-        .cracs
-        .iter()
-        .zip(&state.fan_speed)
-        .map(|(c, f)| c.rated_flow_m3_s * f)
-        .sum();
-    let weight = |t: &kalibre_dc::hall::Tile| t.size_m[0] * t.size_m[1] * t.open_fraction;
-    let total: f64 = hall.tiles.iter().map(weight).sum();
-    hall.tiles
-        .iter()
-        .map(|t| supply_m3_s * weight(t) / total)
-        .collect()
-}
-
 /// One forced link per tile lifting its share of the supply, for `state`.
 fn lifted_supply(
     hall: &Hall,
@@ -143,7 +126,7 @@ fn lifted_supply(
     to_top_m: Option<f64>,
 ) -> SimMods {
     let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
-    let tile_flow_m3_s = tile_flows_m3_s(hall, state);
+    let tile_flow_m3_s = jets::tile_flows_m3_s(hall, state);
     let mut mods = SimMods::new(hall.cracs.len());
     for (t, flow_m3_s) in hall.tiles.iter().zip(tile_flow_m3_s) {
         let ([x, y], [sx, sy]) = (t.position_m, t.size_m);
@@ -162,71 +145,10 @@ fn lifted_supply(
     mods
 }
 
-/// The jet consumed from below: per tile and 0.2 m band from `from_m` to the tallest
-/// rack's top, a link releasing what the servers facing the tile draw in that band
-/// (their flow spread evenly over their height, shared between the tiles in front of
-/// them by x overlap), while the tile's supply lasts; the rest over the racks.
+/// The jet consumed from below ([`jets::draw_matched_links`]) as a run's modifications.
 fn draw_matched_supply(hall: &Hall, state: &OperatingState, alpha: &[f64], from_m: f64) -> SimMods {
-    const BAND_M: f64 = 0.2;
-    const FACING_M: f64 = 0.5;
-    let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
-    let tile_flow_m3_s = tile_flows_m3_s(hall, state);
-    let overlap = |a0: f64, a1: f64, b0: f64, b1: f64| (a1.min(b1) - a0.max(b0)).max(0.0);
     let mut mods = SimMods::new(hall.cracs.len());
-    let n_bands = ((rack_top_m - from_m) / BAND_M).round().max(1.0) as usize;
-    for (t, mut left) in hall.tiles.iter().zip(tile_flow_m3_s) {
-        let ([x, y], [sx, sy]) = (t.position_m, t.size_m);
-        let mut draw = vec![0.0; n_bands];
-        for s in hall.servers() {
-            let b = s.bounds();
-            let face = kalibre_dc::hall::face_centre(&b, s.rack.inlet);
-            let (axis, _) = s.rack.inlet.axis_sign();
-            let other = 1 - axis;
-            let (t0, t1) = if axis == 1 { (y, y + sy) } else { (x, x + sx) };
-            let near = face[axis] >= t0 - FACING_M && face[axis] <= t1 + FACING_M;
-            let (o0, o1) = if other == 0 { (x, x + sx) } else { (y, y + sy) };
-            let share = overlap(b.min[other], b.max[other], o0, o1) / (b.max[other] - b.min[other]);
-            if !near || share <= 0.0 {
-                continue;
-            }
-            let q = alpha[s.index] * state.power_w[s.index] * kalibre_dc::sim::M3_S_PER_CFM * share;
-            let h = b.max[2] - b.min[2];
-            for (k, d) in draw.iter_mut().enumerate() {
-                let z0 = from_m + k as f64 * BAND_M;
-                *d += q * overlap(b.min[2], b.max[2], z0, z0 + BAND_M) / h;
-            }
-        }
-        let floor_box = Aabb {
-            min: [x, y, 0.0],
-            max: [x + sx, y + sy, 0.2],
-        };
-        for (k, d) in draw.iter().enumerate() {
-            let q = d.min(left);
-            if q <= 0.0 {
-                break;
-            }
-            left -= q;
-            let z0 = from_m + k as f64 * BAND_M;
-            mods.air_links.push(AirLink {
-                from: floor_box,
-                to: Aabb {
-                    min: [x, y, z0],
-                    max: [x + sx, y + sy, z0 + BAND_M],
-                },
-                flow_m3_s: q,
-            });
-        }
-        if left > 0.0 {
-            mods.air_links.push(AirLink {
-                from: floor_box,
-                to: Aabb {
-                    min: [x, y, rack_top_m],
-                    max: [x + sx, y + sy, (rack_top_m + 0.4).min(hall.room.size_m[2])],
-                },
-                flow_m3_s: left,
-            });
-        }
-    }
+    mods.air_links = jets::draw_matched_links(hall, state, alpha, from_m);
     mods
 }
 

@@ -67,6 +67,16 @@ pub struct DiagnoseArgs {
     /// any one sensor left out, so that one sensor the model misses cannot carry it).
     #[arg(long)]
     no_single_output_check: bool,
+    /// Name no explanation when another of a different footprint fits about as well as
+    /// the best (BIC within 6): list them as undecided, since the data then say that
+    /// something is missing but not which.
+    #[arg(long)]
+    ambiguity_check: bool,
+    /// Count the built-in model's tile-jet variant (each tile's supply carried up the
+    /// cold aisle, physics the model lacks) in each sensor's model uncertainty, beside its
+    /// grid error. No effect with `--model openfoam`.
+    #[arg(long)]
+    model_form: bool,
     /// Write FILE: the hall with the top significant suggestion added to its effects, and
     /// the calibrated values as every parameter's initial value (a warm start), ready for
     /// the next `kalibre calibrate --hall FILE`. Not written when nothing is significant.
@@ -231,6 +241,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         ..HallDiagnosisSettings::default()
     };
     settings.diagnose.single_output_check = !args.no_single_output_check;
+    settings.diagnose.ambiguity_check = args.ambiguity_check;
+    settings.model_form = args.model_form;
     settings.diagnose.robust_nu = robust_nu;
     if args.refit > 0 && args.refit_iterations == 0 {
         return Err(CliError::Input(
@@ -303,7 +315,28 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         d.diagnosis.mae
     );
     let significant: Vec<_> = d.diagnosis.significant().collect();
-    if significant.is_empty() {
+    // The close set: the best undecided hypothesis and those it could not be told from
+    // (others beyond the window were left undecided because these are).
+    let undecided: Vec<&str> = d
+        .diagnosis
+        .hypotheses
+        .iter()
+        .filter(|h| !h.ambiguous_with.is_empty())
+        .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
+        .map(|best| {
+            std::iter::once(best.name.as_str())
+                .chain(best.ambiguous_with.iter().map(String::as_str))
+                .collect()
+        })
+        .unwrap_or_default();
+    if !undecided.is_empty() {
+        println!(
+            "  no effect decided: {} fit about as well (BIC within {CLOSE_ALTERNATIVE_BIC:.0}), \
+             each with another footprint; the data say something is missing, not which. \
+             Recalibrate with each entry added and keep the one that lowers the error.",
+            undecided.join(", ")
+        );
+    } else if significant.is_empty() {
         println!("  no significant missing effect");
     }
     for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
@@ -318,6 +351,18 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         let entry = || serde_json::to_string(s).unwrap_or_default();
         if h.significant {
             println!("    add to hall.json \"effects\": {}", entry());
+        } else if undecided.contains(&h.name.as_str()) {
+            println!(
+                "    undecided (about as good: {}); if it is this one, add to hall.json \"effects\": {}",
+                h.ambiguous_with.join(", "),
+                entry()
+            );
+        } else if !h.ambiguous_with.is_empty() {
+            println!(
+                "    not named: better explanations are undecided ({}); its entry: {}",
+                h.ambiguous_with.join(", "),
+                entry()
+            );
         } else if let Some(sensor) = &h.carried_by {
             println!(
                 "    rests on one sensor, {sensor}: without it the others do not prefer it \
@@ -456,10 +501,21 @@ pub(super) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
             .filter(|h| h.carried_by.as_deref() == Some(u.output.as_str()))
             .map(|h| h.name.as_str())
             .collect();
-        let note = if resting.is_empty() {
+        let mut notes = Vec::new();
+        if !resting.is_empty() {
+            notes.push(format!("{} rests on it alone", resting.join(", ")));
+        }
+        // How far other plausible physics (the model-form variants) moves it: when that
+        // is of the residual's size, the model's own physics there is the likely cause.
+        if let Some(form) = u.model_form_c {
+            notes.push(format!(
+                "the model's tile-jet variant moves it by {form:.2} C"
+            ));
+        }
+        let note = if notes.is_empty() {
             String::new()
         } else {
-            format!(" ({} rests on it alone)", resting.join(", "))
+            format!(" ({})", notes.join("; "))
         };
         println!(
             "  {:<12} model minus measurement {:+.2} C on average, {:.1} noise scales{note}",

@@ -98,3 +98,19 @@ mod tests {
         assert!(span_distance(&a, &c[..1]).is_none());
     }
 }
+
+/// Whether every direction of `inner` lies in the span of `outer` (both orthonormal
+/// bases), to within a sine of `tol`: a nested hypothesis, the same explanation with
+/// more freedom. False when either basis is empty.
+pub(crate) fn spans_within(inner: &[Vec<f64>], outer: &[Vec<f64>], tol: f64) -> bool {
+    if inner.is_empty() || outer.is_empty() {
+        return false;
+    }
+    inner.iter().all(|v| {
+        let inside: f64 = outer
+            .iter()
+            .map(|q| v.iter().zip(q).map(|(a, b)| a * b).sum::<f64>().powi(2))
+            .sum();
+        (1.0 - inside.clamp(0.0, 1.0)).sqrt() < tol
+    })
+}

@@ -95,6 +95,7 @@ pub struct Residuals {
     jacobian: Array2<f64>,
     params: Vec<String>,
     uncertainty: Option<Vec<f64>>,
+    model_form: Option<Vec<f64>>,
 }
 
 impl Residuals {
@@ -152,6 +153,7 @@ impl Residuals {
             jacobian,
             params,
             uncertainty: None,
+            model_form: None,
         })
     }
 
@@ -202,9 +204,27 @@ impl Residuals {
     /// each row by `1 / sqrt(sigma^2 + u^2)` instead of `1 / sigma`, so that no hypothesis
     /// earns credit for explaining what the model's numerics alone could produce.
     pub fn with_uncertainty(mut self, uncertainty: Vec<f64>) -> Result<Self> {
+        self.check_uncertainty(&uncertainty, "uncertainty")?;
+        self.uncertainty = Some(uncertainty);
+        Ok(self)
+    }
+
+    /// Adds a model-form uncertainty per row (standard deviation, output units): what
+    /// other plausible physics would read differently. It weighs rows as
+    /// [`Self::with_uncertainty`] does (the two add in quadrature), but an output it
+    /// covers is still listed among those no hypothesis explains when it is far off,
+    /// since a user should look at it (`UnexplainedOutput::model_form_c` says how much
+    /// the other physics moves it).
+    pub fn with_model_form(mut self, uncertainty: Vec<f64>) -> Result<Self> {
+        self.check_uncertainty(&uncertainty, "model-form uncertainty")?;
+        self.model_form = Some(uncertainty);
+        Ok(self)
+    }
+
+    fn check_uncertainty(&self, uncertainty: &[f64], what: &str) -> Result<()> {
         if uncertainty.len() != self.rows.len() {
             return Err(Error::Mismatch(format!(
-                "{} uncertainties for {} residual rows",
+                "{} {what} values for {} residual rows",
                 uncertainty.len(),
                 self.rows.len()
             )));
@@ -215,12 +235,16 @@ impl Residuals {
             .find(|(_, u)| !(u.is_finite() && **u >= 0.0))
         {
             return Err(Error::Mismatch(format!(
-                "uncertainty of output `{}` in snapshot `{}` is {u}, expected finite and >= 0",
+                "{what} of output `{}` in snapshot `{}` is {u}, expected finite and >= 0",
                 self.rows[i].output, self.rows[i].snapshot
             )));
         }
-        self.uncertainty = Some(uncertainty);
-        Ok(self)
+        Ok(())
+    }
+
+    /// The per-row model-form uncertainty, when given.
+    pub fn model_form(&self) -> Option<&[f64]> {
+        self.model_form.as_deref()
     }
 
     /// The per-row model uncertainty, when given.

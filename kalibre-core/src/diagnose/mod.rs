@@ -34,7 +34,11 @@
 //!   it passes the **single-output check** (with any one output left out, the others
 //!   still prefer it: BIC change below 0, so no one sensor carries it alone);
 //!   among alternatives collinear with each other only the best is significant (the
-//!   lowest BIC, or within 6 of it the most modest fitted change relative to its range).
+//!   lowest BIC, or within 6 of it the most modest fitted change relative to its range);
+//! - **undecided** (with [`DiagnoseSettings::ambiguity_check`], off by default): when another significant
+//!   hypothesis of a different footprint (not collinear) has a BIC within 6 of the
+//!   best's, the evidence between them is short of "strong", so none is significant and
+//!   each lists the others in [`HypothesisResult::ambiguous_with`].
 //!
 //! A known model uncertainty per row ([`Residuals::with_uncertainty`], e.g. the model's
 //! own grid error) weighs each row by `sigma / sqrt(sigma^2 + u^2)` in every fit and test,
@@ -144,6 +148,10 @@ pub struct UnexplainedOutput {
     /// Root mean square of its residuals in scales of the likelihood (under a Gaussian,
     /// noise sigmas).
     pub rms_scales: f64,
+    /// With a model-form uncertainty ([`Residuals::with_model_form`]): its RMS over the
+    /// output's rows, how far other plausible physics moves the output (output units).
+    #[serde(default)]
+    pub model_form_c: Option<f64>,
 }
 
 impl Diagnosis {
@@ -226,6 +234,12 @@ pub struct HypothesisResult {
     /// model's own error there; only a look at that sensor tells them apart.
     #[serde(default)]
     pub carried_by: Option<String>,
+    /// Significant explanations of other footprints (not collinear with it) that fit
+    /// about as well as the best (BIC within [`CLOSE_ALTERNATIVE_BIC`]), when the
+    /// ambiguity check left them all undecided: the data say something is missing, not
+    /// which of these it is. Empty otherwise.
+    #[serde(default)]
+    pub ambiguous_with: Vec<String>,
 }
 
 fn columns(m: &ndarray::Array2<f64>) -> Vec<Vec<f64>> {
@@ -263,9 +277,33 @@ pub fn diagnose(
     // Row weights: 1 without a model uncertainty; with one, `sigma / sqrt(sigma^2 +
     // u^2)`, `sigma` the given noise or its maximum-likelihood estimate. Every fit, BIC
     // and held-out check below works on weighted rows; MAEs are reported unweighted.
-    let weights: Vec<f64> = match res.uncertainty() {
-        None => vec![1.0; n],
-        Some(u) => weights::row_weights(raw, &raw_jcols, u, settings.noise_sigma).1,
+    // The model-form uncertainty adds to the numerical one in quadrature.
+    let combined: Option<Vec<f64>> = match (res.uncertainty(), res.model_form()) {
+        (None, None) => None,
+        (a, b) => Some(
+            (0..n)
+                .map(|i| a.map_or(0.0, |u| u[i]).hypot(b.map_or(0.0, |u| u[i])))
+                .collect(),
+        ),
+    };
+    let (weight_sigma, weights): (f64, Vec<f64>) = match &combined {
+        None => (0.0, vec![1.0; n]),
+        Some(u) => weights::row_weights(raw, &raw_jcols, u, settings.noise_sigma),
+    };
+    // The weights outputs are listed as unexplained by: the numerical uncertainty's
+    // alone, so that a far-off output the other physics covers is still shown.
+    let listing_weights: Vec<f64> = match res.model_form() {
+        None => weights.clone(),
+        Some(_) => (0..n)
+            .map(|i| {
+                let u = res.uncertainty().map_or(0.0, |u| u[i]);
+                if weight_sigma > 0.0 {
+                    weight_sigma / weight_sigma.hypot(u)
+                } else {
+                    1.0
+                }
+            })
+            .collect(),
     };
     let weigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(&weights).map(|(x, w)| x * w).collect() };
     let unweigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(&weights).map(|(x, w)| x / w).collect() };
@@ -442,6 +480,7 @@ pub fn diagnose(
             current_change: NamedValues::new(res.params(), &sol.x[..p]),
             single_output_delta_bic,
             carried_by,
+            ambiguous_with: Vec::new(),
         });
         fits_left.push((sol.e, sol.scale));
     }
@@ -469,6 +508,15 @@ pub fn diagnose(
     for (r, k) in results.iter_mut().zip(keep) {
         r.significant &= k;
     }
+    if settings.ambiguity_check {
+        // A hypothesis nested in another (or containing it) is the same explanation.
+        let nested = |a: usize, b: usize| {
+            let (pa, pb) = (&perps[a].basis, &perps[b].basis);
+            identify::spans_within(pa, pb, settings.min_independence)
+                || identify::spans_within(pb, pa, settings.min_independence)
+        };
+        undecided_when_ambiguous(&mut results, nested);
+    }
     // What the best significant hypothesis (else the current parameters) leaves.
     let best = (0..results.len())
         .filter(|&i| results[i].significant)
@@ -479,7 +527,28 @@ pub fn diagnose(
         Some(i) => (fits_left[i].0.as_slice(), scale),
         None => (e0.as_slice(), scale),
     };
-    let unexplained = unexplained_outputs(&by_output, &output_names, left, &weights, left_scale);
+    let left_listed: Vec<f64> = left
+        .iter()
+        .zip(&weights)
+        .zip(&listing_weights)
+        .map(|((e, w), l)| e / w * l)
+        .collect();
+    let mut unexplained = unexplained_outputs(
+        &by_output,
+        &output_names,
+        &left_listed,
+        &listing_weights,
+        left_scale,
+    );
+    if let Some(form) = res.model_form() {
+        for u in &mut unexplained {
+            let Some(rows) = by_output.iter().find(|r| output_names[r[0]] == u.output) else {
+                continue;
+            };
+            let ms = rows.iter().map(|&i| form[i] * form[i]).sum::<f64>() / rows.len() as f64;
+            u.model_form_c = Some(ms.sqrt());
+        }
+    }
     results.sort_by(|a, b| {
         b.significant
             .cmp(&a.significant)
@@ -502,6 +571,46 @@ pub fn diagnose(
     })
 }
 
+/// When another significant explanation, neither collinear with the best nor nested
+/// with it (another footprint), fits within [`CLOSE_ALTERNATIVE_BIC`] of it, the data
+/// cannot say which one is missing: every significant hypothesis is left undecided (not
+/// significant), each listing the others of that close set in `ambiguous_with`.
+/// `results` are in the hypotheses' order; `nested(i, j)` says whether the two spans
+/// nest.
+fn undecided_when_ambiguous(
+    results: &mut [HypothesisResult],
+    nested: impl Fn(usize, usize) -> bool,
+) {
+    let Some(best) = (0..results.len())
+        .filter(|&i| results[i].significant)
+        .min_by(|&a, &b| results[a].delta_bic.total_cmp(&results[b].delta_bic))
+    else {
+        return;
+    };
+    let b = &results[best];
+    let close: Vec<String> = results
+        .iter()
+        .enumerate()
+        .filter(|(j, h)| {
+            h.significant
+                && *j != best
+                && !b.collinear_with.contains(&h.name)
+                && !nested(best, *j)
+                && h.delta_bic < b.delta_bic + CLOSE_ALTERNATIVE_BIC
+        })
+        .map(|(_, h)| h.name.clone())
+        .collect();
+    if close.is_empty() {
+        return;
+    }
+    let mut set = vec![b.name.clone()];
+    set.extend(close);
+    for h in results.iter_mut().filter(|h| h.significant) {
+        h.significant = false;
+        h.ambiguous_with = set.iter().filter(|n| **n != h.name).cloned().collect();
+    }
+}
+
 /// Outputs whose weighted residuals `e` are more than [`UNEXPLAINED_SCALES`] times
 /// `scale` off (RMS over their rows), worst first, with their mean unweighted residual.
 fn unexplained_outputs(
@@ -520,6 +629,7 @@ fn unexplained_outputs(
                 output: names[rows[0]].to_string(),
                 mean_residual: rows.iter().map(|&i| e[i] / weights[i]).sum::<f64>() / m,
                 rms_scales: ms.sqrt(),
+                model_form_c: None,
             }
         })
         .filter(|u| u.rms_scales > UNEXPLAINED_SCALES)

@@ -32,6 +32,7 @@ use crate::{Error, ParamLayout, Result};
 /// | `unit_step` | 0.01 | finite-difference step of calibrated parameters (unit box) |
 /// | `effect_step` | 0.05 | finite-difference step of effect parameters (share of their range) |
 /// | `refine_factor` | 0.5 | the model's own discretisation error, estimated by one more solve per snapshot on a grid this much finer, is each sensor's model uncertainty (no hypothesis earns credit for what the grid alone could produce); none: no such solve (nor when the solver offers no finer grid) |
+/// | `model_form` | false | each sensor's model uncertainty also counts what the solver's model-form variants ([`EffectSolver::model_form_variants`]; the built-in simulator: its tile jets carried up the cold aisle) read beyond it at the calibrated parameters, one solve per snapshot and variant |
 /// | `refit_top` | 0 | how many leading one-parameter hypotheses are refit with the solver itself (secant steps at their fitted point; `refit` module) before the final ranking |
 /// | `refit_iterations` | 4 | runs per refit hypothesis (one solve per snapshot each): a step towards its fitted point, halved after a run that reads worse than its best point |
 /// | `diagnose` | [`DiagnoseSettings::default`] | ranking, significance, held-out check |
@@ -45,6 +46,9 @@ pub struct HallDiagnosisSettings {
     pub effect_step: f64,
     /// Cell size of the refined grid relative to `sim.cell_m` (in (0, 1)), or none.
     pub refine_factor: Option<f64>,
+    /// Whether the solver's model-form variants
+    /// ([`EffectSolver::model_form_variants`]) add to each sensor's model uncertainty.
+    pub model_form: bool,
     /// How many leading hypotheses are refit with the solver (0: none).
     pub refit_top: usize,
     /// Secant steps per refit hypothesis.
@@ -60,11 +64,38 @@ impl Default for HallDiagnosisSettings {
             unit_step: 0.01,
             effect_step: 0.05,
             refine_factor: Some(0.5),
+            model_form: false,
             refit_top: 0,
             refit_iterations: 4,
             diagnose: DiagnoseSettings::default(),
         }
     }
+}
+
+/// Adds each reading's squared difference between `other` and `base` (snapshot x
+/// sensor) to `u2`.
+fn add_spread(u2: &mut [Vec<f64>], other: &[Vec<f64>], base: &[Vec<f64>]) {
+    for ((u, o), b) in u2.iter_mut().zip(other).zip(base) {
+        for ((u, o), b) in u.iter_mut().zip(o).zip(b) {
+            *u += (o - b).powi(2);
+        }
+    }
+}
+
+/// The square roots of `u2` (snapshot x sensor) at the measured readings, in the
+/// residuals' row order: snapshot-major, measured sensors only.
+fn measured_sqrt(snaps: &[HallSnapshot], u2: &[Vec<f64>]) -> Vec<f64> {
+    snaps
+        .iter()
+        .zip(u2)
+        .flat_map(|(snap, u2)| {
+            snap.sensor_c
+                .iter()
+                .zip(u2)
+                .filter(|(m, _)| m.is_some())
+                .map(|(_, u2)| u2.sqrt())
+        })
+        .collect()
 }
 
 /// A diagnosis with the `hall.json` entry each hypothesis suggests.
@@ -116,6 +147,7 @@ impl HallDiagnosis {
                     "held_out_improvement": h.held_out_improvement,
                     "single_output_delta_bic": h.single_output_delta_bic,
                     "carried_by": h.carried_by,
+                    "ambiguous_with": h.ambiguous_with,
                     "suggestion": s,
                 })
             })
@@ -129,6 +161,7 @@ impl HallDiagnosis {
                     "sensor": u.output,
                     "mean_residual_c": u.mean_residual,
                     "rms_scales": u.rms_scales,
+                    "model_form_c": u.model_form_c,
                 })
             })
             .collect();
@@ -408,6 +441,8 @@ pub fn diagnose_hall_with(
         })
         .collect();
     let mut residuals = Residuals::from_observations(&obs, &base, &jac, space.names())?;
+    // Each row's model uncertainty: the finer grid's change (numerical), and the
+    // model-form variants' changes in quadrature.
     if let Some(factor) = settings.refine_factor {
         if !(factor > 0.0 && factor < 1.0) {
             return Err(Error::Mismatch(format!(
@@ -420,20 +455,24 @@ pub fn diagnose_hall_with(
                 .par_iter()
                 .map(|st| fine.solve(st, &alpha0, &list))
                 .collect::<Result<_>>()?;
-            // Rows in the order of the residuals: snapshot-major, measured sensors only.
-            let uncertainty: Vec<f64> = snaps
-                .iter()
-                .enumerate()
-                .flat_map(|(s, snap)| {
-                    let (f, b) = (&fine_out[s], &base[s]);
-                    snap.sensor_c
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, m)| m.is_some())
-                        .map(move |(k, _)| (f[k] - b[k]).abs())
-                })
-                .collect();
-            residuals = residuals.with_uncertainty(uncertainty)?;
+            let mut u2 = vec![vec![0.0; n_out]; n_snap];
+            add_spread(&mut u2, &fine_out, &base);
+            residuals = residuals.with_uncertainty(measured_sqrt(snaps, &u2))?;
+        }
+    }
+    if settings.model_form {
+        let variants = solver.model_form_variants()?;
+        if !variants.is_empty() {
+            let list = effect_list(&effects, &values0);
+            let mut u2 = vec![vec![0.0; n_out]; n_snap];
+            for variant in variants {
+                let out: Vec<Vec<f64>> = states
+                    .par_iter()
+                    .map(|st| variant.solve(st, &alpha0, &list))
+                    .collect::<Result<_>>()?;
+                add_spread(&mut u2, &out, &base);
+            }
+            residuals = residuals.with_model_form(measured_sqrt(snaps, &u2))?;
         }
     }
     let mut ranked: Vec<refit::Candidate> = Vec::with_capacity(candidates.len());

@@ -4,7 +4,7 @@
 //! calibrated parameters, so it should be the model that was calibrated.
 
 use crate::effects::Effect;
-use crate::sim::{SimConfig, Simulator};
+use crate::sim::{jets, SimConfig, SimMods, Simulator};
 use crate::snapshots::OperatingState;
 use crate::Result;
 
@@ -30,6 +30,13 @@ pub trait EffectSolver: Sync {
     /// The same solver on a grid `factor` (in (0, 1)) times as fine, to estimate its own
     /// discretisation error; `None` when that is not offered (too costly, or not a grid).
     fn refined(&self, factor: f64) -> Result<Option<Box<dyn EffectSolver>>>;
+
+    /// Other plausible readings of the same physics (a model-form ensemble): what each
+    /// reads beyond this solver at the calibrated parameters is a sensor's model-form
+    /// uncertainty, as the finer grid's is its discretisation error. None by default.
+    fn model_form_variants(&self) -> Result<Vec<Box<dyn EffectSolver>>> {
+        Ok(Vec::new())
+    }
 }
 
 impl EffectSolver for Simulator {
@@ -60,5 +67,50 @@ impl EffectSolver for Simulator {
             },
         )?;
         Ok(Some(Box::new(fine)))
+    }
+
+    /// The tile jets carried up the cold aisle ([`crate::sim::jets`]): the physics the
+    /// built-in model lacks that moves most of its readings against OpenFOAM's.
+    fn model_form_variants(&self) -> Result<Vec<Box<dyn EffectSolver>>> {
+        let sim = Simulator::new(self.hall(), self.config().clone())?;
+        Ok(vec![Box::new(JetSupply { sim })])
+    }
+}
+
+/// The built-in simulator with each tile's supply released up its jet
+/// ([`jets::draw_matched_links`] from the floor), a model-form variant.
+struct JetSupply {
+    sim: Simulator,
+}
+
+impl EffectSolver for JetSupply {
+    fn name(&self) -> String {
+        "the built-in simulator with tile jets".into()
+    }
+
+    fn supports(&self, _kind: &str) -> bool {
+        true
+    }
+
+    fn solve(
+        &self,
+        state: &OperatingState,
+        alpha_per_server: &[f64],
+        effects: &[(&dyn Effect, &[f64])],
+    ) -> Result<Vec<f64>> {
+        let hall = self.sim.hall();
+        let mut mods = SimMods::new(hall.cracs.len());
+        for (e, values) in effects {
+            e.modify(values, hall, &mut mods)?;
+        }
+        mods.air_links
+            .extend(jets::draw_matched_links(hall, state, alpha_per_server, 0.0));
+        self.sim
+            .solve_with_mods(state, alpha_per_server, &mods)
+            .map(|s| s.sensor_c().to_vec())
+    }
+
+    fn refined(&self, _factor: f64) -> Result<Option<Box<dyn EffectSolver>>> {
+        Ok(None)
     }
 }

@@ -29,6 +29,7 @@ mod heat;
 mod heat_sources;
 mod influence;
 mod inlets;
+pub mod jets;
 mod linalg;
 mod mods;
 mod multigrid;

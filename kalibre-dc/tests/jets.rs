@@ -1,0 +1,106 @@
+//! Tile jets (`sim::jets`) and the diagnosis's model-form uncertainty built on them: the
+//! links release exactly the tiles' supply, inside the room and above their tiles, and
+//! the uncertainty they add does not hide a clear effect.
+
+use kalibre_dc::diagnosis::{diagnose_hall, EffectSolver, HallDiagnosisSettings};
+use kalibre_dc::effects::EffectRegistry;
+use kalibre_dc::sim::jets::{draw_matched_links, tile_flows_m3_s};
+use kalibre_dc::sim::Simulator;
+use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions, Synthesised};
+use kalibre_dc::HallModel;
+
+/// `demo` with every CRAC 1 C low, and its true per-type alphas.
+fn demo() -> (Synthesised, Vec<f64>) {
+    let opts = SynthOptions::new(Preset::Demo, 1)
+        .with_noise_c(0.15)
+        .with_effect(parse_effect_arg("crac_supply_offset:offset_c=-1").unwrap());
+    let s = synth::generate(&opts).unwrap();
+    let model = HallModel::new(&s.hall, Default::default()).unwrap();
+    let params: Vec<f64> = model
+        .layout()
+        .space()
+        .names()
+        .iter()
+        .map(|n| s.truth.alpha_type_cfm_per_w[n.trim_start_matches("alpha/")])
+        .collect();
+    (s, params)
+}
+
+#[test]
+fn jets_release_each_tiles_supply_once_inside_the_room() {
+    let (s, params) = demo();
+    let model = HallModel::new(&s.hall, Default::default()).unwrap();
+    let alpha = model.layout().alpha_per_server(&params);
+    let hall = &s.hall;
+    for snap in &s.snapshots {
+        let state = &snap.state;
+        let supply_m3_s: f64 = hall
+            .cracs
+            .iter()
+            .zip(&state.fan_speed)
+            .map(|(c, f)| c.rated_flow_m3_s * f)
+            .sum();
+        let tiles = tile_flows_m3_s(hall, state);
+        let total: f64 = tiles.iter().sum();
+        assert!((total - supply_m3_s).abs() < 1e-12 * supply_m3_s);
+        let links = draw_matched_links(hall, state, &alpha, 0.0);
+        let released: f64 = links.iter().map(|l| l.flow_m3_s).sum();
+        assert!(
+            (released - supply_m3_s).abs() < 1e-9 * supply_m3_s,
+            "{released} of {supply_m3_s} m3/s"
+        );
+        for (t, flow) in hall.tiles.iter().zip(&tiles) {
+            // Each tile's links start at its own floor box, and release its share.
+            let own: f64 = links
+                .iter()
+                .filter(|l| l.from.min[0] == t.position_m[0] && l.from.min[1] == t.position_m[1])
+                .map(|l| l.flow_m3_s)
+                .sum();
+            assert!((own - flow).abs() < 1e-9 * flow, "{own} vs {flow}");
+        }
+        for l in &links {
+            assert!(l.flow_m3_s > 0.0);
+            for k in 0..3 {
+                assert!(l.to.min[k] >= 0.0 && l.to.max[k] <= hall.room.size_m[k] + 1e-9);
+                assert!(l.to.min[k] < l.to.max[k]);
+            }
+            // Released straight above the tile it comes from.
+            assert_eq!((l.to.min[0], l.to.min[1]), (l.from.min[0], l.from.min[1]));
+            assert!(l.to.min[2] >= l.from.min[2]);
+        }
+    }
+}
+
+#[test]
+fn the_model_form_uncertainty_keeps_a_clear_offset() {
+    let (s, params) = demo();
+    let settings = HallDiagnosisSettings {
+        model_form: true,
+        ..HallDiagnosisSettings::default()
+    };
+    let with = diagnose_hall(
+        &s.hall,
+        &s.snapshots,
+        &params,
+        &EffectRegistry::builtin(),
+        &settings,
+    )
+    .unwrap();
+    let top = with.diagnosis.significant().next().map(|h| h.name.as_str());
+    assert_eq!(top, Some("crac_supply_offset"), "{:#?}", with.diagnosis);
+    // The uncertainty is there: the variant reads otherwise than the model.
+    let sim = Simulator::new(&s.hall, Default::default()).unwrap();
+    let variants = sim.model_form_variants().unwrap();
+    assert_eq!(variants.len(), 1);
+    let model = HallModel::new(&s.hall, Default::default()).unwrap();
+    let alpha = model.layout().alpha_per_server(&params);
+    let state = &s.snapshots[0].state;
+    let base = EffectSolver::solve(&sim, state, &alpha, &[]).unwrap();
+    let jets = variants[0].solve(state, &alpha, &[]).unwrap();
+    let moved = base
+        .iter()
+        .zip(&jets)
+        .map(|(b, j)| (j - b).abs())
+        .fold(0.0, f64::max);
+    assert!(moved.is_finite() && moved > 0.1, "largest change {moved} C");
+}
