@@ -6,14 +6,18 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+#[path = "support/demo_offset.rs"]
+mod demo_offset;
+use demo_offset::demo;
+
 use kalibre_dc::diagnosis::{
     diagnose_hall, diagnose_hall_with, EffectSolver, HallDiagnosis, HallDiagnosisSettings,
 };
 use kalibre_dc::effects::{Effect, EffectRegistry};
 use kalibre_dc::sim::Simulator;
 use kalibre_dc::snapshots::OperatingState;
-use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions, Synthesised};
-use kalibre_dc::{Error, HallModel, Result};
+use kalibre_dc::synth::Synthesised;
+use kalibre_dc::{Error, Result};
 
 /// The built-in simulator, restricted to some kinds, failing some runs.
 struct Restricted {
@@ -66,23 +70,6 @@ impl EffectSolver for Restricted {
     fn refined(&self, factor: f64) -> Result<Option<Box<dyn EffectSolver>>> {
         self.sim.refined(factor)
     }
-}
-
-/// `demo` with every CRAC 1 C low, and its true per-type alphas.
-fn demo() -> (Synthesised, Vec<f64>) {
-    let opts = SynthOptions::new(Preset::Demo, 1)
-        .with_noise_c(0.15)
-        .with_effect(parse_effect_arg("crac_supply_offset:offset_c=-1").unwrap());
-    let s = synth::generate(&opts).unwrap();
-    let model = HallModel::new(&s.hall, Default::default()).unwrap();
-    let params: Vec<f64> = model
-        .layout()
-        .space()
-        .names()
-        .iter()
-        .map(|n| s.truth.alpha_type_cfm_per_w[n.trim_start_matches("alpha/")])
-        .collect();
-    (s, params)
 }
 
 fn run(s: &Synthesised, params: &[f64], solver: &dyn EffectSolver) -> Result<HallDiagnosis> {

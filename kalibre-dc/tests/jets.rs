@@ -6,25 +6,11 @@ use kalibre_dc::diagnosis::{diagnose_hall, EffectSolver, HallDiagnosisSettings};
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::sim::jets::{draw_matched_links, tile_flows_m3_s};
 use kalibre_dc::sim::Simulator;
-use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions, Synthesised};
 use kalibre_dc::HallModel;
 
-/// `demo` with every CRAC 1 C low, and its true per-type alphas.
-fn demo() -> (Synthesised, Vec<f64>) {
-    let opts = SynthOptions::new(Preset::Demo, 1)
-        .with_noise_c(0.15)
-        .with_effect(parse_effect_arg("crac_supply_offset:offset_c=-1").unwrap());
-    let s = synth::generate(&opts).unwrap();
-    let model = HallModel::new(&s.hall, Default::default()).unwrap();
-    let params: Vec<f64> = model
-        .layout()
-        .space()
-        .names()
-        .iter()
-        .map(|n| s.truth.alpha_type_cfm_per_w[n.trim_start_matches("alpha/")])
-        .collect();
-    (s, params)
-}
+#[path = "support/demo_offset.rs"]
+mod demo_offset;
+use demo_offset::demo;
 
 #[test]
 fn jets_release_each_tiles_supply_once_inside_the_room() {
