@@ -66,6 +66,22 @@ pub(crate) fn span_distance(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
     Some((1.0 - cos2.clamp(0.0, 1.0)).sqrt())
 }
 
+/// Whether every direction of `inner` lies in the span of `outer` (both orthonormal
+/// bases), to within a sine of `tol`: a nested hypothesis, the same explanation with
+/// more freedom. False when either basis is empty.
+pub(crate) fn spans_within(inner: &[Vec<f64>], outer: &[Vec<f64>], tol: f64) -> bool {
+    if inner.is_empty() || outer.is_empty() {
+        return false;
+    }
+    inner.iter().all(|v| {
+        let inside: f64 = outer
+            .iter()
+            .map(|q| v.iter().zip(q).map(|(a, b)| a * b).sum::<f64>().powi(2))
+            .sum();
+        (1.0 - inside.clamp(0.0, 1.0)).sqrt() < tol
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,20 +113,4 @@ mod tests {
         assert_abs_diff_eq!(span_distance(&a, &c).unwrap(), 1.0, epsilon = 1e-12);
         assert!(span_distance(&a, &c[..1]).is_none());
     }
-}
-
-/// Whether every direction of `inner` lies in the span of `outer` (both orthonormal
-/// bases), to within a sine of `tol`: a nested hypothesis, the same explanation with
-/// more freedom. False when either basis is empty.
-pub(crate) fn spans_within(inner: &[Vec<f64>], outer: &[Vec<f64>], tol: f64) -> bool {
-    if inner.is_empty() || outer.is_empty() {
-        return false;
-    }
-    inner.iter().all(|v| {
-        let inside: f64 = outer
-            .iter()
-            .map(|q| v.iter().zip(q).map(|(a, b)| a * b).sum::<f64>().powi(2))
-            .sum();
-        (1.0 - inside.clamp(0.0, 1.0)).sqrt() < tol
-    })
 }
