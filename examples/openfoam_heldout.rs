@@ -239,7 +239,6 @@ fn evaluate(
     if let Some(on) = o.model_form {
         ds.model_form = on;
     }
-    let refit_top = o.refit_top;
     let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
         .map_err(|e| format!("diagnosis: {e}"))?;
     let top = d.diagnosis.significant().next();
@@ -276,7 +275,7 @@ fn evaluate(
         "first_three": hyps.iter().take(3).map(summary).collect::<Vec<_>>(),
         "footprint_mae_c": footprint_mae_c,
         "diagnosis_mae_c": d.diagnosis.mae,
-        "refit_top": refit_top,
+        "refit_top": ds.refit_top,
         "ambiguity_check": ds.diagnose.ambiguity_check,
         "model_form": ds.model_form,
         "ambiguous_with": hyps.first().map(|h| h.ambiguous_with.clone()),

@@ -292,9 +292,8 @@ pub fn diagnose(
     };
     // The weights outputs are listed as unexplained by: the numerical uncertainty's
     // alone, so that a far-off output the other physics covers is still shown.
-    let listing_weights: Vec<f64> = match res.model_form() {
-        None => weights.clone(),
-        Some(_) => (0..n)
+    let listing_weights: Option<Vec<f64>> = res.model_form().map(|_| {
+        (0..n)
             .map(|i| {
                 let u = res.uncertainty().map_or(0.0, |u| u[i]);
                 if weight_sigma > 0.0 {
@@ -303,8 +302,8 @@ pub fn diagnose(
                     1.0
                 }
             })
-            .collect(),
-    };
+            .collect()
+    });
     let weigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(&weights).map(|(x, w)| x * w).collect() };
     let unweigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(&weights).map(|(x, w)| x / w).collect() };
     let r_weighted = weigh(raw);
@@ -527,28 +526,25 @@ pub fn diagnose(
         Some(i) => (fits_left[i].0.as_slice(), scale),
         None => (e0.as_slice(), scale),
     };
-    let left_listed: Vec<f64> = left
-        .iter()
-        .zip(&weights)
-        .zip(&listing_weights)
-        .map(|((e, w), l)| e / w * l)
-        .collect();
-    let mut unexplained = unexplained_outputs(
-        &by_output,
-        &output_names,
-        &left_listed,
-        &listing_weights,
-        left_scale,
-    );
-    if let Some(form) = res.model_form() {
-        for u in &mut unexplained {
-            let Some(rows) = by_output.iter().find(|r| output_names[r[0]] == u.output) else {
-                continue;
-            };
-            let ms = rows.iter().map(|&i| form[i] * form[i]).sum::<f64>() / rows.len() as f64;
-            u.model_form_c = Some(ms.sqrt());
+    let unexplained = match &listing_weights {
+        None => unexplained_outputs(&by_output, &output_names, left, &weights, left_scale, None),
+        Some(listing) => {
+            let left_listed: Vec<f64> = left
+                .iter()
+                .zip(&weights)
+                .zip(listing)
+                .map(|((e, w), l)| e / w * l)
+                .collect();
+            unexplained_outputs(
+                &by_output,
+                &output_names,
+                &left_listed,
+                listing,
+                left_scale,
+                res.model_form(),
+            )
         }
-    }
+    };
     results.sort_by(|a, b| {
         b.significant
             .cmp(&a.significant)
@@ -612,13 +608,15 @@ fn undecided_when_ambiguous(
 }
 
 /// Outputs whose weighted residuals `e` are more than [`UNEXPLAINED_SCALES`] times
-/// `scale` off (RMS over their rows), worst first, with their mean unweighted residual.
+/// `scale` off (RMS over their rows), worst first, with their mean unweighted residual
+/// and, given a model-form uncertainty per row, its RMS over their rows.
 fn unexplained_outputs(
     by_output: &[Vec<usize>],
     names: &[&str],
     e: &[f64],
     weights: &[f64],
     scale: f64,
+    model_form: Option<&[f64]>,
 ) -> Vec<UnexplainedOutput> {
     let mut out: Vec<UnexplainedOutput> = by_output
         .iter()
@@ -629,7 +627,8 @@ fn unexplained_outputs(
                 output: names[rows[0]].to_string(),
                 mean_residual: rows.iter().map(|&i| e[i] / weights[i]).sum::<f64>() / m,
                 rms_scales: ms.sqrt(),
-                model_form_c: None,
+                model_form_c: model_form
+                    .map(|u| (rows.iter().map(|&i| u[i] * u[i]).sum::<f64>() / m).sqrt()),
             }
         })
         .filter(|u| u.rms_scales > UNEXPLAINED_SCALES)

@@ -442,7 +442,19 @@ pub fn diagnose_hall_with(
         .collect();
     let mut residuals = Residuals::from_observations(&obs, &base, &jac, space.names())?;
     // Each row's model uncertainty: the finer grid's change (numerical), and the
-    // model-form variants' changes in quadrature.
+    // model-form variants' changes in quadrature, each run at the calibrated point.
+    let list = effect_list(&effects, &values0);
+    let spread_of = |others: &[&dyn EffectSolver]| -> Result<Vec<f64>> {
+        let mut u2 = vec![vec![0.0; n_out]; n_snap];
+        for other in others {
+            let out: Vec<Vec<f64>> = states
+                .par_iter()
+                .map(|st| other.solve(st, &alpha0, &list))
+                .collect::<Result<_>>()?;
+            add_spread(&mut u2, &out, &base);
+        }
+        Ok(measured_sqrt(snaps, &u2))
+    };
     if let Some(factor) = settings.refine_factor {
         if !(factor > 0.0 && factor < 1.0) {
             return Err(Error::Mismatch(format!(
@@ -450,29 +462,14 @@ pub fn diagnose_hall_with(
             )));
         }
         if let Some(fine) = solver.refined(factor)? {
-            let list = effect_list(&effects, &values0);
-            let fine_out: Vec<Vec<f64>> = states
-                .par_iter()
-                .map(|st| fine.solve(st, &alpha0, &list))
-                .collect::<Result<_>>()?;
-            let mut u2 = vec![vec![0.0; n_out]; n_snap];
-            add_spread(&mut u2, &fine_out, &base);
-            residuals = residuals.with_uncertainty(measured_sqrt(snaps, &u2))?;
+            residuals = residuals.with_uncertainty(spread_of(&[fine.as_ref()])?)?;
         }
     }
     if settings.model_form {
         let variants = solver.model_form_variants()?;
         if !variants.is_empty() {
-            let list = effect_list(&effects, &values0);
-            let mut u2 = vec![vec![0.0; n_out]; n_snap];
-            for variant in variants {
-                let out: Vec<Vec<f64>> = states
-                    .par_iter()
-                    .map(|st| variant.solve(st, &alpha0, &list))
-                    .collect::<Result<_>>()?;
-                add_spread(&mut u2, &out, &base);
-            }
-            residuals = residuals.with_model_form(measured_sqrt(snaps, &u2))?;
+            let others: Vec<&dyn EffectSolver> = variants.iter().map(|v| v.as_ref()).collect();
+            residuals = residuals.with_model_form(spread_of(&others)?)?;
         }
     }
     let mut ranked: Vec<refit::Candidate> = Vec::with_capacity(candidates.len());

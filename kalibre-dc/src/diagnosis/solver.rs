@@ -4,7 +4,7 @@
 //! calibrated parameters, so it should be the model that was calibrated.
 
 use crate::effects::Effect;
-use crate::sim::{jets, SimConfig, SimMods, Simulator};
+use crate::sim::{jets, SimConfig, Simulator};
 use crate::snapshots::OperatingState;
 use crate::Result;
 
@@ -34,7 +34,7 @@ pub trait EffectSolver: Sync {
     /// Other plausible readings of the same physics (a model-form ensemble): what each
     /// reads beyond this solver at the calibrated parameters is a sensor's model-form
     /// uncertainty, as the finer grid's is its discretisation error. None by default.
-    fn model_form_variants(&self) -> Result<Vec<Box<dyn EffectSolver>>> {
+    fn model_form_variants(&self) -> Result<Vec<Box<dyn EffectSolver + '_>>> {
         Ok(Vec::new())
     }
 }
@@ -71,19 +71,18 @@ impl EffectSolver for Simulator {
 
     /// The tile jets carried up the cold aisle ([`crate::sim::jets`]): the physics the
     /// built-in model lacks that moves most of its readings against OpenFOAM's.
-    fn model_form_variants(&self) -> Result<Vec<Box<dyn EffectSolver>>> {
-        let sim = Simulator::new(self.hall(), self.config().clone())?;
-        Ok(vec![Box::new(JetSupply { sim })])
+    fn model_form_variants(&self) -> Result<Vec<Box<dyn EffectSolver + '_>>> {
+        Ok(vec![Box::new(JetSupply { sim: self })])
     }
 }
 
 /// The built-in simulator with each tile's supply released up its jet
 /// ([`jets::draw_matched_links`] from the floor), a model-form variant.
-struct JetSupply {
-    sim: Simulator,
+struct JetSupply<'a> {
+    sim: &'a Simulator,
 }
 
-impl EffectSolver for JetSupply {
+impl EffectSolver for JetSupply<'_> {
     fn name(&self) -> String {
         "the built-in simulator with tile jets".into()
     }
@@ -98,13 +97,13 @@ impl EffectSolver for JetSupply {
         alpha_per_server: &[f64],
         effects: &[(&dyn Effect, &[f64])],
     ) -> Result<Vec<f64>> {
-        let hall = self.sim.hall();
-        let mut mods = SimMods::new(hall.cracs.len());
-        for (e, values) in effects {
-            e.modify(values, hall, &mut mods)?;
-        }
-        mods.air_links
-            .extend(jets::draw_matched_links(hall, state, alpha_per_server, 0.0));
+        let mut mods = self.sim.effect_mods(effects)?;
+        mods.air_links.extend(jets::draw_matched_links(
+            self.sim.hall(),
+            state,
+            alpha_per_server,
+            0.0,
+        ));
         self.sim
             .solve_with_mods(state, alpha_per_server, &mods)
             .map(|s| s.sensor_c().to_vec())

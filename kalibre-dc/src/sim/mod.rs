@@ -128,11 +128,18 @@ impl Simulator {
         alpha_per_server: &[f64],
         effects: &[(&dyn Effect, &[f64])],
     ) -> Result<Solution> {
+        let mods = self.effect_mods(effects)?;
+        self.solve_with_mods(state, alpha_per_server, &mods)
+    }
+
+    /// The modifications `effects` at their parameter values ask of a run (what
+    /// [`Self::solve`] passes to [`Self::solve_with_mods`]).
+    pub fn effect_mods(&self, effects: &[(&dyn Effect, &[f64])]) -> Result<SimMods> {
         let mut mods = SimMods::new(self.hall.cracs.len());
         for (e, values) in effects {
             e.modify(values, &self.hall, &mut mods)?;
         }
-        self.solve_with_mods(state, alpha_per_server, &mods)
+        Ok(mods)
     }
 
     /// Solves with explicit modifications (what [`Self::solve`] builds from effects).
