@@ -20,11 +20,13 @@
 //! best parameters once per setting, as `kalibre diagnose` does. Settings: `gaussian`
 //! (least squares, no single-output check: the diagnosis before Student-t), `student-t 4,
 //! no single-output check`, `default` (`HallDiagnosisSettings::default()`: Student-t
-//! nu 4 and the single-output check), `student-t 2` and `student-t 8` (with the check),
-//! `refit 3` and `refit 8` (the default with the 3 or 8 leading hypotheses refit with
-//! the model, `HallDiagnosisSettings::refit_top`), `ambiguity`, `model form` and
-//! `ambiguity and model form` (the default with session 29's options:
-//! `DiagnoseSettings::ambiguity_check`, `HallDiagnosisSettings::model_form`).
+//! nu 4, the single-output check and the ambiguity check), `student-t 2` and `student-t
+//! 8` (with both checks), `refit 3` and `refit 8` (the default with the 3 or 8 leading
+//! hypotheses refit with the model, `HallDiagnosisSettings::refit_top`), `no ambiguity
+//! check` (the default before session 30), `model form` and `model form, no ambiguity
+//! check` (the default with the model-form uncertainty, `HallDiagnosisSettings::model_form`,
+//! with or without `DiagnoseSettings::ambiguity_check`). Every setting but the last two
+//! and `no ambiguity check` has the ambiguity check.
 //! `--settings 'NAME;NAME'` runs only the named settings.
 //!
 //! Verdicts per case and setting: `pass` when the top significant hypothesis is the
@@ -89,9 +91,9 @@ const SETTINGS: [Setting; 10] = [
     setting("student-t 8", Some((Some(8.0), true)), 0, false),
     setting("refit 3", None, 3, false),
     setting("refit 8", None, 8, false),
-    setting("ambiguity", None, 0, false),
+    setting("no ambiguity check", None, 0, false),
     setting("model form", None, 0, false),
-    setting("ambiguity and model form", None, 0, false),
+    setting("model form, no ambiguity check", None, 0, false),
 ];
 
 /// Calibrates one case as `kalibre calibrate` does by default, journal and report in
@@ -117,9 +119,12 @@ fn run_case(
             ds.diagnose.single_output_check = check;
         }
         ds.refit_top = s.refit_top;
-        // Session 29's options, one at a time or both.
-        ds.diagnose.ambiguity_check = s.name.starts_with("ambiguity");
-        ds.model_form = s.name.ends_with("model form");
+        // Session 29's options: the ambiguity check (on by default since session 30)
+        // and the model form.
+        if s.name.ends_with("no ambiguity check") {
+            ds.diagnose.ambiguity_check = false;
+        }
+        ds.model_form = s.name.starts_with("model form");
         let d = diagnose_hall(hall, snaps, &params, &registry, &ds)
             .map_err(|e| format!("diagnosis ({}): {e}", s.name))?;
         let top = d.diagnosis.significant().next();
@@ -144,6 +149,11 @@ fn run_case(
             "refit_top": ds.refit_top,
             "verdict": verdict, "top_significant": top,
             "significant": d.diagnosis.significant().count(),
+            // The close set the ambiguity check left undecided: its best, then the others.
+            "undecided": d.diagnosis.hypotheses.iter()
+                .filter(|h| !h.ambiguous_with.is_empty())
+                .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
+                .map(|h| std::iter::once(&h.name).chain(&h.ambiguous_with).collect::<Vec<_>>()),
             "mae_c": d.diagnosis.mae, "noise_sigma_c": d.diagnosis.noise_sigma,
         }));
     }

@@ -4,8 +4,8 @@
 //! data were made after, to see how far they carry (`docs/diagnosis.md`, "Another
 //! layout"). What holds there is tested here: the built-in model's realism, the CRAC
 //! offset named at its mixed size, and a slot seen by one sensor only reported as
-//! resting on that sensor rather than dropped in silence; and (session 29) the stored
-//! clean hall no longer named wrongly with the model-form and ambiguity options. The
+//! resting on that sensor rather than dropped in silence; and (session 30) the stored
+//! clean hall left undecided by the ambiguity check, where it was named wrongly. The
 //! clean hall's false positives over fresh noise draws and the missed cutout are
 //! measured in the docs, not asserted.
 
@@ -154,18 +154,24 @@ fn a_slot_seen_by_one_sensor_is_reported_as_resting_on_that_sensor() {
 }
 
 #[test]
-fn the_clean_hall_as_stored_is_not_named_wrongly_with_session_29s_options() {
-    // By default a recirculation in A06 or A02 is significant here: the built-in model's
-    // own error against OpenFOAM makes it. With the model-form uncertainty and the
-    // ambiguity check (options since session 29) nothing is named.
-    let d = calibrate_and_diagnose_with("ol2-clean", |s| {
-        s.model_form = true;
-        s.diagnose.ambiguity_check = true;
-    });
+fn the_clean_hall_as_stored_is_left_undecided_not_named_wrongly() {
+    // Without the ambiguity check (the default before session 30) a recirculation in A06
+    // or A02 is significant here: the built-in model's own error against OpenFOAM makes
+    // it. Other places fit about as well, so by default nothing is named and the listing
+    // says which explanations the data cannot choose between.
+    let d = calibrate_and_diagnose_with("ol2-clean", |s| s.diagnose.ambiguity_check = false);
     let named = |d: &HallDiagnosis| d.diagnosis.significant().next().map(|h| h.name.clone());
-    let before = named(&d[0]).unwrap_or_default();
+    assert_eq!(named(&d[0]), None, "{:#?}", &d[0].diagnosis.hypotheses[..3]);
+    assert!(
+        d[0].diagnosis
+            .hypotheses
+            .iter()
+            .any(|h| !h.ambiguous_with.is_empty()),
+        "{:#?}",
+        &d[0].diagnosis.hypotheses[..3]
+    );
+    let before = named(&d[1]).unwrap_or_default();
     assert!(before.starts_with("rack_recirculation"), "{before}");
-    assert_eq!(named(&d[1]), None, "{:#?}", &d[1].diagnosis.hypotheses[..3]);
 }
 
 #[test]
@@ -196,6 +202,18 @@ fn the_cli_says_which_sensor_a_hypothesis_rests_on() {
             && text.contains(r#"if c-A05-11 reads right, add to hall.json "effects": {"kind":"rack_recirculation""#)
             && text.contains("(rack_recirculation(rack=A05) rests on it alone)"),
         "{text}"
+    );
+    // The ambiguity check (on by default) can be turned off; the listing is the same
+    // about the slot's sensor.
+    let off = run(on_slot("diagnose")
+        .arg("--calibration")
+        .arg(dir.join("cal"))
+        .arg("--no-ambiguity-check"));
+    assert!(off.status.success(), "{}", stderr(&off));
+    assert!(
+        String::from_utf8_lossy(&off.stdout).contains("rests on one sensor, c-A05-11"),
+        "{}",
+        String::from_utf8_lossy(&off.stdout)
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,6 +1,7 @@
 //! The ambiguity check: two explanations of different footprints that fit equally well
 //! leave the diagnosis undecided; one that is clearly better, or two of the same
-//! footprint, do not.
+//! footprint, or two that change the same readings alike (as a bypass behind the next
+//! rack), do not.
 
 use kalibre_core::diagnose::{
     diagnose, DiagnoseSettings, Diagnosis, Hypothesis, HypothesisParam, Residuals, RowInfo,
@@ -146,4 +147,43 @@ fn two_placements_of_one_footprint_are_not_ambiguous() {
     let named: Vec<&str> = on.significant().map(|h| h.name.as_str()).collect();
     assert_eq!(named, ["b2"], "{on:#?}");
     assert!(on.hypotheses.iter().all(|h| h.ambiguous_with.is_empty()));
+}
+
+/// Two explanations at `angle_cos` to each other (not collinear), with the residual
+/// half-way between them: both fit equally, each explaining `angle_cos` of what the
+/// other does.
+fn two_at_angle(angle_cos: f64) -> Diagnosis {
+    let s = setup(11);
+    let sin = (1.0 - angle_cos * angle_cos).sqrt();
+    let near: Vec<f64> =
+        s.b.iter()
+            .zip(&s.a)
+            .map(|(b, a)| angle_cos * b + sin * a)
+            .collect();
+    let mid = normalised(s.b.iter().zip(&near).map(|(b, n)| b + n).collect());
+    let r: Vec<f64> = (0..s.j.len())
+        .map(|i| 0.2 * s.j[i] - 2.0 * mid[i] + s.noise[i])
+        .collect();
+    let res = Residuals::new(rows(), r, column(&s.j), vec!["alpha".into()]).unwrap();
+    let hyps = [hyp("here", &s.b), hyp("next door", &near)];
+    let d = diagnose(&res, &hyps, &settings(true)).unwrap();
+    assert!(
+        (get(&d, "here").delta_bic - get(&d, "next door").delta_bic).abs() < 1.0,
+        "{d:#?}"
+    );
+    assert!(get(&d, "here").delta_bic < -10.0, "{d:#?}");
+    assert!(get(&d, "here").collinear_with.is_empty(), "{d:#?}");
+    d
+}
+
+#[test]
+fn explanations_that_change_the_same_readings_alike_are_one_footprint() {
+    // At cosine 0.95 both say the same readings moved the same way: one is named.
+    let alike = two_at_angle(0.95);
+    assert_eq!(alike.significant().count(), 2, "{alike:#?}");
+    assert!(alike.hypotheses.iter().all(|h| h.ambiguous_with.is_empty()));
+    // At 0.7 they tell different stories about the data: undecided.
+    let apart = two_at_angle(0.7);
+    assert_eq!(apart.significant().count(), 0, "{apart:#?}");
+    assert_eq!(get(&apart, "here").ambiguous_with, ["next door"]);
 }

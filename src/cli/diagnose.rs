@@ -67,11 +67,11 @@ pub struct DiagnoseArgs {
     /// any one sensor left out, so that one sensor the model misses cannot carry it).
     #[arg(long)]
     no_single_output_check: bool,
-    /// Name no explanation when another of a different footprint fits about as well as
-    /// the best (BIC within 6): list them as undecided, since the data then say that
-    /// something is missing but not which.
+    /// Name the best explanation even when another of a different footprint fits about
+    /// as well (BIC within 6). By default both are listed as undecided: the data then
+    /// say that something is missing, not which.
     #[arg(long)]
-    ambiguity_check: bool,
+    no_ambiguity_check: bool,
     /// Count the built-in model's tile-jet variant (each tile's supply carried up the
     /// cold aisle, physics the model lacks) in each sensor's model uncertainty, beside its
     /// grid error. No effect with `--model openfoam`.
@@ -241,7 +241,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         ..HallDiagnosisSettings::default()
     };
     settings.diagnose.single_output_check = !args.no_single_output_check;
-    settings.diagnose.ambiguity_check = args.ambiguity_check;
+    settings.diagnose.ambiguity_check = !args.no_ambiguity_check;
     settings.model_form = args.model_form;
     settings.diagnose.robust_nu = robust_nu;
     if args.refit > 0 && args.refit_iterations == 0 {

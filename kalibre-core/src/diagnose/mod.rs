@@ -35,10 +35,12 @@
 //!   still prefer it: BIC change below 0, so no one sensor carries it alone);
 //!   among alternatives collinear with each other only the best is significant (the
 //!   lowest BIC, or within 6 of it the most modest fitted change relative to its range);
-//! - **undecided** (with [`DiagnoseSettings::ambiguity_check`], off by default): when another significant
-//!   hypothesis of a different footprint (not collinear) has a BIC within 6 of the
-//!   best's, the evidence between them is short of "strong", so none is significant and
-//!   each lists the others in [`HypothesisResult::ambiguous_with`].
+//! - **undecided** (with [`DiagnoseSettings::ambiguity_check`], on by default): when
+//!   another significant hypothesis of a different footprint (not collinear, and its fit
+//!   changes other readings: the cosine between the two fits' explained changes below
+//!   0.9) has a BIC within 6 of the best's, the evidence between them is short of
+//!   "strong", so none is significant and each lists the others in
+//!   [`HypothesisResult::ambiguous_with`].
 //!
 //! A known model uncertainty per row ([`Residuals::with_uncertainty`], e.g. the model's
 //! own grid error) weighs each row by `sigma / sqrt(sigma^2 + u^2)` in every fit and test,
@@ -98,6 +100,12 @@ const MODESTY_WINDOW_BIC: f64 = 6.0;
 /// reported as a close alternative: 6, as `MODESTY_WINDOW_BIC`; below it the evidence
 /// between the two is at most "positive" on the Kass-Raftery scale, not "strong".
 pub const CLOSE_ALTERNATIVE_BIC: f64 = MODESTY_WINDOW_BIC;
+
+/// Two fits whose explained changes have at least this cosine (an angle below 26
+/// degrees) explain one footprint, and the ambiguity check does not count them as
+/// rivals. A bypass behind the next rack measured 0.93 on `demo`; rivals that explain
+/// different readings, 0.02-0.7 (`docs/diagnosis.md`, "Session 30").
+const ALIKE_EXPLANATION_COS: f64 = 0.9;
 
 /// An output is reported as unexplained when its residuals, after the best explanation,
 /// are this many scales of the likelihood off (RMS over its rows). A Student-t with 4
@@ -508,13 +516,16 @@ pub fn diagnose(
         r.significant &= k;
     }
     if settings.ambiguity_check {
-        // A hypothesis nested in another (or containing it) is the same explanation.
-        let nested = |a: usize, b: usize| {
+        // A hypothesis nested in another (or containing it) is the same explanation; so
+        // is one whose fit changes the same readings the same way (another label for
+        // one footprint, as a bypass behind the next rack).
+        let same_explanation = |a: usize, b: usize| {
             let (pa, pb) = (&perps[a].basis, &perps[b].basis);
             identify::spans_within(pa, pb, settings.min_independence)
                 || identify::spans_within(pb, pa, settings.min_independence)
+                || explanation_cosine(e0, &fits_left[a].0, &fits_left[b].0) >= ALIKE_EXPLANATION_COS
         };
-        undecided_when_ambiguous(&mut results, nested);
+        undecided_when_ambiguous(&mut results, same_explanation);
     }
     // What the best significant hypothesis (else the current parameters) leaves.
     let best = (0..results.len())
@@ -567,15 +578,33 @@ pub fn diagnose(
     })
 }
 
+/// The cosine between what two fits explain: the current parameters' refit's residuals
+/// `e0` less each fit's residuals `left_a`, `left_b` (1: the same change of the same
+/// readings; 0: changes of different readings).
+fn explanation_cosine(e0: &[f64], left_a: &[f64], left_b: &[f64]) -> f64 {
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for ((e, a), b) in e0.iter().zip(left_a).zip(left_b) {
+        let (da, db) = (e - a, e - b);
+        ab += da * db;
+        aa += da * da;
+        bb += db * db;
+    }
+    if aa > 0.0 && bb > 0.0 {
+        ab / (aa * bb).sqrt()
+    } else {
+        0.0
+    }
+}
+
 /// When another significant explanation, neither collinear with the best nor nested
-/// with it (another footprint), fits within [`CLOSE_ALTERNATIVE_BIC`] of it, the data
-/// cannot say which one is missing: every significant hypothesis is left undecided (not
-/// significant), each listing the others of that close set in `ambiguous_with`.
-/// `results` are in the hypotheses' order; `nested(i, j)` says whether the two spans
-/// nest.
+/// with it, nor changing the same readings alike (another footprint), fits within
+/// [`CLOSE_ALTERNATIVE_BIC`] of it, the data cannot say which one is missing: every
+/// significant hypothesis is left undecided (not significant), each listing the others
+/// of that close set in `ambiguous_with`. `results` are in the hypotheses' order;
+/// `same_explanation(i, j)` says whether the two are one footprint.
 fn undecided_when_ambiguous(
     results: &mut [HypothesisResult],
-    nested: impl Fn(usize, usize) -> bool,
+    same_explanation: impl Fn(usize, usize) -> bool,
 ) {
     let Some(best) = (0..results.len())
         .filter(|&i| results[i].significant)
@@ -591,7 +620,7 @@ fn undecided_when_ambiguous(
             h.significant
                 && *j != best
                 && !b.collinear_with.contains(&h.name)
-                && !nested(best, *j)
+                && !same_explanation(best, *j)
                 && h.delta_bic < b.delta_bic + CLOSE_ALTERNATIVE_BIC
         })
         .map(|(_, h)| h.name.clone())

@@ -16,7 +16,7 @@ use crate::{Error, Result};
 /// | `prior_weight` | 0 | ridge on the hypothesis's parameters: adds `prior_weight * (dq_j / s_j)^2` in noise-sigma units, `s_j` the larger magnitude of its bounds (a Gaussian prior of that scale); 0: plain least squares | finite, >= 0 |
 /// | `robust_nu` | 4 | degrees of freedom of the Student-t likelihood every fit, BIC and held-out check uses, so that a few outputs the model misses for reasons no hypothesis names (its own physics, a faulty sensor) do not decide the ranking; none: Gaussian (least squares) | finite, > 0 |
 /// | `single_output_check` | true | a significant hypothesis must still be preferred (BIC change below 0) with any one output (all its snapshots) left out, so that a model error at one sensor (or a faulty sensor) cannot carry it alone | |
-/// | `ambiguity_check` | false | when another significant hypothesis, not collinear with the best (another footprint), has a BIC within 6 of the best's, none is significant: each lists the others in `ambiguous_with` (the data say something is missing, not which) | |
+/// | `ambiguity_check` | true | when another significant hypothesis of another footprint (not collinear with the best, and its fit changing other readings: cosine of the explained changes below 0.9) has a BIC within 6 of the best's, none is significant: each lists the others in `ambiguous_with` (the data say something is missing, not which) | |
 /// | `output_folds` | 5 | folds of the held-out check over outputs when there is one snapshot (with two or more: leave one snapshot out) | >= 2 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnoseSettings {
@@ -42,7 +42,7 @@ pub struct DiagnoseSettings {
     pub robust_nu: Option<f64>,
     /// Whether a best explanation that another explanation of a different footprint
     /// fits about as well is left undecided (see the module documentation).
-    #[serde(default)]
+    #[serde(default = "default_true")]
     pub ambiguity_check: bool,
 }
 
@@ -66,7 +66,7 @@ impl Default for DiagnoseSettings {
             output_folds: 5,
             single_output_check: true,
             robust_nu: default_robust_nu(),
-            ambiguity_check: false,
+            ambiguity_check: true,
         }
     }
 }
