@@ -150,10 +150,7 @@ fn run_case(
             "verdict": verdict, "top_significant": top,
             "significant": d.diagnosis.significant().count(),
             // The close set the ambiguity check left undecided: its best, then the others.
-            "undecided": d.diagnosis.hypotheses.iter()
-                .filter(|h| !h.ambiguous_with.is_empty())
-                .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
-                .map(|h| std::iter::once(&h.name).chain(&h.ambiguous_with).collect::<Vec<_>>()),
+            "undecided": d.diagnosis.undecided(),
             "mae_c": d.diagnosis.mae, "noise_sigma_c": d.diagnosis.noise_sigma,
         }));
     }

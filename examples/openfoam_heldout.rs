@@ -278,7 +278,8 @@ fn evaluate(
         "refit_top": ds.refit_top,
         "ambiguity_check": ds.diagnose.ambiguity_check,
         "model_form": ds.model_form,
-        "ambiguous_with": hyps.first().map(|h| h.ambiguous_with.clone()),
+        // The close set the ambiguity check left undecided: its best, then the others.
+        "undecided": d.diagnosis.undecided(),
         "refits": d.refits,
         "calibration": {
             "best_mae_c": cal.report.best.mae_c, "model_runs": cal.report.runs.total,

@@ -91,22 +91,6 @@ fn readings_with(
     })
 }
 
-/// The explanations the diagnosis is undecided between: its best undecided one first.
-fn undecided(d: &HallDiagnosis) -> Vec<String> {
-    d.diagnosis
-        .hypotheses
-        .iter()
-        .filter(|h| !h.ambiguous_with.is_empty())
-        .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
-        .map(|h| {
-            std::iter::once(&h.name)
-                .chain(&h.ambiguous_with)
-                .cloned()
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
 /// The top significant hypothesis and its fitted parameter.
 fn top(d: &HallDiagnosis, param: &str) -> Option<(String, f64)> {
     let i = d.diagnosis.hypotheses.iter().position(|h| h.significant)?;
@@ -200,9 +184,9 @@ fn openfoam_diagnosis_finds_the_cutout_and_the_slot_and_nothing_on_the_clean_hal
         "named: {:?}",
         top(&d, "fraction")
     );
-    let undecided = undecided(&d);
+    let undecided = d.diagnosis.undecided();
     assert!(
-        undecided.iter().any(|n| n == "bypass(behind_rack=B3)"),
+        undecided.contains(&"bypass(behind_rack=B3)"),
         "undecided between {undecided:?}"
     );
     let i = d

@@ -315,20 +315,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         d.diagnosis.mae
     );
     let significant: Vec<_> = d.diagnosis.significant().collect();
-    // The close set: the best undecided hypothesis and those it could not be told from
-    // (others beyond the window were left undecided because these are).
-    let undecided: Vec<&str> = d
-        .diagnosis
-        .hypotheses
-        .iter()
-        .filter(|h| !h.ambiguous_with.is_empty())
-        .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
-        .map(|best| {
-            std::iter::once(best.name.as_str())
-                .chain(best.ambiguous_with.iter().map(String::as_str))
-                .collect()
-        })
-        .unwrap_or_default();
+    let undecided = d.diagnosis.undecided();
     if !undecided.is_empty() {
         println!(
             "  no effect decided: {} fit about as well (BIC within {CLOSE_ALTERNATIVE_BIC:.0}), \

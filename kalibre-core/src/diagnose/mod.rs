@@ -82,6 +82,8 @@ pub use heldout::HeldOutScheme;
 pub use input::{measured_rows, Hypothesis, HypothesisParam, Residuals, RowInfo};
 pub use settings::DiagnoseSettings;
 
+use std::borrow::Cow;
+
 use serde::{Deserialize, Serialize};
 
 use crate::calibrate::NamedValues;
@@ -190,6 +192,23 @@ impl Diagnosis {
             .collect();
         close.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
         close
+    }
+
+    /// The explanations the ambiguity check left undecided between, best first (empty
+    /// when it decided): the best undecided hypothesis and those it could not be told
+    /// from. Others beyond that window that were left undecided because these are list
+    /// the set in their `ambiguous_with` but are not in it.
+    pub fn undecided(&self) -> Vec<&str> {
+        self.hypotheses
+            .iter()
+            .filter(|h| !h.ambiguous_with.is_empty())
+            .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
+            .map(|best| {
+                std::iter::once(best.name.as_str())
+                    .chain(best.ambiguous_with.iter().map(String::as_str))
+                    .collect()
+            })
+            .unwrap_or_default()
     }
 }
 
@@ -537,25 +556,26 @@ pub fn diagnose(
         Some(i) => (fits_left[i].0.as_slice(), scale),
         None => (e0.as_slice(), scale),
     };
-    let unexplained = match &listing_weights {
-        None => unexplained_outputs(&by_output, &output_names, left, &weights, left_scale, None),
-        Some(listing) => {
-            let left_listed: Vec<f64> = left
-                .iter()
+    // Re-weighed by the listing weights when those differ from the fits'.
+    let (left, listing): (Cow<[f64]>, &[f64]) = match &listing_weights {
+        None => (Cow::Borrowed(left), &weights),
+        Some(listing) => (
+            left.iter()
                 .zip(&weights)
                 .zip(listing)
                 .map(|((e, w), l)| e / w * l)
-                .collect();
-            unexplained_outputs(
-                &by_output,
-                &output_names,
-                &left_listed,
-                listing,
-                left_scale,
-                res.model_form(),
-            )
-        }
+                .collect(),
+            listing,
+        ),
     };
+    let unexplained = unexplained_outputs(
+        &by_output,
+        &output_names,
+        &left,
+        listing,
+        left_scale,
+        res.model_form(),
+    );
     results.sort_by(|a, b| {
         b.significant
             .cmp(&a.significant)
@@ -619,9 +639,9 @@ fn undecided_when_ambiguous(
         .filter(|(j, h)| {
             h.significant
                 && *j != best
+                && h.delta_bic < b.delta_bic + CLOSE_ALTERNATIVE_BIC
                 && !b.collinear_with.contains(&h.name)
                 && !same_explanation(best, *j)
-                && h.delta_bic < b.delta_bic + CLOSE_ALTERNATIVE_BIC
         })
         .map(|(_, h)| h.name.clone())
         .collect();

@@ -126,6 +126,13 @@ pub struct Tile {
     pub extra: Option<serde_json::Value>,
 }
 
+impl Tile {
+    /// Open area (m2): the tiles share the floor supply in proportion to it.
+    pub fn open_area_m2(&self) -> f64 {
+        self.size_m[0] * self.size_m[1] * self.open_fraction
+    }
+}
+
 /// A ceiling return grille.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -79,11 +79,7 @@ impl RunInputs {
                     q * (state.setpoint_c[c] + supply_offset_c.get(c).copied().unwrap_or(0.0));
             }
         }
-        let weights: Vec<f64> = hall
-            .tiles
-            .iter()
-            .map(|t| t.size_m[0] * t.size_m[1] * t.open_fraction)
-            .collect();
+        let weights: Vec<f64> = hall.tiles.iter().map(|t| t.open_area_m2()).collect();
         let w_sum: f64 = weights.iter().sum();
         let supplied = floor_q > 0.0 && w_sum > 0.0;
         if !hall.tiles.is_empty() && !supplied {

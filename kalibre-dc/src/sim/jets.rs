@@ -19,8 +19,9 @@ const BAND_M: f64 = 0.2;
 /// How far (m) beyond a tile's edge a server's intake face still draws from its jet.
 const FACING_M: f64 = 0.5;
 
-/// Each tile's share of the supply in `state` (m3/s): the CRACs' flow split by open
-/// area, as the simulator splits it.
+/// Each tile's share of the supply in `state` (m3/s): every CRAC's flow split by open
+/// area. The simulator splits the floor CRACs' flow so, less what supply openings
+/// take; the two agree on halls with floor CRACs only and no bypass effect.
 pub fn tile_flows_m3_s(hall: &Hall, state: &OperatingState) -> Vec<f64> {
     let supply_m3_s: f64 = hall
         .cracs
@@ -28,13 +29,12 @@ pub fn tile_flows_m3_s(hall: &Hall, state: &OperatingState) -> Vec<f64> {
         .zip(&state.fan_speed)
         .map(|(c, f)| c.rated_flow_m3_s * f)
         .sum();
-    let weight = |t: &crate::hall::Tile| t.size_m[0] * t.size_m[1] * t.open_fraction;
-    let total: f64 = hall.tiles.iter().map(weight).sum();
+    let total: f64 = hall.tiles.iter().map(|t| t.open_area_m2()).sum();
     hall.tiles
         .iter()
         .map(|t| {
             if total > 0.0 {
-                supply_m3_s * weight(t) / total
+                supply_m3_s * t.open_area_m2() / total
             } else {
                 0.0
             }

@@ -116,11 +116,7 @@ impl Topology {
         let has_returns = !hall.returns.is_empty();
 
         let mut tiles = Vec::with_capacity(hall.tiles.len());
-        let total_open: f64 = hall
-            .tiles
-            .iter()
-            .map(|t| t.size_m[0] * t.size_m[1] * t.open_fraction)
-            .sum();
+        let total_open: f64 = hall.tiles.iter().map(|t| t.open_area_m2()).sum();
         for (ti, t) in hall.tiles.iter().enumerate() {
             let b = Aabb {
                 min: [t.position_m[0], t.position_m[1], 0.0],
@@ -145,7 +141,7 @@ impl Topology {
                 )));
             }
             let w = 1.0 / cells.len() as f64;
-            let share = t.size_m[0] * t.size_m[1] * t.open_fraction / total_open;
+            let share = t.open_area_m2() / total_open;
             tiles.push((cells.into_iter().map(|c| (c, w)).collect(), share));
         }
 

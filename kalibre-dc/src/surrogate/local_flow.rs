@@ -125,7 +125,7 @@ impl LocalRecirculationTerm {
                     t.position_m[1] + 0.5 * t.size_m[1],
                     0.0,
                 ];
-                (c, t.size_m[0] * t.size_m[1] * t.open_fraction)
+                (c, t.open_area_m2())
             })
             .collect();
         openings.extend(
