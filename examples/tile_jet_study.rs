@@ -126,7 +126,7 @@ fn lifted_supply(
     to_top_m: Option<f64>,
 ) -> SimMods {
     let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
-    let tile_flow_m3_s = jets::tile_flows_m3_s(hall, state);
+    let tile_flow_m3_s = jets::tile_flows_m3_s(hall, state, 0.0);
     let mut mods = SimMods::new(hall.cracs.len());
     for (t, flow_m3_s) in hall.tiles.iter().zip(tile_flow_m3_s) {
         let ([x, y], [sx, sy]) = (t.position_m, t.size_m);
@@ -148,7 +148,7 @@ fn lifted_supply(
 /// The jet consumed from below ([`jets::draw_matched_links`]) as a run's modifications.
 fn draw_matched_supply(hall: &Hall, state: &OperatingState, alpha: &[f64], from_m: f64) -> SimMods {
     let mut mods = SimMods::new(hall.cracs.len());
-    mods.air_links = jets::draw_matched_links(hall, state, alpha, from_m);
+    mods.air_links = jets::draw_matched_links(hall, state, alpha, from_m, 0.0);
     mods
 }
 

@@ -4,6 +4,7 @@
 
 use kalibre_dc::diagnosis::{diagnose_hall, EffectSolver, HallDiagnosisSettings};
 use kalibre_dc::effects::EffectRegistry;
+use kalibre_dc::hall::SupplyKind;
 use kalibre_dc::sim::jets::{draw_matched_links, tile_flows_m3_s};
 use kalibre_dc::sim::Simulator;
 use kalibre_dc::HallModel;
@@ -26,10 +27,10 @@ fn jets_release_each_tiles_supply_once_inside_the_room() {
             .zip(&state.fan_speed)
             .map(|(c, f)| c.rated_flow_m3_s * f)
             .sum();
-        let tiles = tile_flows_m3_s(hall, state);
+        let tiles = tile_flows_m3_s(hall, state, 0.0);
         let total: f64 = tiles.iter().sum();
         assert!((total - supply_m3_s).abs() < 1e-12 * supply_m3_s);
-        let links = draw_matched_links(hall, state, &alpha, 0.0);
+        let links = draw_matched_links(hall, state, &alpha, 0.0, 0.0);
         let released: f64 = links.iter().map(|l| l.flow_m3_s).sum();
         assert!(
             (released - supply_m3_s).abs() < 1e-9 * supply_m3_s,
@@ -55,6 +56,32 @@ fn jets_release_each_tiles_supply_once_inside_the_room() {
             assert!(l.to.min[2] >= l.from.min[2]);
         }
     }
+}
+
+#[test]
+fn tiles_deliver_what_front_supply_and_openings_leave() {
+    // As the simulator splits the supply: front-supply CRACs blow through their fronts,
+    // and openings (bypass effects) take their share of every CRAC's flow.
+    let (s, _) = demo();
+    let mut hall = s.hall.clone();
+    hall.cracs[0].supply = SupplyKind::Front;
+    let state = &s.snapshots[0].state;
+    let flows: Vec<f64> = hall
+        .cracs
+        .iter()
+        .zip(&state.fan_speed)
+        .map(|(c, f)| c.rated_flow_m3_s * f)
+        .collect();
+    let supply_m3_s: f64 = flows.iter().sum();
+    let opening_share = 0.1;
+    let tiles: f64 = tile_flows_m3_s(&hall, state, opening_share).iter().sum();
+    let fronts = (1.0 - opening_share) * flows[0];
+    let openings = opening_share * supply_m3_s;
+    assert!(
+        (tiles + fronts + openings - supply_m3_s).abs() < 1e-12 * supply_m3_s,
+        "tiles {tiles} + fronts {fronts} + openings {openings} vs supply {supply_m3_s} m3/s"
+    );
+    assert!(tiles < (1.0 - opening_share) * supply_m3_s - 0.1);
 }
 
 #[test]

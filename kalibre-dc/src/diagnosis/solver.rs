@@ -98,11 +98,13 @@ impl EffectSolver for JetSupply<'_> {
         effects: &[(&dyn Effect, &[f64])],
     ) -> Result<Vec<f64>> {
         let mut mods = self.sim.effect_mods(effects)?;
+        let opening_share = mods.supply_opening_share();
         mods.air_links.extend(jets::draw_matched_links(
             self.sim.hall(),
             state,
             alpha_per_server,
             0.0,
+            opening_share,
         ));
         self.sim
             .solve_with_mods(state, alpha_per_server, &mods)

@@ -10,7 +10,7 @@
 //! fan speed and on wide tiles, so it is not the model's physics: the diagnosis uses the
 //! difference it makes as one sensor's model-form uncertainty.
 
-use crate::hall::{face_centre, Aabb, Hall};
+use crate::hall::{face_centre, Aabb, Hall, SupplyKind};
 use crate::sim::{AirLink, M3_S_PER_CFM};
 use crate::snapshots::OperatingState;
 
@@ -19,22 +19,25 @@ const BAND_M: f64 = 0.2;
 /// How far (m) beyond a tile's edge a server's intake face still draws from its jet.
 const FACING_M: f64 = 0.5;
 
-/// Each tile's share of the supply in `state` (m3/s): every CRAC's flow split by open
-/// area. The simulator splits the floor CRACs' flow so, less what supply openings
-/// take; the two agree on halls with floor CRACs only and no bypass effect.
-pub fn tile_flows_m3_s(hall: &Hall, state: &OperatingState) -> Vec<f64> {
-    let supply_m3_s: f64 = hall
+/// Each tile's share of the supply in `state` (m3/s), as the simulator splits it: the
+/// floor CRACs' flow less the share `opening_share` that supply openings (bypass
+/// effects, [`crate::sim::SimMods::supply_opening_share`]) take, by open area. Front-supply CRACs
+/// blow through their own front, not the tiles.
+pub fn tile_flows_m3_s(hall: &Hall, state: &OperatingState, opening_share: f64) -> Vec<f64> {
+    let floor_m3_s: f64 = hall
         .cracs
         .iter()
         .zip(&state.fan_speed)
+        .filter(|(c, _)| c.supply == SupplyKind::Floor)
         .map(|(c, f)| c.rated_flow_m3_s * f)
         .sum();
+    let through_tiles_m3_s = (1.0 - opening_share) * floor_m3_s;
     let total: f64 = hall.tiles.iter().map(|t| t.open_area_m2()).sum();
     hall.tiles
         .iter()
         .map(|t| {
             if total > 0.0 {
-                supply_m3_s * t.open_area_m2() / total
+                through_tiles_m3_s * t.open_area_m2() / total
             } else {
                 0.0
             }
@@ -46,19 +49,25 @@ pub fn tile_flows_m3_s(hall: &Hall, state: &OperatingState) -> Vec<f64> {
 /// (cfm/W): per tile and 0.2 m band from `from_m` to the tallest rack's top, a link from
 /// the tile's floor layer releasing what the servers facing the tile draw in that band
 /// (their flow spread evenly over their height, shared between the tiles in front of
-/// them by overlap along the row), while the tile's supply lasts; the rest in the 0.4 m
-/// above the tallest rack.
+/// them by overlap along the row), while the tile's supply ([`tile_flows_m3_s`], with
+/// `opening_share` of the supply taken by openings) lasts; the rest in the 0.4 m above
+/// the tallest rack.
 pub fn draw_matched_links(
     hall: &Hall,
     state: &OperatingState,
     alpha_per_server: &[f64],
     from_m: f64,
+    opening_share: f64,
 ) -> Vec<AirLink> {
     let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
     let overlap = |a0: f64, a1: f64, b0: f64, b1: f64| (a1.min(b1) - a0.max(b0)).max(0.0);
     let n_bands = ((rack_top_m - from_m) / BAND_M).round().max(1.0) as usize;
     let mut links = Vec::new();
-    for (t, mut left) in hall.tiles.iter().zip(tile_flows_m3_s(hall, state)) {
+    for (t, mut left) in hall
+        .tiles
+        .iter()
+        .zip(tile_flows_m3_s(hall, state, opening_share))
+    {
         let ([x, y], [sx, sy]) = (t.position_m, t.size_m);
         let mut draw = vec![0.0; n_bands];
         for s in hall.servers() {

@@ -111,6 +111,12 @@ pub struct SimMods {
 }
 
 impl SimMods {
+    /// The share of the supply the extra openings take (the tiles and CRAC fronts
+    /// deliver the rest).
+    pub fn supply_opening_share(&self) -> f64 {
+        self.supply_openings.iter().map(|o| o.share).sum()
+    }
+
     /// No modification, for a hall with `cracs` CRACs.
     pub fn new(cracs: usize) -> Self {
         SimMods {

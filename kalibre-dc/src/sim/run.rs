@@ -153,7 +153,7 @@ pub(super) fn solve_keeping(
     let crac_t: Vec<f64> = (0..hall.cracs.len())
         .map(|k| state.setpoint_c[k] + mods.supply_offset_c.get(k).copied().unwrap_or(0.0))
         .collect();
-    let open_share: f64 = mods.supply_openings.iter().map(|o| o.share).sum();
+    let open_share = mods.supply_opening_share();
     if !(0.0..1.0).contains(&open_share)
         || mods
             .supply_openings
