@@ -20,13 +20,14 @@
 //! best parameters once per setting, as `kalibre diagnose` does. Settings: `gaussian`
 //! (least squares, no single-output check: the diagnosis before Student-t), `student-t 4,
 //! no single-output check`, `default` (`HallDiagnosisSettings::default()`: Student-t
-//! nu 4, the single-output check and the ambiguity check), `student-t 2` and `student-t
+//! nu 4, the single-output check, the ambiguity check and the model form), `student-t 2` and `student-t
 //! 8` (with both checks), `refit 3` and `refit 8` (the default with the 3 or 8 leading
 //! hypotheses refit with the model, `HallDiagnosisSettings::refit_top`), `no ambiguity
-//! check` (the default before session 30), `model form` and `model form, no ambiguity
-//! check` (the default with the model-form uncertainty, `HallDiagnosisSettings::model_form`,
-//! with or without `DiagnoseSettings::ambiguity_check`). Every setting but the last two
-//! and `no ambiguity check` has the ambiguity check.
+//! check` (the default without `DiagnoseSettings::ambiguity_check`), `no model form` (the
+//! default of session 30: without the model-form uncertainty,
+//! `HallDiagnosisSettings::model_form`) and `no model form, no ambiguity check` (the
+//! default before session 30). Every setting but those named `no model form` has the
+//! model form, and every setting but those named `no ambiguity check` the ambiguity check.
 //! `--settings 'NAME;NAME'` runs only the named settings.
 //!
 //! Verdicts per case and setting: `pass` when the top significant hypothesis is the
@@ -92,8 +93,8 @@ const SETTINGS: [Setting; 10] = [
     setting("refit 3", None, 3, false),
     setting("refit 8", None, 8, false),
     setting("no ambiguity check", None, 0, false),
-    setting("model form", None, 0, false),
-    setting("model form, no ambiguity check", None, 0, false),
+    setting("no model form", None, 0, false),
+    setting("no model form, no ambiguity check", None, 0, false),
 ];
 
 /// Calibrates one case as `kalibre calibrate` does by default, journal and report in
@@ -120,11 +121,11 @@ fn run_case(
         }
         ds.refit_top = s.refit_top;
         // Session 29's options: the ambiguity check (on by default since session 30)
-        // and the model form.
+        // and the model form (on by default since session 31).
         if s.name.ends_with("no ambiguity check") {
             ds.diagnose.ambiguity_check = false;
         }
-        ds.model_form = s.name.starts_with("model form");
+        ds.model_form = !s.name.starts_with("no model form");
         let d = diagnose_hall(hall, snaps, &params, &registry, &ds)
             .map_err(|e| format!("diagnosis ({}): {e}", s.name))?;
         let top = d.diagnosis.significant().next();
@@ -152,6 +153,7 @@ fn run_case(
             // The close set the ambiguity check left undecided: its best, then the others.
             "undecided": d.diagnosis.undecided(),
             "mae_c": d.diagnosis.mae, "noise_sigma_c": d.diagnosis.noise_sigma,
+            "model_form_share": d.diagnosis.model_form_share,
         }));
     }
     Ok(json!({

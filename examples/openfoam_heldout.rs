@@ -278,6 +278,7 @@ fn evaluate(
         "refit_top": ds.refit_top,
         "ambiguity_check": ds.diagnose.ambiguity_check,
         "model_form": ds.model_form,
+        "model_form_share": d.diagnosis.model_form_share,
         // The close set the ambiguity check left undecided: its best, then the others.
         "undecided": d.diagnosis.undecided(),
         "refits": d.refits,

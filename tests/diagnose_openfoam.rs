@@ -63,20 +63,27 @@ fn clean_hall_names_nothing() {
     );
     // What it does say: the four row-end low inlets are off for a reason no candidate
     // names (the model reads them too cold: OpenFOAM's recirculation round the row ends).
-    let mut off: Vec<(&str, f64)> = d
+    let off: Vec<(&str, f64)> = d
         .diagnosis
         .unexplained
         .iter()
         .map(|u| (u.output.as_str(), u.mean_residual))
         .collect();
-    off.sort_by(|a, b| a.0.cmp(b.0));
-    let names: Vec<&str> = off.iter().map(|o| o.0).collect();
-    assert_eq!(
-        names,
-        ["c-A1-lo", "c-A5-lo", "c-B1-lo", "c-B5-lo"],
+    let row_ends = ["c-A1-lo", "c-A5-lo", "c-B1-lo", "c-B5-lo"];
+    for s in row_ends {
+        let o = off.iter().find(|o| o.0 == s);
+        assert!(o.is_some_and(|o| o.1 < -2.0), "{s}: {off:?}");
+    }
+    // Anything else listed is well off too, not noise (0.15 C): with the model-form
+    // uncertainty weighing the row ends down, `h-B5` (+1.45 C) joins them.
+    assert!(
+        off.iter()
+            .all(|o| row_ends.contains(&o.0) || o.1.abs() > 1.0),
         "{off:?}"
     );
-    assert!(off.iter().all(|o| o.1 < -2.0), "{off:?}");
+    // The tile-jet variant is borne out by the residuals here: the model's own physics.
+    let share = d.diagnosis.model_form_share.expect("a model-form variant");
+    assert!(share > 0.5, "share {share}");
 }
 
 #[test]
@@ -125,8 +132,8 @@ fn cable_cutout_is_not_misnamed() {
 fn least_squares_misses_what_the_robust_diagnosis_names() {
     // The reason for the Student-t likelihood: under least squares the four row-end
     // inlets the built-in model misses drown the CRAC offset.
-    // (The model-form uncertainty of session 29, an option, weighs those same inlets
-    // down too, and least squares then finds the offset: it stays off here.)
+    // (The model-form uncertainty weighs those same inlets down too, and least squares
+    // then finds the offset: it is off here.)
     let mut gaussian = HallDiagnosisSettings::default();
     gaussian.diagnose.robust_nu = None;
     gaussian.diagnose.single_output_check = false;

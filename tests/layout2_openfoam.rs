@@ -5,7 +5,8 @@
 //! layout"). What holds there is tested here: the built-in model's realism, the CRAC
 //! offset named at its mixed size, and a slot seen by one sensor only reported as
 //! resting on that sensor rather than dropped in silence; and (session 30) the stored
-//! clean hall left undecided by the ambiguity check, where it was named wrongly. The
+//! clean hall left undecided by the ambiguity check (without the model form), where it
+//! was named wrongly. The
 //! clean hall's false positives over fresh noise draws and the missed cutout are
 //! measured in the docs, not asserted.
 
@@ -36,15 +37,15 @@ fn truth(dataset: &str) -> serde_json::Value {
 /// Calibrates `dataset` as `kalibre calibrate` does (no journal) and diagnoses at the
 /// best parameters as `kalibre diagnose` does.
 fn calibrate_and_diagnose(dataset: &str) -> HallDiagnosis {
-    calibrate_and_diagnose_with(dataset, |_| {}).remove(0)
+    calibrate_and_diagnose_with(dataset, &[]).remove(0)
 }
 
+/// A change of the default diagnosis settings.
+type Variant = dyn Fn(&mut HallDiagnosisSettings);
+
 /// Calibrates `dataset` once and diagnoses it with the default settings and, after
-/// them, with each change of `variants` applied to the default.
-fn calibrate_and_diagnose_with(
-    dataset: &str,
-    variants: impl Fn(&mut HallDiagnosisSettings),
-) -> Vec<HallDiagnosis> {
+/// them, with each of `variants` applied to the default.
+fn calibrate_and_diagnose_with(dataset: &str, variants: &[&Variant]) -> Vec<HallDiagnosis> {
     let hall = Hall::load(&data(&format!("{dataset}/hall.json"))).unwrap();
     let snaps =
         snapshots::load_snapshots(&hall, &data(&format!("{dataset}/snapshots.csv"))).unwrap();
@@ -54,10 +55,13 @@ fn calibrate_and_diagnose_with(
         sim: settings.sim.clone(),
         ..HallDiagnosisSettings::default()
     };
-    let mut changed = default.clone();
-    variants(&mut changed);
-    [default, changed]
-        .iter()
+    let mut all = vec![default.clone()];
+    for change in variants {
+        let mut changed = default.clone();
+        change(&mut changed);
+        all.push(changed);
+    }
+    all.iter()
         .map(|ds| {
             diagnose_hall(
                 &hall,
@@ -154,24 +158,39 @@ fn a_slot_seen_by_one_sensor_is_reported_as_resting_on_that_sensor() {
 }
 
 #[test]
-fn the_clean_hall_as_stored_is_left_undecided_not_named_wrongly() {
+fn the_ambiguity_check_leaves_the_stored_clean_hall_undecided_without_the_model_form() {
     // Without the ambiguity check (the default before session 30) a recirculation in A06
     // or A02 is significant here: the built-in model's own error against OpenFOAM makes
-    // it. Other places fit about as well, so by default nothing is named and the listing
-    // says which explanations the data cannot choose between.
-    let d = calibrate_and_diagnose_with("ol2-clean", |s| s.diagnose.ambiguity_check = false);
+    // it. Other places fit about as well, so with the check nothing is named and the
+    // listing says which explanations the data cannot choose between. This holds with
+    // the model form off (the default of session 30); with it on (the default since
+    // session 31) this stored case is named at A06, one of the 9 wrong names in 13
+    // cases of either default (`docs/diagnosis.md`, "Session 31").
+    let d = calibrate_and_diagnose_with(
+        "ol2-clean",
+        &[&|s| s.model_form = false, &|s| {
+            s.model_form = false;
+            s.diagnose.ambiguity_check = false;
+        }],
+    );
     let named = |d: &HallDiagnosis| d.diagnosis.significant().next().map(|h| h.name.clone());
-    assert_eq!(named(&d[0]), None, "{:#?}", &d[0].diagnosis.hypotheses[..3]);
+    assert_eq!(named(&d[1]), None, "{:#?}", &d[1].diagnosis.hypotheses[..3]);
     assert!(
-        d[0].diagnosis
+        d[1].diagnosis
             .hypotheses
             .iter()
             .any(|h| !h.ambiguous_with.is_empty()),
         "{:#?}",
-        &d[0].diagnosis.hypotheses[..3]
+        &d[1].diagnosis.hypotheses[..3]
     );
-    let before = named(&d[1]).unwrap_or_default();
+    let before = named(&d[2]).unwrap_or_default();
     assert!(before.starts_with("rack_recirculation"), "{before}");
+    // By default the model's own errors here bear out its tile-jet variant (0.97).
+    let share = d[0]
+        .diagnosis
+        .model_form_share
+        .expect("a model-form variant");
+    assert!(share > 0.5, "model-form share {share}");
 }
 
 #[test]
@@ -200,15 +219,16 @@ fn the_cli_says_which_sensor_a_hypothesis_rests_on() {
     assert!(
         text.contains("rests on one sensor, c-A05-11")
             && text.contains(r#"if c-A05-11 reads right, add to hall.json "effects": {"kind":"rack_recirculation""#)
-            && text.contains("(rack_recirculation(rack=A05) rests on it alone)"),
+            && text.contains("(rack_recirculation(rack=A05) rests on it alone"),
         "{text}"
     );
-    // The ambiguity check (on by default) can be turned off; the listing is the same
-    // about the slot's sensor.
+    // The ambiguity check and the model form (on by default) can be turned off; the
+    // listing is the same about the slot's sensor.
     let off = run(on_slot("diagnose")
         .arg("--calibration")
         .arg(dir.join("cal"))
-        .arg("--no-ambiguity-check"));
+        .arg("--no-ambiguity-check")
+        .arg("--no-model-form"));
     assert!(off.status.success(), "{}", stderr(&off));
     assert!(
         String::from_utf8_lossy(&off.stdout).contains("rests on one sensor, c-A05-11"),

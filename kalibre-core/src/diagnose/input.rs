@@ -211,7 +211,9 @@ impl Residuals {
 
     /// Adds a model-form uncertainty per row (standard deviation, output units): what
     /// other plausible physics would read differently. It weighs rows as
-    /// [`Self::with_uncertainty`] does (the two add in quadrature), but an output it
+    /// [`Self::with_uncertainty`] does (the two add in quadrature), by the share of its
+    /// variance the residuals bear out (`Diagnosis::model_form_share`: none where the
+    /// model reproduces the data); an output it
     /// covers is still listed among those no hypothesis explains when it is far off,
     /// since a user should look at it (`UnexplainedOutput::model_form_c` says how much
     /// the other physics moves it).

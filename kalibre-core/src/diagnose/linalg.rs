@@ -1,5 +1,6 @@
 //! Small dense linear algebra for the diagnosis: pivoted Householder least squares with an
-//! optional ridge, orthonormal bases, and eigenvalues of small symmetric matrices.
+//! optional ridge, orthonormal bases, eigenvalues of small symmetric matrices, and the
+//! bisection the likelihood estimates solve their one-dimensional equations with.
 //!
 //! Matrices are held as columns (`Vec<Vec<f64>>`): the diagnosis works column by column
 //! (current parameters, then one hypothesis's parameters), and the problems are small
@@ -94,6 +95,20 @@ pub(crate) fn lstsq(cols: &[&[f64]], b: &[f64], ridge: &[f64]) -> LeastSquares {
         x[j] = zi / scale[j];
     }
     LeastSquares { x, rank }
+}
+
+/// The root of `f` in `[lo, hi]` by `steps` bisections, for an `f` positive below its
+/// root and not above it: the midpoint of the last bracket.
+pub(crate) fn bisect_root(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64, steps: usize) -> f64 {
+    for _ in 0..steps {
+        let mid = 0.5 * (lo + hi);
+        if f(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
 }
 
 /// `b + A x` for `A` given by columns.

@@ -45,6 +45,10 @@
 //! A known model uncertainty per row ([`Residuals::with_uncertainty`], e.g. the model's
 //! own grid error) weighs each row by `sigma / sqrt(sigma^2 + u^2)` in every fit and test,
 //! so that no hypothesis earns credit for what the model's numerics alone could produce.
+//! A model-form uncertainty `m` ([`Residuals::with_model_form`], what another plausible
+//! physics reads otherwise) adds `c m^2` to that variance, `c` in `[0, 1]` the share the
+//! residuals bear out (maximum likelihood, [`Diagnosis::model_form_share`]): where the
+//! model reproduces the data, another physics' reading is no uncertainty of it.
 //!
 //! Results are sorted best first: significant ones, then by BIC change.
 //!
@@ -74,17 +78,17 @@ mod identify;
 mod input;
 mod jackknife;
 pub(crate) mod linalg;
+mod outcome;
 pub(crate) mod robust;
 mod settings;
 mod weights;
 
 pub use heldout::HeldOutScheme;
 pub use input::{measured_rows, Hypothesis, HypothesisParam, Residuals, RowInfo};
+pub use outcome::{Diagnosis, HypothesisResult, UnexplainedOutput, DIAGNOSIS_SCHEMA};
 pub use settings::DiagnoseSettings;
 
 use std::borrow::Cow;
-
-use serde::{Deserialize, Serialize};
 
 use crate::calibrate::NamedValues;
 use crate::{Error, Result};
@@ -114,160 +118,6 @@ const ALIKE_EXPLANATION_COS: f64 = 0.9;
 /// degrees of freedom puts a residual there about once in 25 rows, so an output that
 /// far off in every snapshot is no noise; such rows weigh 0.38 against 1.25 at none.
 pub const UNEXPLAINED_SCALES: f64 = 3.0;
-
-/// Schema tag of a serialised [`Diagnosis`].
-pub const DIAGNOSIS_SCHEMA: &str = "kalibre.core.diagnosis/1";
-
-/// The outcome of a diagnosis.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Diagnosis {
-    /// Schema tag, [`DIAGNOSIS_SCHEMA`].
-    pub schema: String,
-    /// Mean absolute residual as given.
-    pub mae: f64,
-    /// Mean absolute residual after refitting the current parameters alone (linearised):
-    /// the floor without a new parameter.
-    pub refit_mae: f64,
-    /// Noise sigma used (given or estimated).
-    pub noise_sigma: f64,
-    /// Whether `noise_sigma` was estimated.
-    pub noise_sigma_estimated: bool,
-    /// How rows were held out.
-    pub held_out: HeldOutScheme,
-    /// Number of held-out folds.
-    pub held_out_folds: usize,
-    /// Root-mean-square held-out residual with the current parameters alone refit.
-    pub held_out_rmse: f64,
-    /// One result per hypothesis, best first.
-    pub hypotheses: Vec<HypothesisResult>,
-    /// Outputs still off by more than [`UNEXPLAINED_SCALES`] scales of the likelihood
-    /// (RMS over their rows) after the best significant hypothesis (or, with none, the
-    /// current parameters' refit), worst first: what the model misses for a reason no
-    /// candidate names (its own physics there, or a faulty or misplaced sensor).
-    #[serde(default)]
-    pub unexplained: Vec<UnexplainedOutput>,
-}
-
-/// An output no hypothesis explains, see [`Diagnosis::unexplained`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct UnexplainedOutput {
-    /// Output name (sensor id).
-    pub output: String,
-    /// Mean residual over its rows (model minus measurement, output units).
-    pub mean_residual: f64,
-    /// Root mean square of its residuals in scales of the likelihood (under a Gaussian,
-    /// noise sigmas).
-    pub rms_scales: f64,
-    /// With a model-form uncertainty ([`Residuals::with_model_form`]): its RMS over the
-    /// output's rows, how far other plausible physics moves the output (output units).
-    #[serde(default)]
-    pub model_form_c: Option<f64>,
-}
-
-impl Diagnosis {
-    /// The significant hypotheses, best first (empty: no significant missing effect).
-    pub fn significant(&self) -> impl Iterator<Item = &HypothesisResult> {
-        self.hypotheses.iter().filter(|h| h.significant)
-    }
-
-    /// The hypotheses the data hardly tell from the best significant one: fitted within
-    /// their range, not inert, and with a BIC less than [`CLOSE_ALTERNATIVE_BIC`] above
-    /// the best's (short of "strong" evidence between the two), best first. Empty when
-    /// nothing is significant. Whether or not each is significant itself, a reader should
-    /// weigh it beside the best: a neighbouring placement with a footprint of much the
-    /// same shape, say.
-    pub fn close_alternatives(&self) -> Vec<&HypothesisResult> {
-        let Some(best) = self.significant().next() else {
-            return Vec::new();
-        };
-        let mut close: Vec<&HypothesisResult> = self
-            .hypotheses
-            .iter()
-            .filter(|h| {
-                h.name != best.name
-                    && h.in_range
-                    && !h.inert
-                    && h.delta_bic < best.delta_bic + CLOSE_ALTERNATIVE_BIC
-            })
-            .collect();
-        close.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
-        close
-    }
-
-    /// The explanations the ambiguity check left undecided between, best first (empty
-    /// when it decided): the best undecided hypothesis and those it could not be told
-    /// from. Others beyond that window that were left undecided because these are list
-    /// the set in their `ambiguous_with` but are not in it.
-    pub fn undecided(&self) -> Vec<&str> {
-        self.hypotheses
-            .iter()
-            .filter(|h| !h.ambiguous_with.is_empty())
-            .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
-            .map(|best| {
-                std::iter::once(best.name.as_str())
-                    .chain(best.ambiguous_with.iter().map(String::as_str))
-                    .collect()
-            })
-            .unwrap_or_default()
-    }
-}
-
-/// How well one hypothesis explains the residuals.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct HypothesisResult {
-    /// Hypothesis name.
-    pub name: String,
-    /// Fraction of the residual sum of squares (after refitting the current parameters)
-    /// it removes, in [0, 1].
-    pub explained_fraction: f64,
-    /// Predicted MAE after adding it (refit residual).
-    pub predicted_mae: f64,
-    /// BIC change against the current parameters alone (negative: better).
-    pub delta_bic: f64,
-    /// Fraction of held-out squared error removed (negative: worse out of sample).
-    pub held_out_improvement: f64,
-    /// Significant: see the module documentation.
-    pub significant: bool,
-    /// The caller's model runs contradicted it ([`Hypothesis::refuted`]), so it is not
-    /// significant.
-    #[serde(default)]
-    pub refuted: bool,
-    /// The outputs hardly move over its parameter range.
-    pub inert: bool,
-    /// The data can tell it apart from the current parameters and other hypotheses.
-    pub identifiable: bool,
-    /// Smallest singular value of its unit columns outside the current parameters' span.
-    pub independence: f64,
-    /// Largest movement of the outputs (2-norm over rows) one parameter makes over its
-    /// range, in noise sigmas.
-    pub movement_sigma: f64,
-    /// Other hypotheses spanning the same directions (beyond the current parameters).
-    pub collinear_with: Vec<String>,
-    /// Rank it adds to the current parameters (the `k` of the BIC).
-    pub added_rank: usize,
-    /// Fitted values of its parameters (offsets from 0, the effect absent).
-    pub fitted: NamedValues,
-    /// Whether every fitted value lies in its parameter's range.
-    pub in_range: bool,
-    /// Change of the current parameters in the joint refit.
-    pub current_change: NamedValues,
-    /// The largest BIC change with one output (all its snapshots) left out, for a
-    /// hypothesis that passes every other test (none otherwise, or with the check off).
-    #[serde(default)]
-    pub single_output_delta_bic: Option<f64>,
-    /// The output this hypothesis rests on when the single-output check alone stops it:
-    /// without that output (all its snapshots) the others no longer prefer it. A local
-    /// effect seen by one sensor looks like this, and so does a faulty sensor or the
-    /// model's own error there; only a look at that sensor tells them apart.
-    #[serde(default)]
-    pub carried_by: Option<String>,
-    /// Significant explanations of other footprints (not collinear with it) that fit
-    /// about as well as the best (BIC within [`CLOSE_ALTERNATIVE_BIC`]), when the
-    /// ambiguity check left them all undecided: the data say something is missing, not
-    /// which of these it is. Empty otherwise.
-    #[serde(default)]
-    pub ambiguous_with: Vec<String>,
-}
 
 fn columns(m: &ndarray::Array2<f64>) -> Vec<Vec<f64>> {
     m.columns().into_iter().map(|c| c.to_vec()).collect()
@@ -302,21 +152,25 @@ pub fn diagnose(
     let raw_jcols = columns(res.jacobian());
     let p = raw_jcols.len();
     // Row weights: 1 without a model uncertainty; with one, `sigma / sqrt(sigma^2 +
-    // u^2)`, `sigma` the given noise or its maximum-likelihood estimate. Every fit, BIC
-    // and held-out check below works on weighted rows; MAEs are reported unweighted.
-    // The model-form uncertainty adds to the numerical one in quadrature.
-    let combined: Option<Vec<f64>> = match (res.uncertainty(), res.model_form()) {
-        (None, None) => None,
-        (a, b) => Some(
-            (0..n)
-                .map(|i| a.map_or(0.0, |u| u[i]).hypot(b.map_or(0.0, |u| u[i])))
-                .collect(),
-        ),
-    };
-    let (weight_sigma, weights): (f64, Vec<f64>) = match &combined {
-        None => (0.0, vec![1.0; n]),
-        Some(u) => weights::row_weights(raw, &raw_jcols, u, settings.noise_sigma),
-    };
+    // u^2 + c m^2)`, `sigma` the given noise or its maximum-likelihood estimate, `u` the
+    // numerical uncertainty, `m` the model-form one and `c` the share of its variance
+    // the residuals bear out. Every fit, BIC and held-out check below works on weighted
+    // rows; MAEs are reported unweighted.
+    let (weight_sigma, weights, model_form_share): (f64, Vec<f64>, Option<f64>) =
+        match (res.uncertainty(), res.model_form()) {
+            (None, None) => (0.0, vec![1.0; n], None),
+            (u, m) => {
+                let zeros = vec![0.0; n];
+                let w = weights::row_weights(
+                    raw,
+                    &raw_jcols,
+                    u.unwrap_or(&zeros),
+                    m,
+                    settings.noise_sigma,
+                );
+                (w.sigma, w.weights, w.model_form_share)
+            }
+        };
     // The weights outputs are listed as unexplained by: the numerical uncertainty's
     // alone, so that a far-off output the other physics covers is still shown.
     let listing_weights: Option<Vec<f64>> = res.model_form().map(|_| {
@@ -595,6 +449,7 @@ pub fn diagnose(
         held_out_rmse: held_scale * (held0 / n as f64).sqrt(),
         hypotheses: results,
         unexplained,
+        model_form_share,
     })
 }
 

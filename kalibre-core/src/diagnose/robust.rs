@@ -9,7 +9,7 @@
 //! `(nu + 1) / (nu + (e / s)^2)`, and a hypothesis earns what it explains of the rest;
 //! it still earns credit for an outlier it does explain.
 
-use super::linalg::{lstsq, residual_after};
+use super::linalg::{bisect_root, lstsq, residual_after};
 
 /// The likelihood of the residuals: Gaussian (`nu` none) or Student-t with `nu` degrees
 /// of freedom.
@@ -57,16 +57,7 @@ fn t_scale_of_unit_gaussian(nu: f64) -> f64 {
         sum * h / 3.0
     };
     // The expectation falls from nu + 1 toward 0 as s grows.
-    let (mut lo, mut hi) = (1e-3, 10.0);
-    for _ in 0..100 {
-        let mid = 0.5 * (lo + hi);
-        if expectation(mid) > 1.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
+    bisect_root(|s| expectation(s) - 1.0, 1e-3, 10.0, 100)
 }
 
 impl Likelihood {

@@ -32,7 +32,7 @@ use crate::{Error, ParamLayout, Result};
 /// | `unit_step` | 0.01 | finite-difference step of calibrated parameters (unit box) |
 /// | `effect_step` | 0.05 | finite-difference step of effect parameters (share of their range) |
 /// | `refine_factor` | 0.5 | the model's own discretisation error, estimated by one more solve per snapshot on a grid this much finer, is each sensor's model uncertainty (no hypothesis earns credit for what the grid alone could produce); none: no such solve (nor when the solver offers no finer grid) |
-/// | `model_form` | false | each sensor's model uncertainty also counts what the solver's model-form variants ([`EffectSolver::model_form_variants`]; the built-in simulator: its tile jets carried up the cold aisle) read beyond it at the calibrated parameters, one solve per snapshot and variant |
+/// | `model_form` | true | each sensor's model uncertainty also counts what the solver's model-form variants ([`EffectSolver::model_form_variants`]; the built-in simulator: its tile jets carried up the cold aisle) read beyond it at the calibrated parameters, one solve per snapshot and variant, by the share of that variance the residuals bear out ([`Diagnosis::model_form_share`](kalibre_core::diagnose::Diagnosis::model_form_share): near 0 where the model reproduces the data) |
 /// | `refit_top` | 0 | how many leading one-parameter hypotheses are refit with the solver itself (secant steps at their fitted point; `refit` module) before the final ranking |
 /// | `refit_iterations` | 4 | runs per refit hypothesis (one solve per snapshot each): a step towards its fitted point, halved after a run that reads worse than its best point |
 /// | `diagnose` | [`DiagnoseSettings::default`] | ranking, significance, held-out check |
@@ -47,7 +47,8 @@ pub struct HallDiagnosisSettings {
     /// Cell size of the refined grid relative to `sim.cell_m` (in (0, 1)), or none.
     pub refine_factor: Option<f64>,
     /// Whether the solver's model-form variants
-    /// ([`EffectSolver::model_form_variants`]) add to each sensor's model uncertainty.
+    /// ([`EffectSolver::model_form_variants`]) add to each sensor's model uncertainty
+    /// (by the share of their variance the residuals bear out).
     pub model_form: bool,
     /// How many leading hypotheses are refit with the solver (0: none).
     pub refit_top: usize,
@@ -64,7 +65,7 @@ impl Default for HallDiagnosisSettings {
             unit_step: 0.01,
             effect_step: 0.05,
             refine_factor: Some(0.5),
-            model_form: false,
+            model_form: true,
             refit_top: 0,
             refit_iterations: 4,
             diagnose: DiagnoseSettings::default(),
@@ -168,6 +169,8 @@ impl HallDiagnosis {
         let mut doc = json!({
             "schema": "kalibre.diagnosis/1",
             "mae_c": self.diagnosis.mae,
+            "noise_sigma_c": self.diagnosis.noise_sigma,
+            "model_form_share": self.diagnosis.model_form_share,
             "hypotheses": hyps,
             "unexplained_sensors": unexplained,
         });

@@ -1,0 +1,246 @@
+//! What `kalibre diagnose` (and the demo) print beside the ranking: close alternatives,
+//! the sensors no candidate explains, the worst sensors and the racks that warm them.
+
+use std::collections::BTreeMap;
+
+use kalibre_core::calibrate::Report;
+use kalibre_core::diagnose::{Diagnosis, HypothesisResult, CLOSE_ALTERNATIVE_BIC};
+use kalibre_dc::hall::Hall;
+use kalibre_dc::report::WARMING_RACK_MIN_SHARE;
+use kalibre_dc::sim::{sensor_warming, RackHeat};
+
+/// The hypotheses the data hardly tell from the best one, under it: a neighbouring
+/// placement is often among them, and the place to look is then either.
+pub(crate) fn print_close_alternatives(d: &Diagnosis, best: &HypothesisResult) {
+    let close = d.close_alternatives();
+    if close.is_empty() {
+        return;
+    }
+    let describe = |h: &&HypothesisResult| {
+        let why = match &h.carried_by {
+            Some(sensor) => format!(", rests on {sensor} alone"),
+            None => String::new(),
+        };
+        format!("{} (BIC {:+.1}{why})", h.name, h.delta_bic - best.delta_bic)
+    };
+    // Those with a lower BIC than the best are not significant for another reason (one
+    // sensor carries them, say): they fit better, which is not "hardly told apart".
+    let (better, near): (Vec<_>, Vec<_>) = close.iter().partition(|h| h.delta_bic < best.delta_bic);
+    if !near.is_empty() {
+        let names: Vec<String> = near.iter().map(describe).collect();
+        println!(
+            "    the data hardly tell it from (BIC within {CLOSE_ALTERNATIVE_BIC:.0}): {}",
+            names.join(", ")
+        );
+    }
+    if !better.is_empty() {
+        let names: Vec<String> = better.iter().map(describe).collect();
+        println!(
+            "    fit better, but are not significant: {}",
+            names.join(", ")
+        );
+    }
+}
+
+/// The sensors no candidate explains: the model's own error there, or a faulty sensor.
+pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
+    if d.unexplained.is_empty() {
+        return;
+    }
+    println!(
+        "\nsensors no candidate explains (the model's own physics there, or a faulty or misplaced sensor; \
+         the ranking above counts them little):"
+    );
+    for u in &d.unexplained {
+        // A candidate may explain it and still not count: one that rests on it alone.
+        let resting: Vec<&str> = d
+            .hypotheses
+            .iter()
+            .filter(|h| h.carried_by.as_deref() == Some(u.output.as_str()))
+            .map(|h| h.name.as_str())
+            .collect();
+        let mut notes = Vec::new();
+        if !resting.is_empty() {
+            notes.push(format!("{} rests on it alone", resting.join(", ")));
+        }
+        // How far other plausible physics (the model-form variants) moves it: when that
+        // is of the residual's size, the model's own physics there is the likely cause.
+        if let Some(form) = u.model_form_c {
+            notes.push(format!(
+                "the model's tile-jet variant moves it by {form:.2} C"
+            ));
+        }
+        let note = if notes.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", notes.join("; "))
+        };
+        println!(
+            "  {:<12} model minus measurement {:+.2} C on average, {:.1} noise scales{note}",
+            u.output, u.mean_residual, u.rms_scales
+        );
+    }
+    println!(
+        "  to calibrate again (with a suggested effect) weighing them down as this ranking does, \
+         add `--likelihood student-t` to `kalibre calibrate`"
+    );
+}
+
+/// Mean residual (model minus measurement, C) per sensor over the snapshots, largest
+/// magnitude first.
+pub(crate) fn worst_sensors(report: &Report) -> Vec<(&str, f64)> {
+    let mut by_sensor: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
+    for r in &report.residuals {
+        let s = by_sensor.entry(r.sensor.as_str()).or_default();
+        s.0 += r.predicted_c - r.measured_c;
+        s.1 += 1;
+    }
+    let mut worst: Vec<(&str, f64)> = by_sensor
+        .iter()
+        .map(|(k, (s, n))| (*k, s / *n as f64))
+        .collect();
+    worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+    worst
+}
+
+/// One worst sensor in words: where it is and how far off the model reads.
+pub(crate) fn sensor_line(hall: &Hall, sensor: &str, mean_c: f64) -> String {
+    let s = hall.sensors.iter().find(|s| s.id == sensor);
+    let (aisle, pos) = s.map_or(("?", [0.0; 3]), |s| (s.aisle.as_str(), s.position_m));
+    format!(
+        "{sensor:<12} {aisle:>4} aisle at ({:.1}, {:.1}, {:.1}) m: the model reads {:.2} C {}",
+        pos[0],
+        pos[1],
+        pos[2],
+        mean_c.abs(),
+        if mean_c > 0.0 { "too warm" } else { "too cold" }
+    )
+}
+
+/// The racks that warm `sensor` in the model's flow, in words (`rows`: every rack's
+/// share, no cut).
+pub(crate) fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> String {
+    let Some(warming) = sensor_warming(rows, sensor, WARMING_RACK_MIN_SHARE) else {
+        let none = "no exhaust reaches it in the model (under 0.01 K)";
+        return if mean_c < 0.0 {
+            format!(
+                "{none}: the measured warmth takes a path the model lacks, or the sensor is off"
+            )
+        } else {
+            none.into()
+        };
+    };
+    let racks: Vec<String> = warming
+        .racks
+        .iter()
+        .map(|r| format!("{} {:.0} %", r.rack, 100.0 * r.share))
+        .collect();
+    format!(
+        "in the model, exhausts warm it by {:.2} K in {}: {}",
+        warming.warming_k,
+        warming.snapshot,
+        if racks.is_empty() {
+            format!(
+                "no rack gives {:.0} % of that",
+                100.0 * WARMING_RACK_MIN_SHARE
+            )
+        } else {
+            format!("racks {}", racks.join(", "))
+        }
+    )
+}
+
+/// How many of the worst sensors the diagnosis describes.
+const WORST_SENSORS_SHOWN: usize = 5;
+
+/// `worst_sensors` of `diagnose --json`: the sensors the calibrated model misses most,
+/// each with where it is, the mean residual, and (built-in model) which racks warm it in
+/// the model's flow (`warming`, `null` when no exhaust reaches it; absent with a model
+/// whose flow kalibre does not have).
+pub(crate) fn worst_sensors_json(
+    hall: &Hall,
+    report: &Report,
+    heat: Option<&[RackHeat]>,
+) -> serde_json::Value {
+    worst_sensors(report)
+        .iter()
+        .take(WORST_SENSORS_SHOWN)
+        .map(|(sensor, mean_c)| {
+            let s = hall.sensors.iter().find(|s| s.id == *sensor);
+            let mut entry = serde_json::json!({
+                "sensor": sensor,
+                "aisle": s.map(|s| s.aisle.as_str()),
+                "position_m": s.map(|s| s.position_m),
+                "mean_residual_c": mean_c,
+            });
+            if let Some(rows) = heat {
+                entry["warming"] = sensor_warming(rows, sensor, WARMING_RACK_MIN_SHARE).map_or(
+                    serde_json::Value::Null,
+                    |w| {
+                        let racks: Vec<_> = w
+                            .racks
+                            .iter()
+                            .map(|r| {
+                                serde_json::json!({
+                                    "rack": r.rack, "warming_k": r.warming_k, "share": r.share
+                                })
+                            })
+                            .collect();
+                        serde_json::json!({"snapshot": w.snapshot, "warming_k": w.warming_k, "racks": racks})
+                    },
+                );
+            }
+            entry
+        })
+        .collect()
+}
+
+/// A hypothesis's flags in words, e.g. `significant, not identifiable`.
+pub(crate) fn hypothesis_flags(
+    significant: bool,
+    refuted: bool,
+    inert: bool,
+    identifiable: bool,
+) -> String {
+    [
+        (significant, "significant"),
+        (refuted, "refuted by its model runs"),
+        (inert, "inert"),
+        (!identifiable, "not identifiable"),
+    ]
+    .iter()
+    .filter(|f| f.0)
+    .map(|f| f.1)
+    .collect::<Vec<_>>()
+    .join(", ")
+}
+
+/// The worst sensors and the residual by aisle and snapshot, in words.
+pub(crate) fn print_where_it_fails(hall: &Hall, report: &Report, heat: Option<&[RackHeat]>) {
+    println!("where the calibrated model fails (model minus measurement):");
+    let mut by_group: BTreeMap<(String, String), (f64, usize)> = BTreeMap::new();
+    for r in &report.residuals {
+        let aisle = hall
+            .sensors
+            .iter()
+            .find(|s| s.id == r.sensor)
+            .map_or("?", |s| s.aisle.as_str());
+        let g = by_group
+            .entry((aisle.to_string(), r.snapshot.clone()))
+            .or_default();
+        g.0 += r.predicted_c - r.measured_c;
+        g.1 += 1;
+    }
+    for (sensor, mean) in worst_sensors(report).iter().take(WORST_SENSORS_SHOWN) {
+        println!("  {}", sensor_line(hall, sensor, *mean));
+        if let Some(rows) = heat {
+            println!("  {:<12} {}", "", warming_racks(rows, sensor, *mean));
+        }
+    }
+    for ((aisle, snap), (s, n)) in &by_group {
+        println!(
+            "  {aisle:>4} aisle, snapshot {snap:<6} mean residual {:+.2} C",
+            s / *n as f64
+        );
+    }
+}
