@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 use kalibre::dc::openfoam::{OpenFoamModel, OpenFoamSettings};
 use kalibre_core::Model;
 use kalibre_dc::hall::{Aabb, Hall};
-use kalibre_dc::sim::{jets, AirLink, SimConfig, SimMods, Simulator};
+use kalibre_dc::sim::{jets, tile_flows_m3_s, AirLink, SimConfig, SimMods, Simulator};
 use kalibre_dc::snapshots::{load_snapshots, OperatingState};
 use serde_json::{json, Value};
 
@@ -126,7 +126,7 @@ fn lifted_supply(
     to_top_m: Option<f64>,
 ) -> SimMods {
     let rack_top_m = hall.racks.iter().map(|r| r.size_m[2]).fold(0.0, f64::max);
-    let tile_flow_m3_s = jets::tile_flows_m3_s(hall, state, 0.0);
+    let tile_flow_m3_s = tile_flows_m3_s(hall, state, 0.0);
     let mut mods = SimMods::new(hall.cracs.len());
     for (t, flow_m3_s) in hall.tiles.iter().zip(tile_flow_m3_s) {
         let ([x, y], [sx, sy]) = (t.position_m, t.size_m);

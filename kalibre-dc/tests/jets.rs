@@ -5,8 +5,8 @@
 use kalibre_dc::diagnosis::{diagnose_hall, EffectSolver, HallDiagnosisSettings};
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::SupplyKind;
-use kalibre_dc::sim::jets::{draw_matched_links, tile_flows_m3_s};
-use kalibre_dc::sim::Simulator;
+use kalibre_dc::sim::jets::draw_matched_links;
+use kalibre_dc::sim::{tile_flows_m3_s, Simulator};
 use kalibre_dc::HallModel;
 
 #[path = "support/demo_offset.rs"]

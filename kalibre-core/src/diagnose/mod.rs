@@ -160,14 +160,7 @@ pub fn diagnose(
         match (res.uncertainty(), res.model_form()) {
             (None, None) => (0.0, vec![1.0; n], None),
             (u, m) => {
-                let zeros = vec![0.0; n];
-                let w = weights::row_weights(
-                    raw,
-                    &raw_jcols,
-                    u.unwrap_or(&zeros),
-                    m,
-                    settings.noise_sigma,
-                );
+                let w = weights::row_weights(raw, &raw_jcols, u, m, settings.noise_sigma);
                 (w.sigma, w.weights, w.model_form_share)
             }
         };

@@ -78,7 +78,7 @@ pub(crate) struct RowWeights {
 /// variance the residuals bear out (maximum likelihood, at most all of it: on data the
 /// model reproduces, another physics' reading is no uncertainty of it), alternated with
 /// the weighted refit of the current parameters until they settle; and the weights
-/// themselves. `numerical` is each row's numerical uncertainty `u` (zeros for none).
+/// themselves. `numerical` is each row's numerical uncertainty `u`.
 ///
 /// Both are Gaussian estimates: a few readings far off (a strong effect at one sensor)
 /// inflate the noise, and the share can then fall to 0 though the other readings follow
@@ -87,14 +87,15 @@ pub(crate) struct RowWeights {
 pub(crate) fn row_weights(
     r: &[f64],
     jcols: &[Vec<f64>],
-    numerical: &[f64],
+    numerical: Option<&[f64]>,
     model_form: Option<&[f64]>,
     noise_sigma: Option<f64>,
 ) -> RowWeights {
     let n = r.len();
-    let a: Vec<f64> = numerical.iter().map(|u| u * u).collect();
-    let b: Vec<f64> =
-        model_form.map_or_else(|| vec![0.0; n], |m| m.iter().map(|u| u * u).collect());
+    let squares = |u: Option<&[f64]>| -> Vec<f64> {
+        u.map_or_else(|| vec![0.0; n], |u| u.iter().map(|u| u * u).collect())
+    };
+    let (a, b) = (squares(numerical), squares(model_form));
     let weights_for = |s: f64, c: f64| -> Vec<f64> {
         a.iter()
             .zip(&b)
@@ -122,6 +123,14 @@ pub(crate) fn row_weights(
             .map(|(e, w)| e / w)
             .collect()
     };
+    // With the noise given and no model form there is nothing to fit.
+    if let (Some(s), None) = (noise_sigma, model_form) {
+        return RowWeights {
+            sigma: s,
+            weights: weights_for(s, 0.0),
+            model_form_share: None,
+        };
+    }
     let share = |e: &[f64], s: f64| -> f64 {
         if model_form.is_some() {
             ml_model_form_share(e, s * s, &a, &b)
@@ -129,16 +138,11 @@ pub(crate) fn row_weights(
             0.0
         }
     };
-    let (mut s, mut c) = match noise_sigma {
-        Some(s) => (s, 1.0),
-        None => {
-            let e = refit(&vec![1.0; n]);
-            (
-                (e.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt(),
-                1.0,
-            )
-        }
-    };
+    let mut s = noise_sigma.unwrap_or_else(|| {
+        let e = refit(&vec![1.0; n]);
+        (e.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt()
+    });
+    let mut c = 1.0;
     // As many rounds as before the model-form share existed when there is none.
     let rounds = if model_form.is_some() { 50 } else { 20 };
     for _ in 0..rounds {
@@ -197,7 +201,7 @@ mod tests {
             sigma: s,
             weights: w,
             ..
-        } = row_weights(&r, &[], &u, None, None);
+        } = row_weights(&r, &[], Some(&u), None, None);
         assert!((s - 0.1).abs() < 0.02, "sigma {s}");
         assert!(w[0] < 0.1 && (w[10] - 1.0).abs() < 1e-12, "{w:?}");
     }
@@ -224,7 +228,7 @@ mod tests {
     fn a_model_form_the_residuals_do_not_bear_out_weighs_nothing() {
         // The model reproduces the data: the other physics' reading is no uncertainty.
         let (r, m) = model_form_case(0.0);
-        let w = row_weights(&r, &[], &[0.0; 48], Some(&m), None);
+        let w = row_weights(&r, &[], None, Some(&m), None);
         let c = w.model_form_share.unwrap();
         assert!(c < 1e-3, "share {c}");
         assert!((w.sigma - 0.1).abs() < 0.01, "sigma {}", w.sigma);
@@ -235,12 +239,12 @@ mod tests {
     fn a_model_form_the_residuals_bear_out_weighs_its_rows_down() {
         // Model errors of about the variant's size: all of it counts.
         let (r, m) = model_form_case(2.5);
-        let w = row_weights(&r, &[], &[0.0; 48], Some(&m), None);
+        let w = row_weights(&r, &[], None, Some(&m), None);
         assert_eq!(w.model_form_share, Some(1.0));
         assert!(w.weights[0] < 0.1 && (w.weights[20] - 1.0).abs() < 1e-12);
         // Errors of half its size: about a quarter of its variance, (1 / 2)^2.
         let (r, m) = model_form_case(1.0);
-        let w = row_weights(&r, &[], &[0.0; 48], Some(&m), Some(0.1));
+        let w = row_weights(&r, &[], None, Some(&m), Some(0.1));
         let c = w.model_form_share.unwrap();
         // Its rows' mean square is 1 + 0.01 = sigma^2 + c * 4.
         let expected = 0.25;

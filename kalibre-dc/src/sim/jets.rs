@@ -10,8 +10,8 @@
 //! fan speed and on wide tiles, so it is not the model's physics: the diagnosis uses the
 //! difference it makes as one sensor's model-form uncertainty.
 
-use crate::hall::{face_centre, Aabb, Hall, SupplyKind};
-use crate::sim::{AirLink, M3_S_PER_CFM};
+use crate::hall::{face_centre, Aabb, Hall};
+use crate::sim::{tile_flows_m3_s, AirLink, M3_S_PER_CFM};
 use crate::snapshots::OperatingState;
 
 /// Height of one release band (m).
@@ -19,38 +19,12 @@ const BAND_M: f64 = 0.2;
 /// How far (m) beyond a tile's edge a server's intake face still draws from its jet.
 const FACING_M: f64 = 0.5;
 
-/// Each tile's share of the supply in `state` (m3/s), as the simulator splits it: the
-/// floor CRACs' flow less the share `opening_share` that supply openings (bypass
-/// effects, [`crate::sim::SimMods::supply_opening_share`]) take, by open area. Front-supply CRACs
-/// blow through their own front, not the tiles.
-pub fn tile_flows_m3_s(hall: &Hall, state: &OperatingState, opening_share: f64) -> Vec<f64> {
-    let floor_m3_s: f64 = hall
-        .cracs
-        .iter()
-        .zip(&state.fan_speed)
-        .filter(|(c, _)| c.supply == SupplyKind::Floor)
-        .map(|(c, f)| c.rated_flow_m3_s * f)
-        .sum();
-    let through_tiles_m3_s = (1.0 - opening_share) * floor_m3_s;
-    let total: f64 = hall.tiles.iter().map(|t| t.open_area_m2()).sum();
-    hall.tiles
-        .iter()
-        .map(|t| {
-            if total > 0.0 {
-                through_tiles_m3_s * t.open_area_m2() / total
-            } else {
-                0.0
-            }
-        })
-        .collect()
-}
-
 /// The jet consumed from below, as forced links for `state` at `alpha_per_server`
 /// (cfm/W): per tile and 0.2 m band from `from_m` to the tallest rack's top, a link from
 /// the tile's floor layer releasing what the servers facing the tile draw in that band
 /// (their flow spread evenly over their height, shared between the tiles in front of
-/// them by overlap along the row), while the tile's supply ([`tile_flows_m3_s`], with
-/// `opening_share` of the supply taken by openings) lasts; the rest in the 0.4 m above
+/// them by overlap along the row), while the tile's supply (as the simulator splits
+/// it, [`tile_flows_m3_s`], with `opening_share` of the supply taken by openings) lasts; the rest in the 0.4 m above
 /// the tallest rack.
 pub fn draw_matched_links(
     hall: &Hall,

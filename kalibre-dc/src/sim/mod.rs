@@ -36,6 +36,7 @@ mod multigrid;
 mod panel;
 mod run;
 mod solution;
+mod supply;
 mod topology;
 mod vtk;
 
@@ -53,6 +54,7 @@ pub use inlets::{
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
 pub use solution::Solution;
+pub use supply::tile_flows_m3_s;
 pub use vtk::write_vtk;
 
 use crate::effects::Effect;

@@ -13,6 +13,7 @@ use super::mods::{SimMods, WallSide};
 use super::multigrid::Multigrid;
 use super::panel::panel_face_g;
 use super::solution::Solution;
+use super::supply::{crac_flows_m3_s, floor_flow_m3_s, split_over_tiles};
 use super::topology::{open_face_g, Stencil};
 use super::{Simulator, M3_S_PER_CFM};
 use crate::hall::SupplyKind;
@@ -144,12 +145,7 @@ pub(super) fn solve_keeping(
     let rho_cp = cfg.rho_cp();
 
     // CRAC flows and supply temperatures.
-    let crac_q: Vec<f64> = hall
-        .cracs
-        .iter()
-        .zip(&state.fan_speed)
-        .map(|(c, f)| c.rated_flow_m3_s * f)
-        .collect();
+    let crac_q = crac_flows_m3_s(hall, state);
     let crac_t: Vec<f64> = (0..hall.cracs.len())
         .map(|k| state.setpoint_c[k] + mods.supply_offset_c.get(k).copied().unwrap_or(0.0))
         .collect();
@@ -175,13 +171,7 @@ pub(super) fn solve_keeping(
             });
         }
     };
-    let floor_q: f64 = hall
-        .cracs
-        .iter()
-        .zip(&crac_q)
-        .filter(|(c, _)| c.supply == SupplyKind::Floor)
-        .map(|(_, q)| q)
-        .sum();
+    let floor_q = floor_flow_m3_s(hall, &crac_q);
     if floor_q > 0.0 {
         if topo.tiles.is_empty() {
             return Err(Error::Simulation("floor-supply CRACs but no tiles".into()));
@@ -195,13 +185,12 @@ pub(super) fn solve_keeping(
             .map(|(_, (q, t))| q * t)
             .sum::<f64>()
             / floor_q;
-        for (st, share) in &topo.tiles {
-            push_stencil(
-                &mut inflows,
-                st,
-                (1.0 - open_share) * floor_q * share,
-                plenum_t,
-            );
+        for (st, q) in topo
+            .tiles
+            .iter()
+            .zip(split_over_tiles(hall, floor_q, open_share))
+        {
+            push_stencil(&mut inflows, st, q, plenum_t);
         }
     }
     for (k, c) in hall.cracs.iter().enumerate() {

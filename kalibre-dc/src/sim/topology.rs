@@ -32,8 +32,8 @@ pub(crate) struct Topology {
     pub g_outlet: Vec<f64>,
     /// True when the hall has ceiling returns (else air returns into CRAC tops).
     pub has_returns: bool,
-    /// Cells of each tile with weights, and each tile's share of the floor supply.
-    pub tiles: Vec<(Stencil, f64)>,
+    /// Cells of each tile with weights (each tile's flow: [`super::supply::split_over_tiles`]).
+    pub tiles: Vec<Stencil>,
     /// Per CRAC: the cells its supply enters (front face cells for `front` CRACs; empty
     /// for `floor` CRACs).
     pub crac_front: Vec<Stencil>,
@@ -116,7 +116,6 @@ impl Topology {
         let has_returns = !hall.returns.is_empty();
 
         let mut tiles = Vec::with_capacity(hall.tiles.len());
-        let total_open: f64 = hall.tiles.iter().map(|t| t.open_area_m2()).sum();
         for (ti, t) in hall.tiles.iter().enumerate() {
             let b = Aabb {
                 min: [t.position_m[0], t.position_m[1], 0.0],
@@ -141,8 +140,7 @@ impl Topology {
                 )));
             }
             let w = 1.0 / cells.len() as f64;
-            let share = t.open_area_m2() / total_open;
-            tiles.push((cells.into_iter().map(|c| (c, w)).collect(), share));
+            tiles.push(cells.into_iter().map(|c| (c, w)).collect());
         }
 
         let mut crac_front = Vec::with_capacity(hall.cracs.len());
@@ -273,9 +271,7 @@ impl Topology {
                 )));
             }
         }
-        if self.tiles.iter().any(|(t, _)| lost(t))
-            || self.crac_front.iter().chain(&self.crac_top).any(lost)
-        {
+        if self.tiles.iter().any(lost) || self.crac_front.iter().chain(&self.crac_top).any(lost) {
             return Err(Error::Simulation(
                 "a tile or CRAC opens into an enclosed region with no return path".into(),
             ));

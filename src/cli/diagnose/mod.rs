@@ -321,15 +321,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         "\nmissing effects, best first (MAE now {:.3} C):",
         d.diagnosis.mae
     );
-    if let Some(share) = d.diagnosis.model_form_share {
-        // Said only when it weighs: on data the model reproduces it is about 0.
-        if share >= 0.01 {
-            println!(
-                "  (the residuals bear out {:.0} % of the variance of the model's tile-jet variant: \
-                 the sensors that variant moves weigh less in this ranking)",
-                100.0 * share
-            );
-        }
+    // Said only when it weighs: on data the model reproduces the share is about 0.
+    if let Some(share) = d.diagnosis.model_form_share.filter(|c| *c >= 0.01) {
+        println!(
+            "  (the residuals bear out {:.0} % of the variance of the model's tile-jet variant: \
+             the sensors that variant moves weigh less in this ranking)",
+            100.0 * share
+        );
     }
     let significant: Vec<_> = d.diagnosis.significant().collect();
     let undecided = d.diagnosis.undecided();
