@@ -148,3 +148,18 @@ pub fn small_settings(root: &Path) -> OpenFoamSettings {
         .with_iterations(SMALL_ITERATIONS)
         .with_cache_root(root)
 }
+
+/// Processes whose working directory lies under `root` (OpenFOAM steps run in their
+/// run's `logs/<step>` directory).
+pub fn solver_pids_under(root: &Path) -> Vec<i32> {
+    let root = std::fs::canonicalize(root).unwrap();
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let pid: i32 = e.file_name().to_str()?.parse().ok()?;
+            let cwd = std::fs::read_link(e.path().join("cwd")).ok()?;
+            cwd.starts_with(&root).then_some(pid)
+        })
+        .collect()
+}

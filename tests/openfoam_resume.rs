@@ -1,0 +1,176 @@
+//! Killing `kalibre calibrate --model openfoam` while OpenFOAM solves, then running it
+//! again: no OpenFOAM process is left behind and no finished run is repeated.
+//!
+//! These tests need OpenFOAM (Debian's `openfoam` package; CI installs it). Without
+//! `blockMesh` in PATH they fail with a message saying so; they never skip.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use kalibre_dc::snapshots;
+
+mod openfoam_common;
+use openfoam_common::*;
+
+fn journal_lines(path: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+fn calibrate_cmd(dir: &Path) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_kalibre"));
+    c.args([
+        "calibrate",
+        "--model",
+        "openfoam",
+        "--of-iterations",
+        &SMALL_ITERATIONS.to_string(),
+        "--iterations",
+        "1",
+        "--threads",
+        "1",
+        "--seed",
+        "5",
+        "--quiet",
+        "--hall",
+    ])
+    .arg(dir.join("hall.json"))
+    .arg("--snapshots")
+    .arg(dir.join("snapshots.csv"))
+    .arg("--out")
+    .arg(dir.join("out"));
+    c
+}
+
+/// Killing `kalibre calibrate --model openfoam` while OpenFOAM is solving and starting it
+/// again repeats no finished run.
+#[test]
+fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
+    require_openfoam();
+    let (hall, snaps) = small_hall();
+    let dir = tmp("resume");
+    hall.save(&dir.join("hall.json")).unwrap();
+    std::fs::write(
+        dir.join("snapshots.csv"),
+        snapshots::write_snapshots(hall, snaps),
+    )
+    .unwrap();
+    let journal = dir.join("out/runs.jsonl");
+    let mut child = calibrate_cmd(&dir).spawn().unwrap();
+    let start = Instant::now();
+    while journal_lines(&journal).len() < 3 && start.elapsed() < Duration::from_secs(240) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Let the next solve get going, then kill kalibre in the middle of it.
+    std::thread::sleep(Duration::from_secs(2));
+    let solving = solver_pids_under(&dir.join("out/openfoam"));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(
+        !solving.is_empty(),
+        "no OpenFOAM solve was running at the kill"
+    );
+    // The solve has its own process group, so the kill does not reach it; the kernel
+    // ends it when kalibre ends (PR_SET_PDEATHSIG), rather than letting it run on.
+    let t = Instant::now();
+    while !solver_pids_under(&dir.join("out/openfoam")).is_empty()
+        && t.elapsed() < Duration::from_secs(20)
+    {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let left = solver_pids_under(&dir.join("out/openfoam"));
+    for pid in &left {
+        // SAFETY: kill has no memory effects; these are processes this test started.
+        unsafe {
+            libc_kill(*pid, 9);
+        }
+    }
+    assert!(
+        left.is_empty(),
+        "solver processes outlived kalibre: {left:?}"
+    );
+    let before = journal_lines(&journal);
+    let done_before = before.len();
+    assert!(done_before >= 3, "only {done_before} runs before the kill");
+
+    let o = calibrate_cmd(&dir).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/report.json")).unwrap())
+            .unwrap();
+    let total = report["runs"]["total"].as_u64().unwrap() as usize;
+    assert!(
+        done_before < total,
+        "killed before the end ({done_before} of {total})"
+    );
+    assert_eq!(
+        report["runs"]["cached"].as_u64().unwrap() as usize,
+        done_before
+    );
+    assert_eq!(
+        report["runs"]["new"].as_u64().unwrap() as usize,
+        total - done_before,
+        "no finished run is repeated"
+    );
+    let mut keys: Vec<String> = journal_lines(&journal)
+        .iter()
+        .map(|v| format!("{}|{}", v["scenario"], v["params"]))
+        .collect();
+    let n = keys.len();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), n, "a run was repeated");
+    // Every run journals its servers' intakes, so the report shows them at the best
+    // parameters without another solve.
+    let servers = hall.servers().count();
+    for run in journal_lines(&journal)
+        .iter()
+        .filter(|r| r["status"] == "ok")
+    {
+        let intakes = run["extras"]["server_intake_c"].as_array();
+        assert_eq!(intakes.map(Vec::len), Some(servers), "{run}");
+    }
+    let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
+    let per_snapshot = format!(" of {servers} above 27.0 C");
+    assert_eq!(html.matches(&per_snapshot).count(), snaps.len(), "{html}");
+
+    // `kalibre diagnose` must solve with the model the calibration ran: the built-in
+    // simulator, or OpenFOAM with other settings, is refused before any solve.
+    let diagnose = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_kalibre"))
+            .arg("diagnose")
+            .args(extra)
+            .arg("--hall")
+            .arg(dir.join("hall.json"))
+            .arg("--snapshots")
+            .arg(dir.join("snapshots.csv"))
+            .arg("--calibration")
+            .arg(dir.join("out"))
+            .output()
+            .unwrap()
+    };
+    for (extra, model) in [
+        (&[][..], "builtin"),
+        (
+            &["--model", "openfoam", "--of-iterations", "300"][..],
+            "openfoam",
+        ),
+    ] {
+        let o = diagnose(extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(
+            err.contains("runs of another model") && err.contains(&format!("--model {model}")),
+            "{extra:?}: {err}"
+        );
+    }
+}
+
+extern "C" {
+    #[link_name = "kill"]
+    fn libc_kill(pid: i32, sig: i32) -> i32;
+}
