@@ -353,10 +353,17 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
             "refuted_by_model_runs",
             "inert",
             "identifiable",
+            "in_range",
         ] {
             assert!(!h[key].is_null(), "{key} missing in {h}");
         }
         assert_eq!(h["suggestion"]["kind"], h["effect"]);
+        // A fit outside its parameter's range is never significant.
+        let fitted = h["fitted"].as_object().expect("fitted");
+        assert!(!fitted.is_empty(), "{h}");
+        if h["in_range"] == false {
+            assert_eq!(h["significant"], false, "{h}");
+        }
     }
     // The worst sensors, worst first, each with the racks that warm it in the built-in
     // model's flow; a rack's part of the warming is its share of the whole.

@@ -136,8 +136,16 @@ pub struct Suggestion {
     pub inert: bool,
     /// Distinguishable from what the model already has.
     pub identifiable: bool,
+    /// Every fitted value lies in its parameter's range (a story written before this
+    /// field was recorded reads as in range).
+    #[serde(default = "in_range_default")]
+    pub in_range: bool,
     /// The `effects` entry to paste into `hall.json`.
     pub entry: EffectSpec,
+}
+
+fn in_range_default() -> bool {
+    true
 }
 
 /// One diagnosis of the story (after calibration `after_step`, 0-based).
@@ -491,6 +499,7 @@ fn summarise(after_step: usize, d: &HallDiagnosis, wall_s: f64) -> DiagnosisStep
                 significant: h.significant,
                 inert: h.inert,
                 identifiable: h.identifiable,
+                in_range: h.in_range,
                 entry: s.clone(),
             })
             .collect(),

@@ -252,7 +252,8 @@ fn print_event(
                 step.mae_c, step.wall_s
             );
             for h in step.hypotheses.iter().take(5) {
-                let flags = hypothesis_flags(h.significant, false, h.inert, h.identifiable);
+                let flags =
+                    hypothesis_flags(h.significant, false, h.inert, h.identifiable, h.in_range);
                 println!(
                     "    {:<46} explains {:>3.0}%  predicted MAE {:.3} C  {flags}",
                     h.name,

@@ -144,6 +144,8 @@ impl HallDiagnosis {
                     "refuted_by_model_runs": h.refuted,
                     "inert": h.inert,
                     "identifiable": h.identifiable,
+                    "fitted": h.fitted.0.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
+                    "in_range": h.in_range,
                     "delta_bic": h.delta_bic,
                     "held_out_improvement": h.held_out_improvement,
                     "single_output_delta_bic": h.single_output_delta_bic,

@@ -192,6 +192,7 @@ pub fn story_html(hall: &Hall, snaps: &[HallSnapshot], story: &StoryReport) -> S
                 (s.significant, "significant"),
                 (s.inert, "inert"),
                 (!s.identifiable, "not identifiable"),
+                (!s.in_range, "fitted outside its range"),
             ]
             .iter()
             .filter(|f| f.0)

@@ -342,7 +342,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         println!("  no significant missing effect");
     }
     for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
-        let flags = hypothesis_flags(h.significant, h.refuted, h.inert, h.identifiable);
+        let flags = hypothesis_flags(
+            h.significant,
+            h.refuted,
+            h.inert,
+            h.identifiable,
+            h.in_range,
+        );
         println!(
             "  {:<48} explains {:>4.0}%  predicted MAE {:.3} C  {}",
             h.name,
@@ -351,6 +357,20 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             flags
         );
         let entry = || serde_json::to_string(s).unwrap_or_default();
+        if !h.in_range {
+            // A bypass at a negative share, say: the data ask for the opposite of the
+            // effect, which no entry can give.
+            let fitted: Vec<String> = h
+                .fitted
+                .0
+                .iter()
+                .map(|(name, v)| format!("{name} = {v:.4}"))
+                .collect();
+            println!(
+                "    fitted {}: the data lean the opposite way, which no entry gives",
+                fitted.join(", ")
+            );
+        }
         if h.significant {
             println!("    add to hall.json \"effects\": {}", entry());
         } else if undecided.contains(&h.name.as_str()) {

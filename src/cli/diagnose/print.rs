@@ -201,12 +201,14 @@ pub(crate) fn hypothesis_flags(
     refuted: bool,
     inert: bool,
     identifiable: bool,
+    in_range: bool,
 ) -> String {
     [
         (significant, "significant"),
         (refuted, "refuted by its model runs"),
         (inert, "inert"),
         (!identifiable, "not identifiable"),
+        (!in_range, "fitted outside its range"),
     ]
     .iter()
     .filter(|f| f.0)
