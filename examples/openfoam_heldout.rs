@@ -16,9 +16,10 @@
 //! blanking` (instead of the cases: the development hall's blanking slot at each rack),
 //! `--refit K` (the diagnosis refits its K leading hypotheses with the built-in model,
 //! `HallDiagnosisSettings::refit_top`; default 0, as `kalibre diagnose`), `--ambiguity
-//! on|off` and `--model-form on|off` (the diagnosis's ambiguity check and model-form
-//! uncertainty, `DiagnoseSettings::ambiguity_check` and
-//! `HallDiagnosisSettings::model_form`; default: as `kalibre diagnose`).
+//! on|off`, `--model-form on|off` and `--single-output-check on|off` (the diagnosis's
+//! ambiguity check, model-form uncertainty and single-output check:
+//! `DiagnoseSettings::ambiguity_check`, `HallDiagnosisSettings::model_form` and
+//! `DiagnoseSettings::single_output_check`; default: as `kalibre diagnose`).
 //!
 //! The development data (`data/openfoam/of-dev-*`) were tuned against: the diagnosis's
 //! settings were chosen on them. These cases were not. Each is written as a dataset in
@@ -239,6 +240,9 @@ fn evaluate(
     if let Some(on) = o.model_form {
         ds.model_form = on;
     }
+    if let Some(on) = o.single_output_check {
+        ds.diagnose.single_output_check = on;
+    }
     let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
         .map_err(|e| format!("diagnosis: {e}"))?;
     let top = d.diagnosis.significant().next();
@@ -278,6 +282,7 @@ fn evaluate(
         "refit_top": ds.refit_top,
         "ambiguity_check": ds.diagnose.ambiguity_check,
         "model_form": ds.model_form,
+        "single_output_check": ds.diagnose.single_output_check,
         "model_form_share": d.diagnosis.model_form_share,
         // The close set the ambiguity check left undecided: its best, then the others.
         "undecided": d.diagnosis.undecided(),
@@ -299,6 +304,7 @@ struct Options {
     refit_top: usize,
     ambiguity: Option<bool>,
     model_form: Option<bool>,
+    single_output_check: Option<bool>,
 }
 
 fn on_off(flag: &str, value: &str) -> Result<bool, String> {
@@ -320,6 +326,7 @@ fn parse_args() -> Result<Options, String> {
         refit_top: 0,
         ambiguity: None,
         model_form: None,
+        single_output_check: None,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
@@ -351,9 +358,10 @@ fn parse_args() -> Result<Options, String> {
             }
             "--ambiguity" => o.ambiguity = Some(on_off(flag, value)?),
             "--model-form" => o.model_form = Some(on_off(flag, value)?),
+            "--single-output-check" => o.single_output_check = Some(on_off(flag, value)?),
             _ => {
                 return Err(format!(
-                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking, --refit K, --ambiguity on|off, --model-form on|off)"
+                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking, --refit K, --ambiguity on|off, --model-form on|off, --single-output-check on|off)"
                 ))
             }
         }
