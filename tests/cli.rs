@@ -7,7 +7,9 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use cli_support::{assert_input_error, data, kalibre, on_dataset, run, stderr, tmp};
+use cli_support::{
+    assert_each_run_once, assert_input_error, data, kalibre, on_dataset, run, stderr, tmp,
+};
 
 /// `kalibre simulate` on a hall and snapshots, with optional parameters.
 fn simulate(hall: &Path, snaps: &Path, params: Option<&Path>, out: &Path) -> Output {
@@ -285,16 +287,11 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     );
     assert_eq!(resumed["uncertainty"], report["uncertainty"]);
     // Each (snapshot, parameters) appears once in the journal.
-    let mut keys: Vec<String> = journal_lines(&journal)
+    let runs: Vec<serde_json::Value> = journal_lines(&journal)
         .iter()
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .map(|v| format!("{}|{}", v["scenario"], v["params"]))
+        .filter_map(|l| serde_json::from_str(l).ok())
         .collect();
-    let n = keys.len();
-    keys.sort();
-    keys.dedup();
-    assert_eq!(keys.len(), n, "a run was repeated");
-    assert_eq!(n, total - replayed_in_whole);
+    assert_eq!(assert_each_run_once(&runs), total - replayed_in_whole);
 }
 
 /// Without the polish, the spreads come from a local fit of the model's own runs (the

@@ -10,7 +10,9 @@ use std::time::{Duration, Instant};
 
 use kalibre_dc::snapshots;
 
+mod cli_support;
 mod openfoam_common;
+use cli_support::assert_each_run_once;
 use openfoam_common::*;
 
 fn journal_lines(path: &Path) -> Vec<serde_json::Value> {
@@ -116,14 +118,7 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
         total - done_before,
         "no finished run is repeated"
     );
-    let mut keys: Vec<String> = journal_lines(&journal)
-        .iter()
-        .map(|v| format!("{}|{}", v["scenario"], v["params"]))
-        .collect();
-    let n = keys.len();
-    keys.sort();
-    keys.dedup();
-    assert_eq!(keys.len(), n, "a run was repeated");
+    assert_each_run_once(&journal_lines(&journal));
     // Every run journals its servers' intakes, so the report shows them at the best
     // parameters without another solve.
     let servers = hall.servers().count();

@@ -51,3 +51,17 @@ pub fn assert_input_error(o: &Output, needle: &str) {
     assert!(lines[0].starts_with("kalibre: error: "), "{err}");
     assert!(err.contains(needle), "`{needle}` not in: {err}");
 }
+
+/// Asserts that each (snapshot, parameters) pair appears once among a journal's runs,
+/// and returns how many runs there are.
+pub fn assert_each_run_once(runs: &[serde_json::Value]) -> usize {
+    let mut keys: Vec<String> = runs
+        .iter()
+        .map(|v| format!("{}|{}", v["scenario"], v["params"]))
+        .collect();
+    let n = keys.len();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), n, "a run was repeated");
+    n
+}
