@@ -7,13 +7,14 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use clap::Args;
+use kalibre_dc::diagnosis::hypothesis_flags;
 use kalibre_dc::hall::{EffectSpec, Hall};
 use kalibre_dc::sim::{RackHeat, SimConfig};
 use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::story::{run_story, StoryEvent, StoryOutcome, StoryReport, StorySettings};
 use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
 
-use super::diagnose::{hypothesis_flags, sensor_line, warming_racks, worst_sensors};
+use super::diagnose::{sensor_line, warming_racks, worst_sensors};
 use super::{with_threads, CliError, CliResult};
 use kalibre_dc::HallModel;
 

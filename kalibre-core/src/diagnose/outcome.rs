@@ -31,14 +31,16 @@ pub struct Diagnosis {
     pub held_out_rmse: f64,
     /// One result per hypothesis, best first.
     pub hypotheses: Vec<HypothesisResult>,
-    /// Outputs still off by more than [`UNEXPLAINED_SCALES`](super::UNEXPLAINED_SCALES) scales of the likelihood
-    /// (RMS over their rows) after the best significant hypothesis (or, with none, the
-    /// current parameters' refit), worst first: what the model misses for a reason no
-    /// candidate names (its own physics there, or a faulty or misplaced sensor).
+    /// Outputs still off by more than [`UNEXPLAINED_SCALES`](super::UNEXPLAINED_SCALES)
+    /// scales of the likelihood (RMS over their rows) after the best significant
+    /// hypothesis (or, with none, the current parameters' refit), worst first: what the
+    /// model misses for a reason no candidate names (its own physics there, or a faulty
+    /// or misplaced sensor).
     #[serde(default)]
     pub unexplained: Vec<UnexplainedOutput>,
-    /// With a model-form uncertainty ([`Residuals::with_model_form`](super::Residuals::with_model_form)): the share of its
-    /// variance the residuals bear out (maximum likelihood, in `[0, 1]`), by which it
+    /// With a model-form uncertainty
+    /// ([`Residuals::with_model_form`](super::Residuals::with_model_form)): the share of
+    /// its variance the residuals bear out (maximum likelihood, in `[0, 1]`), by which it
     /// weighs the rows. Near 0 where the model reproduces the data (another physics'
     /// reading is then no uncertainty of it), 1 where the model's errors are as large.
     #[serde(default)]
@@ -55,8 +57,9 @@ pub struct UnexplainedOutput {
     /// Root mean square of its residuals in scales of the likelihood (under a Gaussian,
     /// noise sigmas).
     pub rms_scales: f64,
-    /// With a model-form uncertainty ([`Residuals::with_model_form`](super::Residuals::with_model_form)): its RMS over the
-    /// output's rows, how far other plausible physics moves the output (output units).
+    /// With a model-form uncertainty
+    /// ([`Residuals::with_model_form`](super::Residuals::with_model_form)): its RMS over
+    /// the output's rows, how far other plausible physics moves the output (output units).
     #[serde(default)]
     pub model_form_c: Option<f64>,
 }
@@ -125,8 +128,8 @@ pub struct HypothesisResult {
     pub held_out_improvement: f64,
     /// Significant: see the module documentation.
     pub significant: bool,
-    /// The caller's model runs contradicted it ([`Hypothesis::refuted`](super::Hypothesis::refuted)), so it is not
-    /// significant.
+    /// The caller's model runs contradicted it
+    /// ([`Hypothesis::refuted`](super::Hypothesis::refuted)), so it is not significant.
     #[serde(default)]
     pub refuted: bool,
     /// The outputs hardly move over its parameter range.

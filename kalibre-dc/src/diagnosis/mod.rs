@@ -126,6 +126,29 @@ pub struct NotTried {
     pub reason: String,
 }
 
+/// A hypothesis's flags in words, as every listing shows them (the CLI's, the demo's,
+/// the story's HTML), e.g. `significant, not identifiable`.
+pub fn hypothesis_flags(
+    significant: bool,
+    refuted: bool,
+    inert: bool,
+    identifiable: bool,
+    in_range: bool,
+) -> String {
+    [
+        (significant, "significant"),
+        (refuted, "refuted by its model runs"),
+        (inert, "inert"),
+        (!identifiable, "not identifiable"),
+        (!in_range, "fitted outside its range"),
+    ]
+    .iter()
+    .filter(|f| f.0)
+    .map(|f| f.1)
+    .collect::<Vec<_>>()
+    .join(", ")
+}
+
 impl HallDiagnosis {
     /// The `kalibre.diagnosis/1` JSON of `formats.md`.
     pub fn to_json(&self) -> Value {
@@ -144,7 +167,7 @@ impl HallDiagnosis {
                     "refuted_by_model_runs": h.refuted,
                     "inert": h.inert,
                     "identifiable": h.identifiable,
-                    "fitted": h.fitted.0.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
+                    "fitted": h.fitted,
                     "in_range": h.in_range,
                     "delta_bic": h.delta_bic,
                     "held_out_improvement": h.held_out_improvement,

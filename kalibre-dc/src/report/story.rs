@@ -7,6 +7,7 @@ use std::fmt::Write;
 use super::svg::{esc, Chart};
 use super::thermal::{thermal_svg, ColourScale, Marker};
 use super::{history_svg, mean_residual_per_sensor, parity_svg, plan_svg, STYLE};
+use crate::diagnosis::hypothesis_flags;
 use crate::hall::Hall;
 use crate::snapshots::HallSnapshot;
 use crate::story::{StoryOutcome, StoryReport};
@@ -188,17 +189,8 @@ pub fn story_html(hall: &Hall, snaps: &[HallSnapshot], story: &StoryReport) -> S
         }
         h.push_str("<table><tr><th>hypothesis</th><th>explains</th><th>predicted MAE (C)</th><th>flags</th><th>entry for hall.json <code>effects</code></th></tr>");
         for s in &d.hypotheses {
-            let flags = [
-                (s.significant, "significant"),
-                (s.inert, "inert"),
-                (!s.identifiable, "not identifiable"),
-                (!s.in_range, "fitted outside its range"),
-            ]
-            .iter()
-            .filter(|f| f.0)
-            .map(|f| f.1)
-            .collect::<Vec<_>>()
-            .join(", ");
+            // The story keeps no refit: nothing is refuted by model runs.
+            let flags = hypothesis_flags(s.significant, false, s.inert, s.identifiable, s.in_range);
             let _ = write!(
                 h,
                 "<tr><td>{}</td><td>{:.0}%</td><td>{:.3}</td><td>{}</td><td><code>{}</code></td></tr>",

@@ -23,9 +23,9 @@ const FACING_M: f64 = 0.5;
 /// (cfm/W): per tile and 0.2 m band from `from_m` to the tallest rack's top, a link from
 /// the tile's floor layer releasing what the servers facing the tile draw in that band
 /// (their flow spread evenly over their height, shared between the tiles in front of
-/// them by overlap along the row), while the tile's supply (as the simulator splits
-/// it, [`tile_flows_m3_s`], with `opening_share` of the supply taken by openings) lasts; the rest in the 0.4 m above
-/// the tallest rack.
+/// them by overlap along the row), while the tile's supply (as the simulator splits it,
+/// [`tile_flows_m3_s`], with `opening_share` of the supply taken by openings) lasts; the
+/// rest in the 0.4 m above the tallest rack.
 pub fn draw_matched_links(
     hall: &Hall,
     state: &OperatingState,

@@ -8,7 +8,7 @@ use kalibre_core::calibrate::Report;
 use kalibre_core::diagnose::CLOSE_ALTERNATIVE_BIC;
 use kalibre_core::Model;
 use kalibre_dc::diagnosis::{
-    candidates_tried, diagnose_hall_with, EffectSolver, HallDiagnosisSettings,
+    candidates_tried, diagnose_hall_with, hypothesis_flags, EffectSolver, HallDiagnosisSettings,
 };
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
@@ -20,10 +20,10 @@ use kalibre_dc::HallModel;
 
 mod print;
 
-pub(super) use print::{hypothesis_flags, sensor_line, warming_racks, worst_sensors};
 use print::{
     print_close_alternatives, print_unexplained, print_where_it_fails, worst_sensors_json,
 };
+pub(super) use print::{sensor_line, warming_racks, worst_sensors};
 
 use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::openfoam_args::{of_err, OpenFoamArgs};

@@ -195,28 +195,6 @@ pub(crate) fn worst_sensors_json(
         .collect()
 }
 
-/// A hypothesis's flags in words, e.g. `significant, not identifiable`.
-pub(crate) fn hypothesis_flags(
-    significant: bool,
-    refuted: bool,
-    inert: bool,
-    identifiable: bool,
-    in_range: bool,
-) -> String {
-    [
-        (significant, "significant"),
-        (refuted, "refuted by its model runs"),
-        (inert, "inert"),
-        (!identifiable, "not identifiable"),
-        (!in_range, "fitted outside its range"),
-    ]
-    .iter()
-    .filter(|f| f.0)
-    .map(|f| f.1)
-    .collect::<Vec<_>>()
-    .join(", ")
-}
-
 /// The worst sensors and the residual by aisle and snapshot, in words.
 pub(crate) fn print_where_it_fails(hall: &Hall, report: &Report, heat: Option<&[RackHeat]>) {
     println!("where the calibrated model fails (model minus measurement):");
