@@ -34,7 +34,7 @@ fn calibrate_cmd(dir: &Path) -> Command {
         "--iterations",
         "1",
         "--threads",
-        "1",
+        "2",
         "--seed",
         "5",
         "--quiet",
