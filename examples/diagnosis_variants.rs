@@ -21,9 +21,10 @@
 //! (least squares, no single-output check: the diagnosis before Student-t), `student-t 4,
 //! no single-output check`, `default` (`HallDiagnosisSettings::default()`: Student-t
 //! nu 4, the single-output check, the ambiguity check and the model form), `student-t
-//! 2` and `student-t 8` (with both checks), `refit 3` and `refit 8` (the default with the 3 or 8 leading
-//! hypotheses refit with the model, `HallDiagnosisSettings::refit_top`), `no ambiguity
-//! check` (the default without `DiagnoseSettings::ambiguity_check`), `no model form` (the
+//! 2` and `student-t 8` (with both checks), `refit 3` and `refit 8` (the default with
+//! the 3 or 8 leading hypotheses refit with the model,
+//! `HallDiagnosisSettings::refit_top`), `no ambiguity check` (the default without
+//! `DiagnoseSettings::ambiguity_check`), `no model form` (the
 //! default of session 30: without the model-form uncertainty,
 //! `HallDiagnosisSettings::model_form`) and `no model form, no ambiguity check` (the
 //! default before session 30). Every setting but those named `no model form` has the

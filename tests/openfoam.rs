@@ -196,9 +196,10 @@ fn rack_recirculation_effect_reproduces_the_openfoam_blanking_data() {
 }
 
 /// The hall defaults (polish stage included) with `iterations` four-step iterations.
-fn loop_settings(iterations: usize) -> HallCalibrationSettings {
+fn loop_settings(iterations: usize, polish_iterations: usize) -> HallCalibrationSettings {
     let mut s = HallCalibrationSettings::default();
     s.core.max_iterations = iterations;
+    s.core.polish_iterations = polish_iterations;
     s.core.seed = 3;
     s
 }
@@ -216,13 +217,7 @@ fn calibration_with_openfoam_lowers_the_error_and_finds_alpha() {
         snaps,
         &model,
         model.layout(),
-        &HallCalibrationSettings {
-            core: kalibre_core::Settings {
-                polish_iterations: CAL_POLISH_ITERATIONS,
-                ..loop_settings(CAL_ITERATIONS).core
-            },
-            ..loop_settings(CAL_ITERATIONS)
-        },
+        &loop_settings(CAL_ITERATIONS, CAL_POLISH_ITERATIONS),
         None,
         Vec::new(),
     )
@@ -323,14 +318,8 @@ fn timed_out_runs_are_recorded_and_the_loop_goes_on() {
         snaps,
         &model,
         normal.layout(),
-        &HallCalibrationSettings {
-            // The loop's handling of failures is under test, not the polish stage.
-            core: kalibre_core::Settings {
-                polish_iterations: 0,
-                ..loop_settings(1).core
-            },
-            ..loop_settings(1)
-        },
+        // The loop's handling of failures is under test, not the polish stage.
+        &loop_settings(1, 0),
         Some(&journal),
         Vec::new(),
     )
