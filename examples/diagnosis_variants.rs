@@ -27,7 +27,8 @@
 //! `DiagnoseSettings::ambiguity_check`), `no model form` (the
 //! default of session 30: without the model-form uncertainty,
 //! `HallDiagnosisSettings::model_form`) and `no model form, no ambiguity check` (the
-//! default before session 30). Every setting but those named `no model form` has the
+//! default before session 30), `sensor-bias rival 6` and `sensor-bias rival 10` (the
+//! default with `DiagnoseSettings::sensor_bias_rival_bic` at 6 or 10). Every setting but those named `no model form` has the
 //! model form, and every setting but those named `no ambiguity check` the ambiguity check.
 //! `--settings 'NAME;NAME'` runs only the named settings.
 //!
@@ -80,7 +81,7 @@ const fn setting(
     }
 }
 
-const SETTINGS: [Setting; 10] = [
+const SETTINGS: [Setting; 12] = [
     setting("gaussian", Some((None, false)), 0, true),
     setting(
         "student-t 4, no single-output check",
@@ -96,6 +97,8 @@ const SETTINGS: [Setting; 10] = [
     setting("no ambiguity check", None, 0, false),
     setting("no model form", None, 0, false),
     setting("no model form, no ambiguity check", None, 0, false),
+    setting("sensor-bias rival 6", None, 0, false),
+    setting("sensor-bias rival 10", None, 0, false),
 ];
 
 /// Calibrates one case as `kalibre calibrate` does by default, journal and report in
@@ -127,6 +130,10 @@ fn run_case(
             ds.diagnose.ambiguity_check = false;
         }
         ds.model_form = !s.name.starts_with("no model form");
+        // Session 34's option: a one-output hypothesis against a bias of that sensor.
+        if let Some(t) = s.name.strip_prefix("sensor-bias rival ") {
+            ds.diagnose.sensor_bias_rival_bic = t.parse().ok();
+        }
         let d = diagnose_hall(hall, snaps, &params, &registry, &ds)
             .map_err(|e| format!("diagnosis ({}): {e}", s.name))?;
         let top = d.diagnosis.significant().next();
@@ -142,12 +149,14 @@ fn run_case(
                 "name": h.name, "fitted": h.fitted, "delta_bic": h.delta_bic,
                 "single_output_delta_bic": h.single_output_delta_bic,
                 "carried_by": h.carried_by,
+                "sensor_bias_delta_bic": h.sensor_bias_delta_bic,
             })
         });
         verdicts.push(json!({
             "setting": s.name, "robust_nu": ds.diagnose.robust_nu,
             "ambiguity_check": ds.diagnose.ambiguity_check, "model_form": ds.model_form,
             "single_output_check": ds.diagnose.single_output_check,
+            "sensor_bias_rival_bic": ds.diagnose.sensor_bias_rival_bic,
             "refit_top": ds.refit_top,
             "verdict": verdict, "top_significant": top,
             "significant": d.diagnosis.significant().count(),

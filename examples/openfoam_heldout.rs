@@ -19,7 +19,9 @@
 //! on|off`, `--model-form on|off` and `--single-output-check on|off` (the diagnosis's
 //! ambiguity check, model-form uncertainty and single-output check:
 //! `DiagnoseSettings::ambiguity_check`, `HallDiagnosisSettings::model_form` and
-//! `DiagnoseSettings::single_output_check`; default: as `kalibre diagnose`).
+//! `DiagnoseSettings::single_output_check`; default: as `kalibre diagnose`),
+//! `--sensor-bias-rival T` (`DiagnoseSettings::sensor_bias_rival_bic`: a hypothesis
+//! resting on one sensor passes when its BIC is T below a bias of that sensor).
 //!
 //! The development data (`data/openfoam/of-dev-*`) were tuned against: the diagnosis's
 //! settings were chosen on them. These cases were not. Each is written as a dataset in
@@ -243,6 +245,9 @@ fn evaluate(
     if let Some(on) = o.single_output_check {
         ds.diagnose.single_output_check = on;
     }
+    if o.sensor_bias_rival_bic.is_some() {
+        ds.diagnose.sensor_bias_rival_bic = o.sensor_bias_rival_bic;
+    }
     let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
         .map_err(|e| format!("diagnosis: {e}"))?;
     let top = d.diagnosis.significant().next();
@@ -265,6 +270,7 @@ fn evaluate(
         json!({
             "name": h.name, "fitted": h.fitted, "explained_fraction": h.explained_fraction,
             "delta_bic": h.delta_bic, "significant": h.significant,
+            "carried_by": h.carried_by, "sensor_bias_delta_bic": h.sensor_bias_delta_bic,
         })
     };
     Ok(json!({
@@ -283,6 +289,7 @@ fn evaluate(
         "ambiguity_check": ds.diagnose.ambiguity_check,
         "model_form": ds.model_form,
         "single_output_check": ds.diagnose.single_output_check,
+        "sensor_bias_rival_bic": ds.diagnose.sensor_bias_rival_bic,
         "model_form_share": d.diagnosis.model_form_share,
         // The close set the ambiguity check left undecided: its best, then the others.
         "undecided": d.diagnosis.undecided(),
@@ -305,6 +312,7 @@ struct Options {
     ambiguity: Option<bool>,
     model_form: Option<bool>,
     single_output_check: Option<bool>,
+    sensor_bias_rival_bic: Option<f64>,
 }
 
 fn on_off(flag: &str, value: &str) -> Result<bool, String> {
@@ -327,6 +335,7 @@ fn parse_args() -> Result<Options, String> {
         ambiguity: None,
         model_form: None,
         single_output_check: None,
+        sensor_bias_rival_bic: None,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
@@ -359,9 +368,20 @@ fn parse_args() -> Result<Options, String> {
             "--ambiguity" => o.ambiguity = Some(on_off(flag, value)?),
             "--model-form" => o.model_form = Some(on_off(flag, value)?),
             "--single-output-check" => o.single_output_check = Some(on_off(flag, value)?),
+            "--sensor-bias-rival" => {
+                o.sensor_bias_rival_bic = Some(
+                    value
+                        .parse()
+                        .ok()
+                        .filter(|t: &f64| t.is_finite() && *t >= 0.0)
+                        .ok_or_else(|| {
+                            format!("--sensor-bias-rival needs a BIC margin >= 0, got `{value}`")
+                        })?,
+                )
+            }
             _ => {
                 return Err(format!(
-                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking, --refit K, --ambiguity on|off, --model-form on|off, --single-output-check on|off)"
+                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, --only NAMES, --variants N, --sweep blanking, --refit K, --ambiguity on|off, --model-form on|off, --single-output-check on|off, --sensor-bias-rival T)"
                 ))
             }
         }

@@ -431,6 +431,11 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "--nu: must be finite and > 0, got 0");
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .args(["--sensor-bias-rival", "nan"])
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "--sensor-bias-rival: must be finite and >= 0, got NaN");
     // OpenFOAM's options belong to --model openfoam.
     let o = run(on_dataset("diagnose", "of-dev-clean")
         .args(["--np", "2"])

@@ -170,6 +170,63 @@ fn outliers_alone_are_no_missing_effect() {
         let named: Vec<&str> = unchecked.significant().map(|h| h.name.as_str()).collect();
         assert_eq!(named, vec!["spot"], "seed {seed}: {unchecked:#?}");
         assert!(unchecked.hypotheses[0].single_output_delta_bic.is_none());
+        // A constant bias of that output fits it at least as well as `spot` (which also
+        // moves output 8), so the sensor-bias rival keeps `spot` stopped.
+        let against_bias = spot.sensor_bias_delta_bic;
+        assert!(
+            against_bias.is_some_and(|b| b >= 0.0),
+            "seed {seed}: {spot:?}"
+        );
+        let rival = diagnose(
+            &res,
+            &case.hypotheses(),
+            &DiagnoseSettings::new().with_sensor_bias_rival_bic(Some(6.0)),
+        )
+        .unwrap();
+        assert_eq!(rival.significant().count(), 0, "seed {seed}: {rival:#?}");
+    }
+}
+
+#[test]
+fn the_sensor_bias_rival_passes_a_one_output_effect_that_follows_its_cause() {
+    // An effect at output 10 alone that grows from snapshot to snapshot (1, 2, 3 times
+    // its value: say a rack's exhaust with its power), beside the model-form outliers.
+    let follows = column(|o, s| if o == 10 { 1.0 + s as f64 } else { 0.0 });
+    for seed in 1..=5 {
+        let case = Case::new(seed);
+        let base = case.residuals(0.0);
+        let r: Vec<f64> = (0..N)
+            .map(|i| base.residuals()[i] - 1.5 * follows[i])
+            .collect();
+        let res = Residuals::new(
+            rows(),
+            r,
+            matrix(std::slice::from_ref(&case.jac)),
+            vec!["alpha".into()],
+        )
+        .unwrap();
+        let hyps = vec![Hypothesis::new(
+            "local",
+            vec![HypothesisParam::bounded("local/q", -5.0, 5.0)],
+            matrix(std::slice::from_ref(&follows)),
+        )];
+        // The single-output check stops it, and says a bias of s10 fits far worse.
+        let d = diagnose(&res, &hyps, &DiagnoseSettings::new()).unwrap();
+        let local = &d.hypotheses[0];
+        assert!(!local.significant, "seed {seed}: {local:?}");
+        assert_eq!(local.carried_by.as_deref(), Some("s10"), "seed {seed}");
+        let against_bias = local.sensor_bias_delta_bic.unwrap();
+        assert!(against_bias < -10.0, "seed {seed}: {against_bias}");
+        // With the rival, the snapshots' evidence names it, at its size.
+        let rival = diagnose(
+            &res,
+            &hyps,
+            &DiagnoseSettings::new().with_sensor_bias_rival_bic(Some(6.0)),
+        )
+        .unwrap();
+        let top = rival.significant().next().expect("named with the rival");
+        let q = top.fitted.get("local/q").unwrap();
+        assert!((q - 1.5).abs() < 0.1, "seed {seed}: fitted {q}");
     }
 }
 

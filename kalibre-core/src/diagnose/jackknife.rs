@@ -58,6 +58,37 @@ pub(crate) fn worst_delta_bic(
     worst
 }
 
+/// The BIC of a constant bias at one output (`rows`, all its snapshots; `weights` the
+/// rows' weights, so that the bias is constant in output units), refit with the current
+/// parameters (`base_rank` the rank of their refit alone): the rival of a hypothesis that rests on that output. A faulty sensor or
+/// the model's own error there reads as such a bias; an effect's warming follows its
+/// cause from snapshot to snapshot and reaches other sensors a little, so the data can
+/// prefer it to the bias even when no other output carries it alone.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sensor_bias_bic(
+    lik: &Likelihood,
+    jcols: &[Vec<f64>],
+    base_rank: usize,
+    ridge: &[f64],
+    r: &[f64],
+    rows: &[usize],
+    weights: &[f64],
+    scale: Option<f64>,
+    floor: f64,
+) -> f64 {
+    let p = jcols.len();
+    let mut bias = vec![0.0; r.len()];
+    for &i in rows {
+        bias[i] = weights[i];
+    }
+    let mut cols = jcols.to_vec();
+    cols.push(bias);
+    let mut ridge = ridge[..p].to_vec();
+    ridge.push(0.0);
+    let fit = lik.fit(&cols, r, &ridge, scale, floor);
+    fit.deviance + fit.rank.saturating_sub(base_rank) as f64 * (r.len() as f64).ln()
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::heldout::group_rows;
@@ -90,5 +121,47 @@ mod tests {
         assert_eq!(spike_carrier, Some(4));
         let (shared_worst, _) = worst(&shared);
         assert!(shared_worst < -50.0, "shared: {shared_worst}");
+    }
+
+    #[test]
+    fn a_bias_rival_tells_a_constant_fault_from_an_effect_that_follows_its_cause() {
+        // 10 outputs x 3 snapshots. The effect acts on output 4 in proportion to a
+        // cause that changes between snapshots (1, 2, 3) and a little on output 5.
+        let n = 30;
+        let output = |i: usize| i % 10;
+        let snapshot = |i: usize| i / 10;
+        let noise = |i: usize| 0.05 * (((i * 7919) % 13) as f64 / 6.0 - 1.0);
+        let effect: Vec<f64> = (0..n)
+            .map(|i| match output(i) {
+                4 => 1.0 + snapshot(i) as f64,
+                5 => 0.05,
+                _ => 0.0,
+            })
+            .collect();
+        let names: Vec<String> = (0..n).map(|i| format!("s{}", output(i))).collect();
+        let by = group_rows(names.iter().map(String::as_str));
+        let lik = Likelihood::new(Some(4.0));
+        let weights = vec![1.0; n];
+        let against_bias = |r: &[f64]| {
+            let fit = lik.fit(std::slice::from_ref(&effect), r, &[0.0], Some(0.05), 0.0);
+            let bias = sensor_bias_bic(&lik, &[], 0, &[0.0], r, &by[4], &weights, Some(0.05), 0.0);
+            fit.deviance + fit.rank as f64 * (n as f64).ln() - bias
+        };
+        // Data with the effect: it beats a bias of output 4 by far.
+        let with_effect: Vec<f64> = (0..n).map(|i| noise(i) - 1.5 * effect[i]).collect();
+        let effect_margin = against_bias(&with_effect);
+        assert!(
+            effect_margin < -50.0,
+            "effect against bias: {effect_margin}"
+        );
+        // Output 4 off by 3 in every snapshot (a faulty sensor): the bias wins.
+        let faulty: Vec<f64> = (0..n)
+            .map(|i| noise(i) - if output(i) == 4 { 3.0 } else { 0.0 })
+            .collect();
+        let fault_margin = against_bias(&faulty);
+        assert!(
+            fault_margin > 10.0,
+            "effect against bias on a fault: {fault_margin}"
+        );
     }
 }

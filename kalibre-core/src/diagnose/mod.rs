@@ -306,6 +306,7 @@ pub fn diagnose(
             && in_range
             && !h.refuted;
         let mut carried_by = None;
+        let mut sensor_bias_delta_bic = None;
         let single_output_delta_bic = if significant && settings.single_output_check {
             let (worst, worst_output) = jackknife::worst_delta_bic(
                 &lik,
@@ -318,6 +319,28 @@ pub fn diagnose(
                 floor,
             );
             significant = worst < 0.0;
+            if !significant {
+                // Reported whenever the check stops a hypothesis: how a fault of that
+                // sensor compares. It decides only with the rival setting.
+                if let Some(o) = worst_output {
+                    let bias_bic = jackknife::sensor_bias_bic(
+                        &lik,
+                        &jcols,
+                        base.rank,
+                        &ridge,
+                        r,
+                        &by_output[o],
+                        &weights,
+                        given_scale,
+                        floor,
+                    );
+                    let against_bias = sol.deviance + added_rank as f64 * ln_n - bias_bic;
+                    sensor_bias_delta_bic = Some(against_bias);
+                    significant = settings
+                        .sensor_bias_rival_bic
+                        .is_some_and(|margin| against_bias <= -margin);
+                }
+            }
             if !significant {
                 carried_by = worst_output
                     .and_then(|o| by_output[o].first())
@@ -352,6 +375,7 @@ pub fn diagnose(
             in_range,
             current_change: NamedValues::new(res.params(), &sol.x[..p]),
             single_output_delta_bic,
+            sensor_bias_delta_bic,
             carried_by,
             ambiguous_with: Vec::new(),
         });

@@ -155,6 +155,13 @@ pub struct HypothesisResult {
     /// hypothesis that passes every other test (none otherwise, or with the check off).
     #[serde(default)]
     pub single_output_delta_bic: Option<f64>,
+    /// For a hypothesis the single-output check stops (or, with
+    /// [`crate::diagnose::DiagnoseSettings::sensor_bias_rival_bic`], would stop): its BIC
+    /// less that of a constant bias at the output it rests on, both refit with the
+    /// current parameters; negative when the data prefer the effect to a fault of that
+    /// sensor.
+    #[serde(default)]
+    pub sensor_bias_delta_bic: Option<f64>,
     /// The output this hypothesis rests on when the single-output check alone stops it:
     /// without that output (all its snapshots) the others no longer prefer it. A local
     /// effect seen by one sensor looks like this, and so does a faulty sensor or the

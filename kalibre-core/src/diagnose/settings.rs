@@ -16,6 +16,7 @@ use crate::{Error, Result};
 /// | `prior_weight` | 0 | ridge on the hypothesis's parameters: adds `prior_weight * (dq_j / s_j)^2` in noise-sigma units, `s_j` the larger magnitude of its bounds (a Gaussian prior of that scale); 0: plain least squares | finite, >= 0 |
 /// | `robust_nu` | 4 | degrees of freedom of the Student-t likelihood every fit, BIC and held-out check uses, so that a few outputs the model misses for reasons no hypothesis names (its own physics, a faulty sensor) do not decide the ranking; none: Gaussian (least squares) | finite, > 0 |
 /// | `single_output_check` | true | a significant hypothesis must still be preferred (BIC change below 0) with any one output (all its snapshots) left out, so that a model error at one sensor (or a faulty sensor) cannot carry it alone | |
+/// | `sensor_bias_rival_bic` | none | with a value `t`: a hypothesis the single-output check would stop stays significant when its BIC is at least `t` below that of a constant bias at the output it rests on (a faulty sensor, or the model's own error there), both refit with the current parameters; none: the check stops it | finite, >= 0 |
 /// | `ambiguity_check` | true | when another significant hypothesis of another footprint (not collinear with the best, and its fit changing other readings: cosine of the explained changes below 0.9) has a BIC within 6 of the best's, none is significant: each lists the others in `ambiguous_with` (the data say something is missing, not which) | |
 /// | `output_folds` | 5 | folds of the held-out check over outputs when there is one snapshot (with two or more: leave one snapshot out) | >= 2 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -44,6 +45,10 @@ pub struct DiagnoseSettings {
     /// fits about as well is left undecided (see the module documentation).
     #[serde(default = "default_true")]
     pub ambiguity_check: bool,
+    /// How much lower than a constant bias at its one carrying output a hypothesis's BIC
+    /// must be for it to pass the single-output check anyway; `None`: never.
+    #[serde(default)]
+    pub sensor_bias_rival_bic: Option<f64>,
 }
 
 fn default_true() -> bool {
@@ -67,6 +72,7 @@ impl Default for DiagnoseSettings {
             single_output_check: true,
             robust_nu: default_robust_nu(),
             ambiguity_check: true,
+            sensor_bias_rival_bic: None,
         }
     }
 }
@@ -152,6 +158,13 @@ impl DiagnoseSettings {
         self
     }
 
+    /// Lets a hypothesis that rests on one output pass when its BIC is at least `t` below
+    /// that of a constant bias at that output; `None`: the single-output check stops it.
+    pub fn with_sensor_bias_rival_bic(mut self, t: Option<f64>) -> Self {
+        self.sensor_bias_rival_bic = t;
+        self
+    }
+
     /// Checks every setting against its range, naming the first offender.
     pub fn check(&self) -> Result<()> {
         if let Some(s) = self.noise_sigma {
@@ -179,6 +192,9 @@ impl DiagnoseSettings {
             ));
         }
         non_negative("prior_weight", self.prior_weight)?;
+        if let Some(t) = self.sensor_bias_rival_bic {
+            non_negative("sensor_bias_rival_bic", t)?;
+        }
         if let Some(nu) = self.robust_nu {
             if !(nu.is_finite() && nu > 0.0) {
                 return Err(bad(

@@ -173,6 +173,7 @@ impl HallDiagnosis {
                     "held_out_improvement": h.held_out_improvement,
                     "single_output_delta_bic": h.single_output_delta_bic,
                     "carried_by": h.carried_by,
+                    "sensor_bias_delta_bic": h.sensor_bias_delta_bic,
                     "ambiguous_with": h.ambiguous_with,
                     "suggestion": s,
                 })

@@ -72,6 +72,12 @@ pub struct DiagnoseArgs {
     /// any one sensor left out, so that one sensor the model misses cannot carry it).
     #[arg(long)]
     no_single_output_check: bool,
+    /// Let a hypothesis the single-output check would stop pass when its BIC is at least
+    /// this much below that of a constant bias of the one sensor it rests on (a faulty
+    /// sensor reads as such a bias; an effect follows its cause from snapshot to
+    /// snapshot). By default the check stops it.
+    #[arg(long, value_name = "BIC")]
+    sensor_bias_rival: Option<f64>,
     /// Name the best explanation even when another of a different footprint fits about
     /// as well (BIC within 6). By default both are listed as undecided: the data then
     /// say that something is missing, not which.
@@ -249,6 +255,14 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     };
     settings.diagnose.single_output_check = !args.no_single_output_check;
     settings.diagnose.ambiguity_check = !args.no_ambiguity_check;
+    if let Some(t) = args.sensor_bias_rival {
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(CliError::Input(format!(
+                "--sensor-bias-rival: must be finite and >= 0, got {t}"
+            )));
+        }
+    }
+    settings.diagnose.sensor_bias_rival_bic = args.sensor_bias_rival;
     settings.model_form = !args.no_model_form;
     settings.diagnose.robust_nu = robust_nu;
     if args.refit > 0 && args.refit_iterations == 0 {
@@ -390,6 +404,18 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
                 "    rests on one sensor, {sensor}: without it the others do not prefer it \
                  (a faulty sensor, or the model's own error there, looks the same)"
             );
+            if let Some(b) = h.sensor_bias_delta_bic {
+                // A fault reads the same in every snapshot; an effect follows its cause.
+                // Within 6 either way the evidence between the two is short of strong.
+                let verdict = if b <= -CLOSE_ALTERNATIVE_BIC {
+                    "the snapshots prefer it to a constant bias of that sensor"
+                } else if b < CLOSE_ALTERNATIVE_BIC {
+                    "the snapshots cannot tell it from a constant bias of that sensor"
+                } else {
+                    "a constant bias of that sensor fits better"
+                };
+                println!("    {verdict} (BIC {b:+.1} against the bias)");
+            }
             println!(
                 "    if {sensor} reads right, add to hall.json \"effects\": {}",
                 entry()
