@@ -24,12 +24,12 @@
 //! 2` and `student-t 8` (with both checks), `refit 3` and `refit 8` (the default with
 //! the 3 or 8 leading hypotheses refit with the model,
 //! `HallDiagnosisSettings::refit_top`), `no ambiguity check` (the default without
-//! `DiagnoseSettings::ambiguity_check`), `no model form` (the
-//! default of session 30: without the model-form uncertainty,
-//! `HallDiagnosisSettings::model_form`) and `no model form, no ambiguity check` (the
-//! default before session 30), `sensor-bias rival 6` and `sensor-bias rival 10` (the
-//! default with `DiagnoseSettings::sensor_bias_rival_bic` at 6 or 10). Every setting but those named `no model form` has the
-//! model form, and every setting but those named `no ambiguity check` the ambiguity check.
+//! `DiagnoseSettings::ambiguity_check`), `no model form` (the default of session 30:
+//! without the model-form uncertainty, `HallDiagnosisSettings::model_form`), `no model
+//! form, no ambiguity check` (the default before session 30), and `sensor-bias rival 6`
+//! and `sensor-bias rival 10` (the default with `DiagnoseSettings::sensor_bias_rival_bic`
+//! at 6 or 10). Every setting but those named `no model form` has the model form, and
+//! every setting but those named `no ambiguity check` the ambiguity check.
 //! `--settings 'NAME;NAME'` runs only the named settings.
 //!
 //! Verdicts per case and setting: `pass` when the top significant hypothesis is the

@@ -245,9 +245,7 @@ fn evaluate(
     if let Some(on) = o.single_output_check {
         ds.diagnose.single_output_check = on;
     }
-    if o.sensor_bias_rival_bic.is_some() {
-        ds.diagnose.sensor_bias_rival_bic = o.sensor_bias_rival_bic;
-    }
+    ds.diagnose.sensor_bias_rival_bic = o.sensor_bias_rival_bic;
     let d = diagnose_hall(hall, snaps, &params, &EffectRegistry::builtin(), &ds)
         .map_err(|e| format!("diagnosis: {e}"))?;
     let top = d.diagnosis.significant().next();

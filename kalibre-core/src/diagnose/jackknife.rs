@@ -11,7 +11,7 @@
 //! with either of its two sensors left out); a parameter fitted to one sensor the model
 //! misses gets only its penalty from the others (+2 to +4 there).
 
-use super::robust::Likelihood;
+use super::robust::{Fit, Likelihood};
 
 /// The problem without some rows.
 fn without(cols: &[Vec<f64>], r: &[f64], out: &[usize]) -> (Vec<Vec<f64>>, Vec<f64>) {
@@ -58,35 +58,35 @@ pub(crate) fn worst_delta_bic(
     worst
 }
 
-/// The BIC of a constant bias at one output (`rows`, all its snapshots; `weights` the
-/// rows' weights, so that the bias is constant in output units), refit with the current
-/// parameters (`base_rank` the rank of their refit alone): the rival of a hypothesis that rests on that output. A faulty sensor or
-/// the model's own error there reads as such a bias; an effect's warming follows its
-/// cause from snapshot to snapshot and reaches other sensors a little, so the data can
-/// prefer it to the bias even when no other output carries it alone.
+/// The BIC change of a constant bias at one output (`rows`, all its snapshots; `weights`
+/// the rows' weights, so that the bias is constant in output units), refit with the
+/// current parameters, against `base`, their refit alone: the rival of a hypothesis that
+/// rests on that output. A faulty sensor or the model's own error there reads as such a
+/// bias; an effect's warming follows its cause from snapshot to snapshot and reaches
+/// other sensors a little, so the data can prefer it to the bias even when no other
+/// output carries it alone.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn sensor_bias_bic(
+pub(crate) fn sensor_bias_delta_bic(
     lik: &Likelihood,
     jcols: &[Vec<f64>],
-    base_rank: usize,
-    ridge: &[f64],
+    base: &Fit,
     r: &[f64],
     rows: &[usize],
     weights: &[f64],
     scale: Option<f64>,
     floor: f64,
 ) -> f64 {
-    let p = jcols.len();
     let mut bias = vec![0.0; r.len()];
     for &i in rows {
         bias[i] = weights[i];
     }
     let mut cols = jcols.to_vec();
     cols.push(bias);
-    let mut ridge = ridge[..p].to_vec();
-    ridge.push(0.0);
-    let fit = lik.fit(&cols, r, &ridge, scale, floor);
-    fit.deviance + fit.rank.saturating_sub(base_rank) as f64 * (r.len() as f64).ln()
+    // The current parameters are not ridged (as in every fit of the diagnosis), nor is
+    // the bias: it is the sensor's own offset, of any size.
+    let fit = lik.fit(&cols, r, &vec![0.0; cols.len()], scale, floor);
+    let added_rank = fit.rank.saturating_sub(base.rank);
+    fit.deviance + added_rank as f64 * (r.len() as f64).ln() - base.deviance
 }
 
 #[cfg(test)]
@@ -143,9 +143,12 @@ mod tests {
         let lik = Likelihood::new(Some(4.0));
         let weights = vec![1.0; n];
         let against_bias = |r: &[f64]| {
+            let base = lik.fit(&[], r, &[], Some(0.05), 0.0);
             let fit = lik.fit(std::slice::from_ref(&effect), r, &[0.0], Some(0.05), 0.0);
-            let bias = sensor_bias_bic(&lik, &[], 0, &[0.0], r, &by[4], &weights, Some(0.05), 0.0);
-            fit.deviance + fit.rank as f64 * (n as f64).ln() - bias
+            let effect_delta = fit.deviance + fit.rank as f64 * (n as f64).ln() - base.deviance;
+            let bias_delta =
+                sensor_bias_delta_bic(&lik, &[], &base, r, &by[4], &weights, Some(0.05), 0.0);
+            effect_delta - bias_delta
         };
         // Data with the effect: it beats a bias of output 4 by far.
         let with_effect: Vec<f64> = (0..n).map(|i| noise(i) - 1.5 * effect[i]).collect();

@@ -323,18 +323,17 @@ pub fn diagnose(
                 // Reported whenever the check stops a hypothesis: how a fault of that
                 // sensor compares. It decides only with the rival setting.
                 if let Some(o) = worst_output {
-                    let bias_bic = jackknife::sensor_bias_bic(
-                        &lik,
-                        &jcols,
-                        base.rank,
-                        &ridge,
-                        r,
-                        &by_output[o],
-                        &weights,
-                        given_scale,
-                        floor,
-                    );
-                    let against_bias = sol.deviance + added_rank as f64 * ln_n - bias_bic;
+                    let against_bias = delta_bic
+                        - jackknife::sensor_bias_delta_bic(
+                            &lik,
+                            &jcols,
+                            &base,
+                            r,
+                            &by_output[o],
+                            &weights,
+                            given_scale,
+                            floor,
+                        );
                     sensor_bias_delta_bic = Some(against_bias);
                     significant = settings
                         .sensor_bias_rival_bic
