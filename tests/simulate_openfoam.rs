@@ -6,14 +6,15 @@ use std::process::Command;
 mod openfoam_common;
 use openfoam_common::*;
 
-/// At the true alphas, one snapshot through the CLI reproduces the development hall's
-/// noise-free OpenFOAM readings and its servers' intakes, and the case is meshed beside
-/// `--out`.
+/// At the true alphas, one snapshot through the CLI, decomposed over two processes
+/// (`--np 2`), reproduces the development hall's noise-free OpenFOAM readings and its
+/// servers' intakes, and the case is meshed beside `--out`.
 #[test]
 fn simulate_with_openfoam_reproduces_the_openfoam_data() {
     require_openfoam();
     let dir = tmp("simulate-cli");
-    // The first snapshot only: one solve.
+    // The first snapshot only: one solve, on both cores (`tests/openfoam.rs` solves the
+    // same hall serially through the library).
     let csv = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
     let t0: Vec<&str> = csv
         .lines()
@@ -35,7 +36,7 @@ fn simulate_with_openfoam_reproduces_the_openfoam_data() {
     )
     .unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_kalibre"))
-        .args(["simulate", "--model", "openfoam", "--hall"])
+        .args(["simulate", "--model", "openfoam", "--np", "2", "--hall"])
         .arg(data("of-dev-clean/hall.json"))
         .arg("--snapshots")
         .arg(dir.join("t0.csv"))

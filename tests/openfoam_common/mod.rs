@@ -128,16 +128,24 @@ pub fn small_hall() -> &'static (Hall, Vec<HallSnapshot>) {
         )
         .unwrap();
         let params = true_params(&model.layout().space().names());
-        let snaps: Vec<HallSnapshot> = states
-            .into_iter()
-            .map(|state| {
-                let out = model.evaluate(&state, &params).unwrap();
-                HallSnapshot {
-                    state,
-                    sensor_c: out.values.into_iter().map(Some).collect(),
-                }
-            })
-            .collect();
+        // One serial solve per snapshot, side by side: a test file that waits for these
+        // alone would otherwise leave a core idle.
+        let snaps: Vec<HallSnapshot> = std::thread::scope(|sc| {
+            let solves: Vec<_> = states
+                .into_iter()
+                .map(|state| {
+                    let (model, params) = (&model, &params);
+                    sc.spawn(move || {
+                        let out = model.evaluate(&state, params).unwrap();
+                        HallSnapshot {
+                            state,
+                            sensor_c: out.values.into_iter().map(Some).collect(),
+                        }
+                    })
+                })
+                .collect();
+            solves.into_iter().map(|s| s.join().unwrap()).collect()
+        });
         (hall, snaps)
     })
 }
