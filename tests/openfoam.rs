@@ -40,12 +40,8 @@ fn mae_against_openfoam_data(dataset: &str, hall: &Hall, tag: &str) -> f64 {
         OpenFoamModel::new(hall, OpenFoamSettings::default().with_cache_root(&dir)).unwrap();
     let space = model.layout().space();
     let params = truth_with_effects(space);
-    let results: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = snaps
-            .iter()
-            .map(|snap| s.spawn(|| model.evaluate_timed(&snap.state, &params)))
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    let results = side_by_side(snaps.iter().map(|s| &s.state), |state| {
+        model.evaluate_timed(state, &params)
     });
     let mut all_got = Vec::new();
     let mut all_want = Vec::new();

@@ -82,12 +82,8 @@ fn readings_with(
     let model = OpenFoamModel::new(&h, settings.clone()).unwrap();
     let space = model.layout().space();
     let params = truth_with_effects(space);
-    std::thread::scope(|sc| {
-        let runs: Vec<_> = snaps
-            .iter()
-            .map(|s| sc.spawn(|| model.evaluate(&s.state, &params).unwrap().values))
-            .collect();
-        runs.into_iter().map(|r| r.join().unwrap()).collect()
+    side_by_side(snaps.iter().map(|s| &s.state), |state| {
+        model.evaluate(state, &params).unwrap().values
     })
 }
 

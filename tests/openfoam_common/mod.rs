@@ -128,25 +128,32 @@ pub fn small_hall() -> &'static (Hall, Vec<HallSnapshot>) {
         )
         .unwrap();
         let params = true_params(&model.layout().space().names());
-        // One serial solve per snapshot, side by side: a test file that waits for these
-        // alone would otherwise leave a core idle.
-        let snaps: Vec<HallSnapshot> = std::thread::scope(|sc| {
-            let solves: Vec<_> = states
-                .into_iter()
-                .map(|state| {
-                    let (model, params) = (&model, &params);
-                    sc.spawn(move || {
-                        let out = model.evaluate(&state, params).unwrap();
-                        HallSnapshot {
-                            state,
-                            sensor_c: out.values.into_iter().map(Some).collect(),
-                        }
-                    })
-                })
-                .collect();
-            solves.into_iter().map(|s| s.join().unwrap()).collect()
-        });
+        let readings = side_by_side(&states, |state| model.evaluate(state, &params).unwrap());
+        let snaps: Vec<HallSnapshot> = states
+            .into_iter()
+            .zip(readings)
+            .map(|(state, out)| HallSnapshot {
+                state,
+                sensor_c: out.values.into_iter().map(Some).collect(),
+            })
+            .collect();
         (hall, snaps)
+    })
+}
+
+/// `run` on every state at once, one thread each, in the states' order: one serial
+/// OpenFOAM solve per snapshot, side by side, so that a test waiting for them does not
+/// leave a core idle.
+pub fn side_by_side<'a, T: Send>(
+    states: impl IntoIterator<Item = &'a OperatingState>,
+    run: impl Fn(&OperatingState) -> T + Sync,
+) -> Vec<T> {
+    std::thread::scope(|sc| {
+        let solves: Vec<_> = states
+            .into_iter()
+            .map(|state| sc.spawn(|| run(state)))
+            .collect();
+        solves.into_iter().map(|s| s.join().unwrap()).collect()
     })
 }
 
