@@ -305,3 +305,18 @@ fn a_tile_under_a_rack_is_refused_by_the_hall() {
         "{err}"
     );
 }
+
+/// Cells too small for the room are refused before anything is allocated: 0.5 mm cells
+/// over this 6 x 6 x 2.6 m hall would be 7.5e11 of them.
+#[test]
+fn a_grid_too_fine_for_the_room_is_refused_by_name() {
+    let hall = hall();
+    let config = SimConfig::default().with_cell_m(0.0005);
+    let err = Simulator::new(&hall, config).unwrap_err().to_string();
+    assert!(
+        err.contains("cells of 0.0005 m") && err.contains("at most 30000000"),
+        "{err}"
+    );
+    // An ordinary grid of the same hall still builds.
+    assert!(Simulator::new(&hall, SimConfig::default().with_cell_m(0.1)).is_ok());
+}

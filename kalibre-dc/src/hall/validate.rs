@@ -242,8 +242,9 @@ impl Hall {
         racks.chain(cracs)
     }
 
-    /// No tile under a rack or CRAC: the simulator drops a tile's cells that a grid snaps
-    /// under a neighbouring rack, so the hall itself must not put it there.
+    /// No tile under a rack or CRAC (the simulator drops a tile's cells that a grid snaps
+    /// under a neighbouring rack, so the hall itself must not put it there), and no two
+    /// tiles or return grilles on the same area.
     fn check_tiles_clear(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
         for (what, id, solid) in self.solid_boxes() {
             for (i, t) in self.tiles.iter().enumerate() {
@@ -266,7 +267,12 @@ impl Hall {
                 }
             }
         }
-        Ok(())
+        // Two tiles (or two return grilles) on the same floor (ceiling) area would count
+        // its air twice.
+        let tiles = self.tiles.iter().map(|t| (t.position_m, t.size_m));
+        check_no_overlap(c, "tiles", "tile", tiles)?;
+        let returns = self.returns.iter().map(|r| (r.position_m, r.size_m));
+        check_no_overlap(c, "returns", "return grille", returns)
     }
 
     fn check_containment(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
@@ -346,6 +352,38 @@ impl Hall {
 
 /// Servers of one rack must not share a unit. Sorting by first unit keeps this linear in
 /// the number of servers after the sort.
+/// No two of these floor or ceiling rectangles (minimum corner, size) overlap; the later
+/// one is named.
+fn check_no_overlap(
+    c: &Checker,
+    list: &str,
+    what: &str,
+    rects: impl Iterator<Item = ([f64; 2], [f64; 2])>,
+) -> Result<()> {
+    let boxes: Vec<Aabb> = rects
+        .map(|(p, s)| Aabb {
+            min: [p[0], p[1], 0.0],
+            max: [p[0] + s[0], p[1] + s[1], 1.0],
+        })
+        .collect();
+    for (j, b) in boxes.iter().enumerate() {
+        if let Some(i) = boxes[..j]
+            .iter()
+            .position(|a| a.overlaps(b, GEOMETRY_TOL_M))
+        {
+            return Err(c.err(
+                format!("/{list}/{j}"),
+                format!(
+                    "{what} at {:?} overlaps {what} {i} at {:?}; expected {what}s not to overlap (touching is fine, tolerance 1 mm)",
+                    [b.min[0], b.min[1]],
+                    [boxes[i].min[0], boxes[i].min[1]]
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn check_unit_overlaps(c: &Checker, rack_pointer: &str, r: &super::types::Rack) -> Result<()> {
     let mut spans: Vec<(u64, u64, usize)> = r
         .servers

@@ -54,8 +54,35 @@ fn full_g(grid: &Grid, a: usize) -> f64 {
     grid.face_area(a) / grid.d[a]
 }
 
+/// The most cells the built-in simulator builds. A solve holds about 300 bytes per cell
+/// (the `demo` hall at 0.1 m: 302,400 cells, 100 MB resident), so this is about 9 GB.
+pub const MAX_CELLS: usize = 30_000_000;
+
 impl Topology {
     pub fn build(hall: &Hall, config: &SimConfig) -> Result<Self> {
+        // Counted in floating point first: a room of 1e308 m would overflow the count.
+        let cells: f64 = hall
+            .room
+            .size_m
+            .iter()
+            .map(|l| (l / config.cell_m).round().max(2.0))
+            .product();
+        if cells.is_nan() || cells > MAX_CELLS as f64 {
+            let m = |l: f64| {
+                if l < 1e6 {
+                    format!("{l}")
+                } else {
+                    format!("{l:e}")
+                }
+            };
+            let [x, y, z] = hall.room.size_m.map(m);
+            return Err(Error::Simulation(format!(
+                "the room ({x} x {y} x {z} m) at cells of {} m needs {cells:.3e} cells; \
+                 the built-in simulator takes at most {MAX_CELLS}: use coarser cells \
+                 (`--grid-m`) or check the room size",
+                config.cell_m
+            )));
+        }
         let grid = Grid::new(hall.room.size_m, config.cell_m);
         let n = grid.len();
         let mut solid = vec![false; n];

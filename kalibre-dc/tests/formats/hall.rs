@@ -252,6 +252,28 @@ pub fn hall_cases() -> Vec<HallCase> {
             |v| set(v, "/tiles/0/position_m/0", json!(7.8)),
         ),
         hall_case(
+            "two tiles on the same floor",
+            "/tiles/1",
+            "overlaps tile 0",
+            |v| {
+                let tile = v["tiles"][0].clone();
+                let mut other = tile.clone();
+                other["position_m"] = json!([2.3, 2.9]);
+                set(v, "/tiles", json!([tile, other]));
+            },
+        ),
+        hall_case(
+            "two return grilles on the same ceiling",
+            "/returns/1",
+            "overlaps return grille 0",
+            |v| {
+                let grille = v["returns"][0].clone();
+                let mut other = grille.clone();
+                other["position_m"] = json!([3.0, 5.2]);
+                set(v, "/returns", json!([grille, other]));
+            },
+        ),
+        hall_case(
             "return with negative size",
             "/returns/0/size_m/1",
             "expected a positive size",
