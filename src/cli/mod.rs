@@ -52,8 +52,17 @@ pub fn run(cli: Cli) -> CliResult {
     }
 }
 
+/// The most worker threads a command takes.
+pub const MAX_THREADS: usize = 1024;
+
 /// Builds the rayon pool for `--threads` (0 = all cores) and runs `f` in it.
 pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> CliResult<T> {
+    // Thousands of threads on a few cores only thrash (10,000 took minutes to start).
+    if threads > MAX_THREADS {
+        return Err(CliError::Input(format!(
+            "--threads {threads}: expected at most {MAX_THREADS} (0 = all cores)"
+        )));
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()

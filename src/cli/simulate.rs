@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
+use kalibre_core::calibrate::REPORT_SCHEMA;
 use kalibre_core::ParamSpace;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::sim::{coldest_under_read, setpoint_headroom_c, SimConfig};
@@ -138,7 +139,18 @@ pub(super) fn read_params_file(
         .map_err(|e| CliError::Input(format!("{file}: not valid JSON: {e}")))?;
     // Only a report (one with `best`) records a model; a plain object is all parameters.
     let recorded = match json.get("best") {
-        Some(_) => CalibratedModel::of_report(path, json.get("model"))?,
+        Some(_) => {
+            match json.get("schema") {
+                Some(serde_json::Value::String(s)) if s == REPORT_SCHEMA => {}
+                None => {}
+                Some(other) => {
+                    return Err(CliError::Input(format!(
+                        "{file}: /schema: expected \"{REPORT_SCHEMA}\", found {other}"
+                    )))
+                }
+            }
+            CalibratedModel::of_report(path, json.get("model"))?
+        }
         None => None,
     };
     Ok((json, recorded))
@@ -234,7 +246,38 @@ pub fn sim_config(grid_m: Option<f64>) -> CliResult<SimConfig> {
 }
 
 /// Runs `kalibre simulate`.
+/// An output path that names an input file would replace the measurements (or the hall)
+/// with predictions: refused before anything runs.
+fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
+    let inputs = [
+        ("--hall", Some(&args.hall)),
+        ("--snapshots", Some(&args.snapshots)),
+        ("--params", args.params.as_ref()),
+    ];
+    let outputs = [
+        ("--out", Some(&args.out)),
+        ("--servers", args.servers.as_ref()),
+        ("--heat-sources", args.heat_sources.as_ref()),
+    ];
+    for (out_flag, out) in outputs {
+        let Some(out) = out.and_then(|p| std::fs::canonicalize(p).ok()) else {
+            continue;
+        };
+        for (in_flag, input) in inputs {
+            if input.and_then(|p| std::fs::canonicalize(p).ok()).as_ref() == Some(&out) {
+                return Err(CliError::Input(format!(
+                    "{out_flag} {} is the {in_flag} file: writing there would replace it; \
+                     expected another path",
+                    out.display()
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: SimulateArgs) -> CliResult {
+    refuse_overwriting_inputs(&args)?;
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;

@@ -20,7 +20,7 @@ pub struct SynthArgs {
     /// Output directory (created if missing).
     #[arg(long)]
     out: PathBuf,
-    /// Hide an effect in the truth: `KIND[:key=value,...]`, e.g. `bypass:fraction=0.1`.
+    /// Hide an effect in the truth: `KIND[:key=value,...]`, e.g. `bypass:fraction=0.1,behind_rack=A03`.
     /// Repeatable. Kinds: containment_leakage, bypass, crac_supply_offset, rack_recirculation.
     #[arg(long = "effect", value_name = "KIND[:key=value,...]")]
     effects: Vec<String>,

@@ -3,7 +3,7 @@
 
 use clap::Args;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::snapshots::HallSnapshot;
+use kalibre_dc::snapshots::{HallSnapshot, AIR_C_RANGE, MAX_POWER_W};
 
 use super::{CliError, CliResult};
 
@@ -40,7 +40,8 @@ impl WhatIfArgs {
     }
 
     /// Applies the changes to every snapshot's operating state; a change that leaves the
-    /// hall's limits (a fan speed above 1) or is not a number is refused by name.
+    /// hall's limits (a fan speed above 1, a setpoint outside the air's range, a server
+    /// above 10 MW) or is not a number is refused by name.
     pub fn apply(&self, hall: &Hall, snaps: &mut [HallSnapshot]) -> CliResult {
         if let Some(d) = self.setpoint_offset_c {
             if !d.is_finite() {
@@ -66,7 +67,15 @@ impl WhatIfArgs {
         for snap in snaps.iter_mut() {
             let state = &mut snap.state;
             if let Some(d) = self.setpoint_offset_c {
-                state.setpoint_c.iter_mut().for_each(|t| *t += d);
+                for (t, crac) in state.setpoint_c.iter_mut().zip(&hall.cracs) {
+                    *t += d;
+                    if !AIR_C_RANGE.contains(t) {
+                        return Err(CliError::Input(format!(
+                            "--setpoint-offset-c {}: CRAC `{}` in snapshot `{}` would supply {} C; expected a setpoint in [{}, {}] C",
+                            num(d), crac.id, state.label, num(*t), AIR_C_RANGE.start(), AIR_C_RANGE.end()
+                        )));
+                    }
+                }
             }
             if let Some(f) = self.fan_speed_scale {
                 for (speed, crac) in state.fan_speed.iter_mut().zip(&hall.cracs) {
@@ -80,9 +89,26 @@ impl WhatIfArgs {
                 }
             }
             if let Some(f) = self.power_scale {
-                state.power_w.iter_mut().for_each(|p| *p *= f);
+                for (p, server) in state.power_w.iter_mut().zip(hall.servers()) {
+                    *p *= f;
+                    if *p > MAX_POWER_W {
+                        return Err(CliError::Input(format!(
+                            "--power-scale {}: server `{}` in snapshot `{}` would draw {} W; expected at most {MAX_POWER_W:e} W",
+                            num(f), server.server.id, state.label, num(*p)
+                        )));
+                    }
+                }
             }
         }
         Ok(())
+    }
+}
+
+/// A number as written, or in exponent form when that would run to many digits.
+fn num(v: f64) -> String {
+    if v.abs() < 1e6 {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
     }
 }

@@ -13,7 +13,7 @@ use crate::{Error, Result};
 /// | `target_score` | none | stop when the best score (default: MAE) is at most this | finite, >= 0 |
 /// | `max_model_runs` | none | stop before exceeding this many model runs (design included) | >= design runs |
 /// | `max_wall_s` | none | stop at the start of an iteration once this much wall time passed | finite, > 0 |
-/// | `max_parallel_runs` | none | model runs at once (a dedicated rayon pool); none: the current pool | >= 1 |
+/// | `max_parallel_runs` | none | model runs at once (a dedicated rayon pool); none: the current pool | 1 to 1024 |
 /// | `augment_copies` | 16 | samples per design run in the first fit: the run plus `copies - 1` noisy copies | >= 1 |
 /// | `augment_sigma` | 0.05 | standard deviation of the augmentation noise, unit box | finite, >= 0 |
 /// | `regularizer_weight` | 1 | weight of the regulariser in the search loss (when one is given) | finite, >= 0 |
@@ -133,6 +133,9 @@ fn non_negative(name: &str, v: f64) -> Result<()> {
     }
 }
 
+/// The most model runs [`Settings::max_parallel_runs`] allows at once.
+pub const MAX_PARALLEL_RUNS: usize = 1024;
+
 impl Settings {
     /// Checks every setting against its range, naming the first offender.
     pub fn check(&self) -> Result<()> {
@@ -153,8 +156,16 @@ impl Settings {
                 ));
             }
         }
-        if self.max_parallel_runs == Some(0) {
-            return Err(bad("max_parallel_runs", "must be at least 1".into()));
+        match self.max_parallel_runs {
+            Some(0) => return Err(bad("max_parallel_runs", "must be at least 1".into())),
+            // Each run at once is a thread; thousands of them only thrash.
+            Some(n) if n > MAX_PARALLEL_RUNS => {
+                return Err(bad(
+                    "max_parallel_runs",
+                    format!("must be at most {MAX_PARALLEL_RUNS}, got {n}"),
+                ))
+            }
+            _ => {}
         }
         if self.linear_correction && !self.output_correction {
             return Err(bad(

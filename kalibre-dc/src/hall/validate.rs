@@ -10,6 +10,13 @@ use super::geometry::Aabb;
 use super::types::{Hall, SupplyKind, HALL_SCHEMA};
 use crate::{Error, Result};
 
+/// The largest alpha bound taken (cfm/W): a server's air would then warm by 0.02 K, and
+/// larger values are a unit error (alpha is about 0.1 for real servers).
+pub const MAX_ALPHA_CFM_PER_W: f64 = 100.0;
+
+/// The largest CRAC flow taken (m3/s): ten times the largest units built.
+pub const MAX_CRAC_FLOW_M3_S: f64 = 300.0;
+
 /// Tolerance of every geometric test (m): boxes that touch do not overlap.
 pub const GEOMETRY_TOL_M: f64 = 1e-3;
 
@@ -95,6 +102,15 @@ impl Hall {
                     ),
                 ));
             }
+            if a.max > MAX_ALPHA_CFM_PER_W {
+                return Err(c.err(
+                    format!("{p}/max"),
+                    format!(
+                        "expected max <= {MAX_ALPHA_CFM_PER_W} cfm/W (a server air rise of 0.02 K), found {}",
+                        crate::snapshots::number(a.max)
+                    ),
+                ));
+            }
             if a.initial < a.min || a.initial > a.max {
                 return Err(c.err(
                     format!("{p}/initial"),
@@ -123,6 +139,15 @@ impl Hall {
                 &format!("{p}/rated_flow_m3_s"),
                 "rated flow",
             )?;
+            if k.rated_flow_m3_s > MAX_CRAC_FLOW_M3_S {
+                return Err(c.err(
+                    format!("{p}/rated_flow_m3_s"),
+                    format!(
+                        "expected a rated flow of at most {MAX_CRAC_FLOW_M3_S} m3/s, found {}",
+                        crate::snapshots::number(k.rated_flow_m3_s)
+                    ),
+                ));
+            }
             if k.supply == SupplyKind::Floor && self.tiles.is_empty() {
                 return Err(c.err(
                     format!("{p}/supply"),

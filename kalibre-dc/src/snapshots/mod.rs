@@ -14,6 +14,33 @@ pub use read::{load_snapshots, parse_snapshots, parse_snapshots_bytes};
 pub(crate) use write::quote;
 pub use write::{write_predictions, write_snapshots};
 
+/// The air temperatures (C) a data hall's setpoints and sensors can read. Outside them a
+/// value is a unit or export error (or below absolute zero), not a measurement.
+pub const AIR_C_RANGE: std::ops::RangeInclusive<f64> = -50.0..=150.0;
+
+/// The most power (W) one row may give a server or a rack: 10 MW, a whole hall's worth.
+pub const MAX_POWER_W: f64 = 1e7;
+
+/// Why a setpoint or sensor reading `v` (C) is not an air temperature; `None` when it is.
+pub(crate) fn air_c_problem(what: &str, v: f64) -> Option<String> {
+    let (lo, hi) = (AIR_C_RANGE.start(), AIR_C_RANGE.end());
+    (!AIR_C_RANGE.contains(&v)).then(|| {
+        format!(
+            "{what} is {} C; expected an air temperature in [{lo}, {hi}] C",
+            number(v)
+        )
+    })
+}
+
+/// A number as written, or in exponent form when that would run to many digits.
+pub(crate) fn number(v: f64) -> String {
+    if v.abs() < 1e6 {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// One operating state of the hall: what the model is run at. Vectors are in hall order
 /// (CRACs as listed, servers as [`crate::hall::Hall::servers`] yields them).
 #[derive(Debug, Clone, PartialEq)]

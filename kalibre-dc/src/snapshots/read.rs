@@ -7,7 +7,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::{HallSnapshot, OperatingState};
+use super::{air_c_problem, number, HallSnapshot, OperatingState, MAX_POWER_W};
 use crate::hall::Hall;
 use crate::{Error, Result};
 
@@ -271,6 +271,13 @@ impl Acc {
                     ));
                 };
                 let v = row.value()?;
+                let what = format!("setpoint_c of CRAC `{id}`");
+                if let Some(m) = (kind == "setpoint_c")
+                    .then(|| air_c_problem(&what, v))
+                    .flatten()
+                {
+                    return Err(row.err(Some(3), m));
+                }
                 if kind == "fan_speed" && !(0.0..=1.0).contains(&v) {
                     return Err(row.err(
                         Some(3),
@@ -295,6 +302,9 @@ impl Acc {
                     ));
                 };
                 let v = row.value()?;
+                if let Some(m) = air_c_problem(&format!("sensor_c of `{id}`"), v) {
+                    return Err(row.err(Some(3), m));
+                }
                 if let Some((_, first)) = self.sensor_c[k] {
                     return Err(duplicate(row, &self.label, first));
                 }
@@ -304,10 +314,14 @@ impl Acc {
                 let server = index.servers.get(id).copied();
                 let rack = index.racks.get(id).copied();
                 let v = row.value()?;
-                if v < 0.0 {
+                if !(0.0..=MAX_POWER_W).contains(&v) {
                     return Err(row.err(
                         Some(3),
-                        format!("power_w of `{}` is {v}; expected a power >= 0", show(id)),
+                        format!(
+                            "power_w of `{}` is {}; expected a power in [0, {MAX_POWER_W:e}] W",
+                            show(id),
+                            number(v)
+                        ),
                     ));
                 }
                 match (server, rack) {

@@ -76,12 +76,33 @@ pub fn csv_cases() -> Vec<CsvCase> {
         csv_case(
             "negative power",
             "line 4, column value",
-            "power_w of `R1-01` is -5; expected a power >= 0",
+            "power_w of `R1-01` is -5; expected a power in [0, 1e7] W",
             |r| replace_row(r, 2, "t0,power_w,R1-01,-5"),
         ),
-        csv_case("negative rack power", "line 6, column value", ">= 0", |r| {
-            replace_row(r, 4, "t0,power_w,R2,-4000")
-        }),
+        csv_case(
+            "negative rack power",
+            "line 6, column value",
+            "in [0, 1e7] W",
+            |r| replace_row(r, 4, "t0,power_w,R2,-4000"),
+        ),
+        csv_case(
+            "power beyond a hall's",
+            "line 4, column value",
+            "power_w of `R1-01` is 1e308",
+            |r| replace_row(r, 2, "t0,power_w,R1-01,1e308"),
+        ),
+        csv_case(
+            "setpoint below absolute zero",
+            "line 2, column value",
+            "setpoint_c of CRAC `crac-1` is -300 C; expected an air temperature in [-50, 150] C",
+            |r| replace_row(r, 0, "t0,setpoint_c,crac-1,-300"),
+        ),
+        csv_case(
+            "sensor reading beyond any air",
+            "line 8, column value",
+            "sensor_c of `c01` is 1e308 C",
+            |r| replace_row(r, 6, "t0,sensor_c,c01,1e308"),
+        ),
         csv_case(
             "fan speed above 1",
             "line 3, column value",

@@ -286,6 +286,18 @@ pub fn hall_cases() -> Vec<HallCase> {
             |v| set(v, "/cracs/0/rated_flow_m3_s", json!(-1.0)),
         ),
         hall_case(
+            "rated flow beyond any CRAC",
+            "/cracs/0/rated_flow_m3_s",
+            "at most 300 m3/s, found 1e308",
+            |v| set(v, "/cracs/0/rated_flow_m3_s", json!(1e308)),
+        ),
+        hall_case(
+            "alpha bound beyond any server",
+            "/server_types/0/alpha_cfm_per_w/max",
+            "expected max <= 100 cfm/W",
+            |v| set(v, "/server_types/0/alpha_cfm_per_w/max", json!(1e308)),
+        ),
+        hall_case(
             "room of zero height",
             "/room/size_m/2",
             "positive room size",

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use kalibre_core::calibrate::Report;
+use kalibre_core::calibrate::{Report, REPORT_SCHEMA};
 use kalibre_core::diagnose::CLOSE_ALTERNATIVE_BIC;
 use kalibre_core::Model;
 use kalibre_dc::diagnosis::{
@@ -166,6 +166,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             report_path.display()
         ))
     })?;
+    if report.schema != REPORT_SCHEMA {
+        return Err(CliError::Input(format!(
+            "{}: /schema: expected \"{REPORT_SCHEMA}\", found \"{}\"",
+            report_path.display(),
+            report.schema
+        )));
+    }
     // The model the calibration ran, as it recorded it: its grid, alpha mode and
     // OpenFOAM options stand unless given again here.
     let recorded = CalibratedModel::of_report(&report_path, report.model.as_ref())?;
