@@ -71,22 +71,20 @@ fn thread_and_run_counts_that_would_thrash_are_refused() {
 #[test]
 fn what_if_changes_beyond_the_air_are_refused() {
     let dir = tmp("what-if");
-    let o = run(kalibre()
-        .args(["simulate", "--setpoint-offset-c", "1e308", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-clean/snapshots.csv"))
-        .arg("--out")
-        .arg(dir.join("pred.csv")));
-    assert_input_error(&o, "would supply 1e308 C");
-    let o = run(kalibre()
-        .args(["simulate", "--power-scale", "1e300", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-clean/snapshots.csv"))
-        .arg("--out")
-        .arg(dir.join("pred.csv")));
-    assert_input_error(&o, "expected at most 1e7 W");
+    let what_if = |flag: &str, value: &str| {
+        run(kalibre()
+            .args(["simulate", flag, value, "--hall"])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(data("of-dev-clean/snapshots.csv"))
+            .arg("--out")
+            .arg(dir.join("pred.csv")))
+    };
+    assert_input_error(
+        &what_if("--setpoint-offset-c", "1e308"),
+        "would supply 1e308 C",
+    );
+    assert_input_error(&what_if("--power-scale", "1e300"), "expected at most 1e7 W");
     assert!(!dir.join("pred.csv").exists());
 }
 
