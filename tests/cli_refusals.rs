@@ -4,6 +4,8 @@
 
 mod cli_support;
 
+use std::path::Path;
+
 use cli_support::{assert_input_error, data, kalibre, run, tmp};
 
 #[test]
@@ -13,30 +15,28 @@ fn an_output_over_an_input_file_is_refused_and_the_input_kept() {
     let snaps = dir.join("snapshots.csv");
     std::fs::copy(data("of-dev-clean/snapshots.csv"), &snaps).unwrap();
     let before = std::fs::read(&snaps).unwrap();
+    let simulate = |out: &Path, servers: Option<&Path>| {
+        let mut c = kalibre();
+        c.args(["simulate", "--hall"])
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(&snaps)
+            .arg("--out")
+            .arg(out);
+        if let Some(s) = servers {
+            c.arg("--servers").arg(s);
+        }
+        run(&mut c)
+    };
     // The same file by another spelling of its path.
     let same = dir.join(".").join("snapshots.csv");
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(&same));
-    assert_input_error(&o, "is the --snapshots file");
+    assert_input_error(&simulate(&same, None), "is the --snapshots file");
     assert_eq!(
         std::fs::read(&snaps).unwrap(),
         before,
         "the measurements changed"
     );
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(dir.join("pred.csv"))
-        .arg("--servers")
-        .arg(&hall));
+    let o = simulate(&dir.join("pred.csv"), Some(&hall));
     assert_input_error(&o, "--servers");
 }
 
