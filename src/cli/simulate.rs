@@ -245,14 +245,14 @@ pub fn sim_config(grid_m: Option<f64>) -> CliResult<SimConfig> {
     Ok(config)
 }
 
-/// Runs `kalibre simulate`.
 /// An output path that names an input file would replace the measurements (or the hall)
 /// with predictions: refused before anything runs.
 fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
+    let canonical = |p: Option<&PathBuf>| p.and_then(|p| std::fs::canonicalize(p).ok());
     let inputs = [
-        ("--hall", Some(&args.hall)),
-        ("--snapshots", Some(&args.snapshots)),
-        ("--params", args.params.as_ref()),
+        ("--hall", canonical(Some(&args.hall))),
+        ("--snapshots", canonical(Some(&args.snapshots))),
+        ("--params", canonical(args.params.as_ref())),
     ];
     let outputs = [
         ("--out", Some(&args.out)),
@@ -260,11 +260,11 @@ fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
         ("--heat-sources", args.heat_sources.as_ref()),
     ];
     for (out_flag, out) in outputs {
-        let Some(out) = out.and_then(|p| std::fs::canonicalize(p).ok()) else {
+        let Some(out) = canonical(out) else {
             continue;
         };
-        for (in_flag, input) in inputs {
-            if input.and_then(|p| std::fs::canonicalize(p).ok()).as_ref() == Some(&out) {
+        for (in_flag, input) in &inputs {
+            if input.as_ref() == Some(&out) {
                 return Err(CliError::Input(format!(
                     "{out_flag} {} is the {in_flag} file: writing there would replace it; \
                      expected another path",
@@ -276,6 +276,7 @@ fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
     Ok(())
 }
 
+/// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
     refuse_overwriting_inputs(&args)?;
     let hall = Hall::load(&args.hall)?;

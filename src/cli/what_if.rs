@@ -3,7 +3,7 @@
 
 use clap::Args;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::snapshots::{HallSnapshot, AIR_C_RANGE, MAX_POWER_W};
+use kalibre_dc::snapshots::{number, HallSnapshot, AIR_C_RANGE, MAX_POWER_W};
 
 use super::{CliError, CliResult};
 
@@ -72,7 +72,7 @@ impl WhatIfArgs {
                     if !AIR_C_RANGE.contains(t) {
                         return Err(CliError::Input(format!(
                             "--setpoint-offset-c {}: CRAC `{}` in snapshot `{}` would supply {} C; expected a setpoint in [{}, {}] C",
-                            num(d), crac.id, state.label, num(*t), AIR_C_RANGE.start(), AIR_C_RANGE.end()
+                            number(d), crac.id, state.label, number(*t), AIR_C_RANGE.start(), AIR_C_RANGE.end()
                         )));
                     }
                 }
@@ -94,21 +94,12 @@ impl WhatIfArgs {
                     if *p > MAX_POWER_W {
                         return Err(CliError::Input(format!(
                             "--power-scale {}: server `{}` in snapshot `{}` would draw {} W; expected at most {MAX_POWER_W:e} W",
-                            num(f), server.server.id, state.label, num(*p)
+                            number(f), server.server.id, state.label, number(*p)
                         )));
                     }
                 }
             }
         }
         Ok(())
-    }
-}
-
-/// A number as written, or in exponent form when that would run to many digits.
-fn num(v: f64) -> String {
-    if v.abs() < 1e6 {
-        format!("{v}")
-    } else {
-        format!("{v:e}")
     }
 }

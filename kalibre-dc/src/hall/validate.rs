@@ -375,8 +375,6 @@ impl Hall {
     }
 }
 
-/// Servers of one rack must not share a unit. Sorting by first unit keeps this linear in
-/// the number of servers after the sort.
 /// No two of these floor or ceiling rectangles (minimum corner, size) overlap; the later
 /// one is named.
 fn check_no_overlap(
@@ -409,6 +407,8 @@ fn check_no_overlap(
     Ok(())
 }
 
+/// Servers of one rack must not share a unit. Sorting by first unit keeps this linear in
+/// the number of servers after the sort.
 fn check_unit_overlaps(c: &Checker, rack_pointer: &str, r: &super::types::Rack) -> Result<()> {
     let mut spans: Vec<(u64, u64, usize)> = r
         .servers

@@ -15,6 +15,11 @@ pub struct Grid {
     pub d: [f64; 3],
 }
 
+/// Cells along one axis of length `l`: `round(l / cell_m)`, at least 2.
+fn cells_along(l: f64, cell_m: f64) -> f64 {
+    (l / cell_m).round().max(2.0)
+}
+
 impl Grid {
     /// The grid with cells of about `cell_m` over a room of `size_m` (each axis gets
     /// `round(L / cell_m)` cells, at least 2, so that cell faces fall on the room walls).
@@ -22,10 +27,16 @@ impl Grid {
         let mut n = [0usize; 3];
         let mut d = [0.0; 3];
         for a in 0..3 {
-            n[a] = ((size_m[a] / cell_m).round() as usize).max(2);
+            n[a] = cells_along(size_m[a], cell_m) as usize;
             d[a] = size_m[a] / n[a] as f64;
         }
         Grid { n, d }
+    }
+
+    /// How many cells [`Grid::new`] would make, counted in floating point so that a
+    /// room too large for `usize` gives a large (or infinite) count, not an overflow.
+    pub fn cell_count(size_m: [f64; 3], cell_m: f64) -> f64 {
+        size_m.iter().map(|&l| cells_along(l, cell_m)).product()
     }
 
     /// Number of cells.

@@ -60,22 +60,10 @@ pub const MAX_CELLS: usize = 30_000_000;
 
 impl Topology {
     pub fn build(hall: &Hall, config: &SimConfig) -> Result<Self> {
-        // Counted in floating point first: a room of 1e308 m would overflow the count.
-        let cells: f64 = hall
-            .room
-            .size_m
-            .iter()
-            .map(|l| (l / config.cell_m).round().max(2.0))
-            .product();
+        // Counted before the grid is built: a room of 1e308 m would overflow `usize`.
+        let cells = Grid::cell_count(hall.room.size_m, config.cell_m);
         if cells.is_nan() || cells > MAX_CELLS as f64 {
-            let m = |l: f64| {
-                if l < 1e6 {
-                    format!("{l}")
-                } else {
-                    format!("{l:e}")
-                }
-            };
-            let [x, y, z] = hall.room.size_m.map(m);
+            let [x, y, z] = hall.room.size_m.map(crate::snapshots::number);
             return Err(Error::Simulation(format!(
                 "the room ({x} x {y} x {z} m) at cells of {} m needs {cells:.3e} cells; \
                  the built-in simulator takes at most {MAX_CELLS}: use coarser cells \

@@ -32,8 +32,9 @@ pub(crate) fn air_c_problem(what: &str, v: f64) -> Option<String> {
     })
 }
 
-/// A number as written, or in exponent form when that would run to many digits.
-pub(crate) fn number(v: f64) -> String {
+/// A number as written, or in exponent form when that would run to many digits (an
+/// error message quoting 1e308 should not print 309 of them).
+pub fn number(v: f64) -> String {
     if v.abs() < 1e6 {
         format!("{v}")
     } else {

@@ -271,12 +271,10 @@ impl Acc {
                     ));
                 };
                 let v = row.value()?;
-                let what = format!("setpoint_c of CRAC `{id}`");
-                if let Some(m) = (kind == "setpoint_c")
-                    .then(|| air_c_problem(&what, v))
-                    .flatten()
-                {
-                    return Err(row.err(Some(3), m));
+                if kind == "setpoint_c" {
+                    if let Some(m) = air_c_problem(&format!("setpoint_c of CRAC `{id}`"), v) {
+                        return Err(row.err(Some(3), m));
+                    }
                 }
                 if kind == "fan_speed" && !(0.0..=1.0).contains(&v) {
                     return Err(row.err(
