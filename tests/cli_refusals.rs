@@ -1,6 +1,8 @@
 //! Inputs the command-line tool refuses before any model runs: outputs that would
 //! replace an input file, thread and run counts that would only thrash, what-if changes
-//! beyond the air's range. Each is one line naming the flag, and exit code 2.
+//! beyond the air's range, a parameter named twice, a journal line no model could have
+//! written, flags that cannot apply. Each is one line naming the flag, file or line, and
+//! exit code 2.
 
 mod cli_support;
 
@@ -92,22 +94,164 @@ fn what_if_changes_beyond_the_air_are_refused() {
 fn a_report_of_another_schema_is_refused() {
     let dir = tmp("schema");
     let report = dir.join("report.json");
-    std::fs::write(
-        &report,
+    let simulate_with = |text: &str| {
+        std::fs::write(&report, text).unwrap();
+        run(kalibre()
+            .args(["simulate", "--hall"])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(data("of-dev-clean/snapshots.csv"))
+            .arg("--params")
+            .arg(&report)
+            .arg("--out")
+            .arg(dir.join("pred.csv")))
+    };
+    let o = simulate_with(
         r#"{ "schema": "kalibre.report/9", "best": { "params": { "alpha/web": 0.13 } } }"#,
-    )
-    .unwrap();
+    );
+    assert_input_error(
+        &o,
+        "/schema: expected \"kalibre.report/1\", found \"kalibre.report/9\"",
+    );
+    // An edited model record is blamed, not a --grid-m that was never given.
+    let o = simulate_with(
+        r#"{ "schema": "kalibre.report/1", "best": { "params": { "alpha/web": 0.13 } },
+             "model": { "kind": "builtin", "grid_m": -0.2, "alpha": "per_type" } }"#,
+    );
+    assert_input_error(
+        &o,
+        "report.json: /model/grid_m: -0.2 is not a cell size in m",
+    );
+}
+
+#[test]
+fn a_parameter_named_twice_is_refused() {
+    let dir = tmp("twice");
+    let params = dir.join("params.json");
+    // serde_json alone would keep 0.2 without a word.
+    std::fs::write(&params, r#"{ "alpha/web": 0.1, "alpha/web": 0.2 }"#).unwrap();
     let o = run(kalibre()
         .args(["simulate", "--hall"])
         .arg(data("of-dev-clean/hall.json"))
         .arg("--snapshots")
         .arg(data("of-dev-clean/snapshots.csv"))
         .arg("--params")
-        .arg(&report)
+        .arg(&params)
         .arg("--out")
         .arg(dir.join("pred.csv")));
+    assert_input_error(&o, "params.json: /: key `alpha/web` appears twice");
+    assert!(!dir.join("pred.csv").exists());
+}
+
+#[test]
+fn a_journal_line_no_hall_model_could_give_is_named_on_resume() {
+    let dir = tmp("journal-edit");
+    let out = dir.join("cal");
+    let calibrate = || {
+        run(kalibre()
+            .args([
+                "calibrate",
+                "--iterations",
+                "1",
+                "--no-grid-check",
+                "--hall",
+            ])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(data("of-dev-clean/snapshots.csv"))
+            .arg("--out")
+            .arg(&out))
+    };
+    assert_eq!(calibrate().status.code(), Some(0));
+    let journal = out.join("runs.jsonl");
+    let text = std::fs::read_to_string(&journal).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let k = lines
+        .iter()
+        .position(|l| l.contains(r#""status":"ok""#))
+        .expect("an ok run");
+    let mut run: serde_json::Value = serde_json::from_str(&lines[k]).unwrap();
+    let n = run["outputs"].as_array().unwrap().len();
+    // Finite, so the record parses; a sensor at 1e308 C would reach the surrogate as NaN.
+    run["outputs"] = serde_json::json!(vec![1e308; n]);
+    lines[k] = run.to_string();
+    std::fs::write(&journal, lines.join("\n") + "\n").unwrap();
+    let o = calibrate();
+    assert_input_error(&o, &format!("runs.jsonl: line {}", k + 1));
+    assert_input_error(&o, "is implausible: 1e308 C");
+    // A line that is not a record at all is skipped and its run done again, with a word.
+    lines[k] = "{not json".into();
+    std::fs::write(&journal, lines.join("\n") + "\n").unwrap();
+    let o = calibrate();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    let warning = format!("1 unreadable line(s) skipped (line {}:", k + 1);
+    assert!(
+        err.contains("kalibre: warning: ") && err.contains(&warning),
+        "{err}"
+    );
+}
+
+#[test]
+fn flags_that_cannot_apply_are_refused_before_any_output() {
+    let dir = tmp("early");
+    let hall = data("of-dev-clean/hall.json");
+    let snaps = data("of-dev-clean/snapshots.csv");
+    // A bad --grid-check factor used to be found after pred.csv was written.
+    let o = run(kalibre()
+        .args(["simulate", "--grid-check", "2", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("pred.csv")));
+    assert_input_error(&o, "--grid-check: 2 is not a finer grid");
+    assert!(!dir.join("pred.csv").exists());
+    // An unwritable --write-hall used to be found after the diagnosis's solves.
+    let o = run(kalibre()
+        .args(["diagnose", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--calibration")
+        .arg(dir.join("no-calibration"))
+        .arg("--write-hall")
+        .arg(&dir));
+    assert_input_error(&o, "--write-hall");
+    assert_input_error(&o, "is a directory");
+    // A command model meshes for itself: --grid-m would be ignored.
+    let o = run(kalibre()
+        .args([
+            "calibrate",
+            "--model",
+            "command",
+            "--grid-m",
+            "0.1",
+            "--config",
+        ])
+        .arg(dir.join("model.toml"))
+        .arg("--hall")
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("cal")));
     assert_input_error(
         &o,
-        "/schema: expected \"kalibre.report/1\", found \"kalibre.report/9\"",
+        "--grid-m sets the grid of the built-in simulator or OpenFOAM",
     );
+    // Air at billions of degrees (fans all but stopped) is no prediction.
+    let o = run(kalibre()
+        .args(["simulate", "--fan-speed-scale", "1e-9", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("pred.csv")));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("is implausible"),
+        "{err}"
+    );
+    assert!(!dir.join("pred.csv").exists());
 }

@@ -111,6 +111,22 @@ fn cases() -> Vec<Case> {
             "index 4 is out of range",
         ),
         c(
+            "the same effect twice, a default written out in one",
+            json!([
+                {"kind": "bypass", "behind_rack": "A01", "fraction": 0.1},
+                {"kind": "crac_supply_offset", "crac": "crac-1"},
+                {"kind": "bypass", "behind_rack": "A01", "depth_m": 0.4, "fraction_bounds": [0.0, 0.3]}
+            ]),
+            "/effects/2",
+            "the same kind in the same place as effects/0",
+        ),
+        c(
+            "a floor opening under a rack",
+            json!([{"kind": "bypass", "position_m": [2.5, 2.5], "size_m": [0.4, 0.4]}]),
+            "/effects/0/position_m",
+            "the opening lies under rack `A01`",
+        ),
+        c(
             "kind not a string",
             json!([{"kind": 3}]),
             "/effects/0/kind",

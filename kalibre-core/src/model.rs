@@ -49,6 +49,19 @@ pub enum ModelError {
     /// The model refused the parameters (e.g. out of its valid range).
     #[error("model refused the parameters: {0}")]
     InvalidParams(String),
+    /// An output is finite but physically impossible ([`Model::check_plausible`]): the
+    /// run diverged, or the value did not come from the model.
+    #[error("model output {index} (`{name}`) is implausible: {value} ({reason})")]
+    Implausible {
+        /// Output index.
+        index: usize,
+        /// Output name.
+        name: String,
+        /// The value as text.
+        value: String,
+        /// The limit it breaks, in words.
+        reason: String,
+    },
 }
 
 impl ModelError {
@@ -106,6 +119,15 @@ pub trait Model: Sync {
         scenario: &Self::Scenario,
         params: &[f64],
     ) -> std::result::Result<Outputs, ModelError>;
+
+    /// Checks a successful run's outputs against what the model can physically give
+    /// (for a data hall: air above absolute zero). The loop applies it to every run,
+    /// fresh or read back from the journal, so an impossible value never reaches the
+    /// surrogate. The default accepts every finite value.
+    fn check_plausible(&self, outputs: &Outputs) -> std::result::Result<(), ModelError> {
+        let _ = outputs;
+        Ok(())
+    }
 }
 
 /// Checks a model's answer: the output count and that every value is finite.

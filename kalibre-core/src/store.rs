@@ -138,8 +138,11 @@ fn key(scenario: &str, names: &[String], params: &[f64]) -> Key {
 
 #[derive(Debug)]
 struct Inner {
-    runs: HashMap<Key, RunRecord>,
+    /// Each run with its 1-based journal line (0 for an in-memory store).
+    runs: HashMap<Key, (usize, RunRecord)>,
     next_seq: u64,
+    /// Lines in the journal file, so an appended run knows its line.
+    lines: usize,
     file: Option<File>,
 }
 
@@ -171,6 +174,7 @@ impl RunStore {
             inner: Mutex::new(Inner {
                 runs: HashMap::new(),
                 next_seq: 0,
+                lines: 0,
                 file: None,
             }),
             load: LoadReport::default(),
@@ -198,7 +202,7 @@ impl RunStore {
         let mut runs = HashMap::new();
         let mut max_seq: Option<u64> = None;
         let complete_len = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
-        let mut take = |rec: RunRecord, load: &mut LoadReport| {
+        let mut take = |line: usize, rec: RunRecord, load: &mut LoadReport| {
             max_seq = Some(max_seq.map_or(rec.seq, |m: u64| m.max(rec.seq)));
             if rec.fingerprint != fingerprint {
                 load.other_fingerprint += 1;
@@ -208,7 +212,7 @@ impl RunStore {
             match runs.entry(k) {
                 Entry::Occupied(_) => load.duplicates += 1,
                 Entry::Vacant(v) => {
-                    v.insert(rec);
+                    v.insert((line, rec));
                     load.loaded += 1;
                 }
             }
@@ -219,7 +223,7 @@ impl RunStore {
             }
             load.lines += 1;
             match parse(line) {
-                Ok(rec) => take(rec, &mut load),
+                Ok(rec) => take(i + 1, rec, &mut load),
                 Err(reason) => load.bad_lines.push(BadLine {
                     line: i + 1,
                     reason,
@@ -233,13 +237,15 @@ impl RunStore {
             .count()
             + 1;
         let mut fix_newline = false;
+        let mut lines = tail_line - 1;
         if !tail.is_empty() {
             match parse(tail) {
                 // Only the newline is missing: the record is whole.
                 Ok(rec) => {
                     load.lines += 1;
-                    take(rec, &mut load);
+                    take(tail_line, rec, &mut load);
                     fix_newline = true;
+                    lines = tail_line;
                 }
                 Err(reason) => {
                     load.torn_tail = Some(BadLine {
@@ -264,6 +270,7 @@ impl RunStore {
             inner: Mutex::new(Inner {
                 runs,
                 next_seq: max_seq.map_or(0, |m| m + 1),
+                lines,
                 file: Some(file),
             }),
             load,
@@ -297,6 +304,18 @@ impl RunStore {
 
     /// The cached run at exactly these parameter values, if any.
     pub fn get(&self, scenario: &str, names: &[String], params: &[f64]) -> Option<RunRecord> {
+        self.get_with_line(scenario, names, params)
+            .map(|(_, rec)| rec)
+    }
+
+    /// The cached run at exactly these parameter values with its 1-based line in the
+    /// journal (0 for an in-memory store), so a bad record can be named.
+    pub fn get_with_line(
+        &self,
+        scenario: &str,
+        names: &[String],
+        params: &[f64],
+    ) -> Option<(usize, RunRecord)> {
         self.lock().runs.get(&key(scenario, names, params)).cloned()
     }
 
@@ -353,8 +372,16 @@ impl RunStore {
             file.flush().map_err(|e| Error::io(path, e))?;
             file.sync_data().map_err(|e| Error::io(path, e))?;
         }
+        let line = if inner.file.is_some() {
+            inner.lines += 1;
+            inner.lines
+        } else {
+            0
+        };
         inner.next_seq += 1;
-        inner.runs.insert(key(scenario, names, params), rec.clone());
+        inner
+            .runs
+            .insert(key(scenario, names, params), (line, rec.clone()));
         Ok(rec)
     }
 

@@ -543,6 +543,11 @@ fn config_errors_name_the_key() {
         key_of(text.replace("timeout_s = 30", "timeout_s = 30 30")),
         "line 6"
     );
+    // A failure that repeats every time would be retried without end.
+    assert_eq!(
+        key_of(text.replace("retries = 1 ", "retries = 1000000000 ")),
+        "retries"
+    );
     // A placeholder no scenario provides names its template.
     std::fs::write(dir.join("params.in.tmpl"), "k = {{k}}\nx = {{ambient}}\n").unwrap();
     match CommandModelConfig::load(&file).unwrap_err() {
@@ -554,6 +559,14 @@ fn config_errors_name_the_key() {
                 "{file} {placeholder}"
             );
         }
+        e => panic!("{e}"),
+    }
+    // So does a number's format on a text value, before any run.
+    std::fs::write(dir.join("params.in.tmpl"), "k = {{k}}\n# {{scenario:.3}}\n").unwrap();
+    match CommandModelConfig::load(&file).unwrap_err() {
+        ExternalError::Template {
+            line, placeholder, ..
+        } => assert_eq!((line, placeholder.as_str()), (2, "scenario:.3")),
         e => panic!("{e}"),
     }
 }

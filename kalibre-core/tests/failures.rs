@@ -95,3 +95,23 @@ fn a_proposal_on_a_failed_point_is_moved_and_never_repeated() {
     // Near the corner (a > 3) every run fails; the best stays a design point.
     assert_eq!(r.best.iteration, 0);
 }
+
+#[test]
+fn a_design_that_fails_everywhere_says_why() {
+    // Fails at every point: a > -1 always.
+    let model = Poly::failing(FailZone {
+        a_err: -1.0,
+        b_nan: 0.0,
+    });
+    let e = Calibrator::new(&model, QuadSurface::default(), &observations(), &space())
+        .with_max_iterations(2)
+        .run()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("runs of the initial design failed"), "{e}");
+    // The model's own reason, not only a count.
+    assert!(
+        e.contains("the first: model run failed: diverged at a ="),
+        "{e}"
+    );
+}

@@ -203,6 +203,10 @@ fn garbage_lines_and_foreign_runs_are_skipped_and_reported() {
         store
             .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
             .unwrap();
+        // Each run knows its journal line, bad and foreign lines counted, so a record
+        // the loop refuses can be named.
+        let line = |p: &[f64]| store.get_with_line("t0", &names(), p).unwrap().0;
+        assert_eq!((line(&[1.0, 1.0]), line(&[2.0, 1.0])), (1, 6));
     }
     let store = RunStore::open(&path, "m1").unwrap();
     let load = store.load_report();

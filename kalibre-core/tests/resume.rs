@@ -68,3 +68,91 @@ fn a_resumed_calibration_repeats_no_finished_run_and_ends_bit_identical() {
     assert_eq!(without_timings(&replay), without_timings(&full));
     assert!(replay.journal.as_ref().unwrap().is_clean());
 }
+
+/// [`Poly`] with a physical limit: output 0 above 10 is impossible.
+struct Bounded(Poly);
+
+impl kalibre_core::Model for Bounded {
+    type Scenario = Scen;
+    fn fingerprint(&self) -> String {
+        self.0.fingerprint()
+    }
+    fn evaluate(
+        &self,
+        scenario: &Scen,
+        params: &[f64],
+    ) -> Result<kalibre_core::Outputs, kalibre_core::ModelError> {
+        self.0.evaluate(scenario, params)
+    }
+    fn check_plausible(
+        &self,
+        outputs: &kalibre_core::Outputs,
+    ) -> Result<(), kalibre_core::ModelError> {
+        match outputs.values[0] {
+            v if v > 10.0 => Err(kalibre_core::ModelError::Implausible {
+                index: 0,
+                name: "s0".into(),
+                value: v.to_string(),
+                reason: "at most 10".into(),
+            }),
+            _ => Ok(()),
+        }
+    }
+}
+
+#[test]
+fn implausible_runs_are_failed_runs_and_an_implausible_journal_line_is_named() {
+    let dir = temp_dir("implausible");
+    let path = dir.join("runs.jsonl");
+    let run = |model: &Bounded| {
+        Calibrator::new(model, QuadSurface::default(), &observations(), &space())
+            .with_seed(11)
+            .with_max_iterations(6)
+            .with_store(RunStore::open(&path, "poly-v1").unwrap())
+            .run()
+    };
+    // The design's upper corner (4, 3) gives 2 * 4 + 3 = 11 at load 2: a failed run,
+    // journaled as such; the loop still gets near the truth.
+    let report = run(&Bounded(Poly::new())).unwrap();
+    assert_eq!(report.initial.failed_runs, 1);
+    let text = fs::read_to_string(&path).unwrap();
+    let records: Vec<kalibre_core::RunRecord> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let implausible = records
+        .iter()
+        .filter(|r| matches!(r.error, Some(kalibre_core::ModelError::Implausible { .. })))
+        .count();
+    assert!(implausible >= 1, "{implausible} implausible runs journaled");
+    assert!((report.best.params.get("a").unwrap() - TRUTH[0]).abs() < 0.05);
+
+    // A run written into the journal with a value the model cannot give stops the
+    // resume at its line, before it can reach the surrogate.
+    let k = records
+        .iter()
+        .position(|r| r.outputs.is_some())
+        .expect("an ok run");
+    let mut edited = records[k].clone();
+    edited.outputs.as_mut().unwrap()[0] = 1e308;
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    lines[k] = serde_json::to_string(&edited).unwrap();
+    fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let model = Bounded(Poly::new());
+    let err = run(&model).unwrap_err().to_string();
+    assert!(
+        err.contains("runs.jsonl") && err.contains(&format!("line {}", k + 1)),
+        "{err}"
+    );
+    assert!(err.contains("implausible"), "{err}");
+
+    // So does an ok run with too few outputs.
+    edited.outputs = Some(vec![1.0]);
+    lines[k] = serde_json::to_string(&edited).unwrap();
+    fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let err = run(&model).unwrap_err().to_string();
+    assert!(
+        err.contains(&format!("line {}", k + 1)) && err.contains("1 outputs"),
+        "{err}"
+    );
+}

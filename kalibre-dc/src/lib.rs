@@ -12,6 +12,7 @@ pub mod diagnosis;
 pub mod effects;
 mod error;
 pub mod hall;
+pub mod json_keys;
 mod model;
 pub mod openfoam;
 mod params;
@@ -23,5 +24,5 @@ pub mod surrogate;
 pub mod synth;
 
 pub use error::{Error, Result};
-pub use model::HallModel;
+pub use model::{check_sensor_c, HallModel, PLAUSIBLE_SENSOR_C};
 pub use params::ParamLayout;

@@ -161,6 +161,49 @@ impl Model for HallModel {
             .map_err(|e| ModelError::failed(e.to_string()))?;
         check_outputs(Outputs::from(sol.sensor_c().to_vec()), &self.sensor_names)
     }
+
+    fn check_plausible(&self, outputs: &Outputs) -> std::result::Result<(), ModelError> {
+        check_sensor_c(outputs, &self.sensor_names)
+    }
+}
+
+/// The sensor temperatures (C) a hall model can give. Below absolute zero is impossible;
+/// above 10,000 C (far past anything air-cooled, even at the lowest alpha bounds, which
+/// give about 190 C on the presets) a solve has diverged or the value is not a model's.
+pub const PLAUSIBLE_SENSOR_C: std::ops::RangeInclusive<f64> = -273.15..=10_000.0;
+
+/// Every predicted sensor temperature in [`PLAUSIBLE_SENSOR_C`]: the
+/// [`Model::check_plausible`] of every hall model (built-in, OpenFOAM, external command).
+///
+/// ```
+/// use kalibre_core::Outputs;
+/// use kalibre_dc::check_sensor_c;
+/// let names = vec!["s1".to_string(), "s2".to_string()];
+/// assert!(check_sensor_c(&Outputs::from(vec![24.0, 41.5]), &names).is_ok());
+/// assert!(check_sensor_c(&Outputs::from(vec![24.0, 1e308]), &names).is_err());
+/// ```
+pub fn check_sensor_c(
+    outputs: &Outputs,
+    sensor_names: &[String],
+) -> std::result::Result<(), ModelError> {
+    let (lo, hi) = (PLAUSIBLE_SENSOR_C.start(), PLAUSIBLE_SENSOR_C.end());
+    match outputs
+        .values
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !PLAUSIBLE_SENSOR_C.contains(*v))
+    {
+        Some((index, v)) => Err(ModelError::Implausible {
+            index,
+            name: sensor_names
+                .get(index)
+                .cloned()
+                .unwrap_or_else(|| format!("#{index}")),
+            value: format!("{} C", crate::snapshots::number(*v)),
+            reason: format!("a sensor temperature is in [{lo}, {hi}] C"),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// 64-bit FNV-1a: a hash that is stable across builds and platforms.

@@ -11,7 +11,8 @@ use crate::{Error, Result};
 ///
 /// Alpha parameters come first (`alpha/<type id>` or `alpha/<server id>`), on a log
 /// scale because a server's temperature rise goes as `1 / alpha`; then each effect's
-/// parameters, `<kind>/<name>` (`<kind>#2/<name>` for a second effect of one kind).
+/// parameters, `<kind>/<name>` (`<kind>#2/<name>` for a second effect of one kind). A
+/// server type no server uses has no alpha parameter: nothing could calibrate it.
 #[derive(Debug, Clone)]
 pub struct ParamLayout {
     space: ParamSpace,
@@ -34,6 +35,17 @@ impl ParamLayout {
     pub fn with_mode(hall: &Hall, mode: AlphaMode, effects: &[Box<dyn Effect>]) -> Result<Self> {
         let mut space = ParamSpace::new();
         let type_index = hall.server_type_indices();
+        // Per type: its parameter's index when alpha is calibrated per type (types in
+        // hall order, those no server uses left out).
+        let mut type_param: Vec<Option<usize>> = vec![None; hall.server_types.len()];
+        if mode == AlphaMode::PerType {
+            for t in type_index.iter().flatten() {
+                type_param[*t] = Some(0);
+            }
+            for (k, p) in type_param.iter_mut().flatten().enumerate() {
+                *p = k;
+            }
+        }
         let mut alpha_index = Vec::with_capacity(type_index.len());
         let mut alpha_fixed = Vec::with_capacity(type_index.len());
         for (s, t) in hall.servers().zip(&type_index) {
@@ -54,7 +66,7 @@ impl ParamLayout {
             alpha_fixed.push(bounds.initial);
             alpha_index.push(match mode {
                 AlphaMode::Fixed => None,
-                AlphaMode::PerType => Some(t),
+                AlphaMode::PerType => type_param[t],
                 AlphaMode::PerServer => {
                     space.push(Param::new(
                         format!("alpha/{}", s.server.id),
@@ -68,7 +80,12 @@ impl ParamLayout {
             });
         }
         if mode == AlphaMode::PerType {
-            for t in &hall.server_types {
+            for (t, _) in hall
+                .server_types
+                .iter()
+                .zip(&type_param)
+                .filter(|(_, p)| p.is_some())
+            {
                 let b = t.alpha_cfm_per_w;
                 space.push(Param::new(
                     format!("alpha/{}", t.id),

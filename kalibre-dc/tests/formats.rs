@@ -181,6 +181,35 @@ fn tolerances_and_extra_are_honoured() {
 }
 
 #[test]
+fn a_server_type_no_server_uses_has_no_alpha_parameter() {
+    use kalibre_dc::hall::AlphaMode;
+    use kalibre_dc::ParamLayout;
+    let mut v = hall_value();
+    v["server_types"].as_array_mut().unwrap().insert(
+        1,
+        json!({ "id": "spare", "alpha_cfm_per_w": { "initial": 0.2, "min": 0.01, "max": 3.0 } }),
+    );
+    let hall = Hall::from_json_str(&v.to_string(), HALL_FILE).expect("a spare type is fine");
+    let layout = ParamLayout::new(&hall, &[]).unwrap();
+    assert_eq!(layout.space().names(), ["alpha/1u", "alpha/2u"]);
+    // Each server still reads its own type's value.
+    let per_server = layout.alpha_per_server(&[0.11, 0.22]);
+    let want: Vec<f64> = hall
+        .servers()
+        .map(|s| {
+            if s.server.server_type == "1u" {
+                0.11
+            } else {
+                0.22
+            }
+        })
+        .collect();
+    assert_eq!(per_server, want);
+    let per_server = ParamLayout::with_mode(&hall, AlphaMode::PerServer, &[]).unwrap();
+    assert_eq!(per_server.space().dim(), hall.server_count());
+}
+
+#[test]
 fn validate_rejects_non_finite_numbers_of_a_built_hall() {
     let mut h = hall();
     h.sensors[1].position_m[0] = f64::NAN;

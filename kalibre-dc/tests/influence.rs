@@ -63,6 +63,36 @@ fn every_sensor_is_the_supply_plus_the_influence_times_the_rises() {
 }
 
 #[test]
+fn sensors_in_the_rooms_corners_get_their_influence() {
+    // Stagnant corner air once broke the adjoint's BiCGSTAB down in its first
+    // iterations; it now restarts and converges.
+    use kalibre_dc::synth::{generate_hall, Preset, SynthOptions};
+    let mut hall = generate_hall(&SynthOptions::new(Preset::Demo, 1)).expect("demo hall");
+    let state = varied_state(&hall, 19.0, 0.9, 400.0);
+    let alpha = varied_alpha(hall.server_count());
+    let [lx, ly, lz] = hall.room.size_m;
+    let corners = [
+        [0.0, 0.0, 0.0],
+        [0.05, 0.05, 0.05],
+        [lx, 0.0, 0.0],
+        [0.0, ly, lz],
+        [lx, ly, lz],
+        [lx - 0.05, ly - 0.05, 0.05],
+    ];
+    for (sensor, p) in hall.sensors.iter_mut().zip(corners) {
+        sensor.position_m = p;
+    }
+    hall.validate("demo").expect("corners are in the room");
+    let sim = Simulator::new(&hall, SimConfig::default()).expect("topology");
+    let sol = sim.solve(&state, &alpha, &[]).expect("run");
+    let (_, inf) = sim
+        .sensor_influence(&state, &alpha, &[])
+        .expect("influence");
+    assert!(inf.max_rel_residual <= SimConfig::default().heat_tol);
+    assert_superposition(&sol, &inf);
+}
+
+#[test]
 fn the_influence_sees_the_runs_effects() {
     let (hall, sim, state, alpha) = demo_run();
     // Exhaust drawn back to the intakes inside two racks: transfers without a rise.

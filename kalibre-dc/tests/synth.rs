@@ -303,6 +303,18 @@ fn bad_options_are_refused() {
         (quick(1).with_snapshots(0), "snapshots"),
         (quick(1).with_measurement_cell_m(0.0), "measurement_cell_m"),
         (quick(1).with_initial_alpha(5.0), "initial_alpha"),
+        // Readings off by tens of degrees would be refused by every reader of the file.
+        (quick(1).with_noise_c(100.0), "noise_c must be at most 10 C"),
+        (
+            quick(1).with_snapshots(100_000_000),
+            "snapshots must lie in [1, 1000]",
+        ),
+        (
+            quick(1)
+                .with_effect(parse_effect_arg("bypass:fraction=0.1,behind_rack=A03").unwrap())
+                .with_effect(parse_effect_arg("bypass:fraction=0.2,behind_rack=A03").unwrap()),
+            "hidden effect 2 (`bypass`) is the same kind in the same place as hidden effect 1",
+        ),
     ] {
         let err = generate(&opts).unwrap_err().to_string();
         assert!(err.contains(needle), "{err}");

@@ -40,16 +40,30 @@ impl CalibratedModel {
         report_path: &Path,
         model: Option<&serde_json::Value>,
     ) -> CliResult<Option<Self>> {
-        model
-            .map(|m| {
-                serde_json::from_value(m.clone()).map_err(|e| {
-                    CliError::Input(format!(
-                        "{}: /model: not a kalibre model record: {e}",
-                        report_path.display()
-                    ))
-                })
-            })
-            .transpose()
+        let Some(m) = model else {
+            return Ok(None);
+        };
+        let bad = |pointer: &str, e: &dyn std::fmt::Display| {
+            CliError::Input(format!("{}: {pointer}: {e}", report_path.display()))
+        };
+        let record: Self = serde_json::from_value(m.clone())
+            .map_err(|e| bad("/model", &format!("not a kalibre model record: {e}")))?;
+        // Checked here so that an edited record is blamed, not a `--grid-m` never given.
+        if let Some(dx) = record.grid_m {
+            if !(dx.is_finite() && dx > 0.0) {
+                return Err(bad(
+                    "/model/grid_m",
+                    &format!("{dx} is not a cell size in m"),
+                ));
+            }
+            if record.kind == "builtin" {
+                kalibre_dc::sim::SimConfig::default()
+                    .with_cell_m(dx)
+                    .check()
+                    .map_err(|e| bad("/model/grid_m", &e))?;
+            }
+        }
+        Ok(Some(record))
     }
 
     /// The hall as it was calibrated: its alpha mode set to the calibration's.

@@ -137,6 +137,13 @@ pub(super) fn read_params_file(
         std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
     let json: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| CliError::Input(format!("{file}: not valid JSON: {e}")))?;
+    // A parameter named twice would keep its last value without a word.
+    if let Some((pointer, key)) = kalibre_dc::json_keys::first_duplicate_key(&text) {
+        return Err(CliError::Input(format!(
+            "{file}: {}: key `{key}` appears twice",
+            if pointer.is_empty() { "/" } else { &pointer }
+        )));
+    }
     // Only a report (one with `best`) records a model; a plain object is all parameters.
     let recorded = match json.get("best") {
         Some(_) => {
@@ -195,6 +202,21 @@ pub(super) fn load_params(
     Ok(values)
 }
 
+/// Every `--grid-check` factor a finer grid: checked before the predictions are written,
+/// so a bad factor never replaces a good `--out`.
+fn check_grid_factors(args: &SimulateArgs) -> CliResult {
+    match args
+        .grid_check
+        .iter()
+        .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
+    {
+        Some(f) => Err(CliError::Input(format!(
+            "--grid-check: {f} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)"
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Each `--grid-check` factor's cell size and, per snapshot, the setpoint headroom there.
 fn finer_headrooms(
     hall: &Hall,
@@ -207,17 +229,16 @@ fn finer_headrooms(
     args.grid_check
         .iter()
         .map(|&f| {
-            if !(f.is_finite() && f > 0.0 && f < 1.0) {
-                return Err(CliError::Input(format!(
-                    "--grid-check: {f} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)"
-                )));
-            }
             let model = HallModel::new(hall, sim_config(Some(base * f))?)?;
             let rooms = snaps
                 .iter()
                 .map(|snap| {
                     let air = model.server_air(&snap.state, params).map_err(|e| {
-                        CliError::Run(format!("snapshot `{}` at {:.3} m: {e}", snap.state.label, base * f))
+                        CliError::Run(format!(
+                            "snapshot `{}` at {:.3} m: {e}",
+                            snap.state.label,
+                            base * f
+                        ))
                     })?;
                     let check = kalibre_dc::sim::inlet_check(&air, inlet_limit_c(args)?, 1)?;
                     Ok(setpoint_headroom_c(&check).unwrap_or(f64::NAN))
@@ -279,6 +300,7 @@ fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
     refuse_overwriting_inputs(&args)?;
+    check_grid_factors(&args)?;
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
@@ -350,6 +372,11 @@ pub fn run(args: SimulateArgs) -> CliResult {
                 solution.sensor_c()[k]
             )));
         }
+        // What calibration refuses as a run (e.g. air at 1e9 C, from a fan speed near 0)
+        // is no prediction either.
+        let sensor_names: Vec<String> = hall.sensors.iter().map(|s| s.id.clone()).collect();
+        kalibre_dc::check_sensor_c(&solution.sensor_c().to_vec().into(), &sensor_names)
+            .map_err(|e| failed(&e))?;
         if let Some(dir) = &args.vtk {
             kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
         }

@@ -167,6 +167,11 @@ where
         let design_s = t_design.elapsed().as_secs_f64();
         let mut design_samples = Vec::new();
         let mut initial_eval = None;
+        // Why the design failed, should every run fail: the first reason, by design order.
+        let first_failure = design_results
+            .iter()
+            .flatten()
+            .find_map(|r| r.result.as_ref().err().cloned());
         for (i, results) in design_results.into_iter().enumerate() {
             let eval = state.absorb(
                 &self.validator,
@@ -190,8 +195,10 @@ where
             failed: design_failed,
         });
         if state.samples.is_empty() {
+            let why = first_failure.map_or_else(String::new, |e| format!("; the first: {e}"));
             return Err(Error::NoSuccessfulRun(format!(
-                "all {design_runs} runs of the initial design failed"
+                "all {design_runs} runs of the initial design failed{why} (each run's reason \
+                 is in the run journal)"
             )));
         }
         let augmented = design::augment(

@@ -6,7 +6,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::observe::{Event, Observe};
-use crate::{check_outputs, Model, ModelError, Observations, Outputs, Result, RunStore};
+use crate::{check_outputs, Error, Model, ModelError, Observations, Outputs, Result, RunStore};
 
 /// One run's result and whether it came from the journal.
 #[derive(Debug, Clone)]
@@ -49,6 +49,21 @@ impl<M: Model> Runner<'_, M> {
             .collect())
     }
 
+    /// A successful run's outputs as the loop accepts them: one finite value per output,
+    /// a spread (if any) to match, and nothing the model calls impossible.
+    fn checked(&self, outputs: Outputs) -> std::result::Result<Outputs, ModelError> {
+        let o = check_outputs(outputs, self.output_names)?;
+        if let Some(sp) = &o.spread {
+            if sp.len() != o.values.len() || sp.iter().any(|v| !v.is_finite()) {
+                return Err(ModelError::failed(
+                    "output spread has the wrong length or a non-finite value",
+                ));
+            }
+        }
+        self.model.check_plausible(&o)?;
+        Ok(o)
+    }
+
     fn emit(&self, event: Event<'_>) {
         for o in self.observers {
             o.observe(&event);
@@ -58,7 +73,7 @@ impl<M: Model> Runner<'_, M> {
     fn run_one(&self, iteration: usize, s: usize, params: &[f64]) -> Result<RunResult> {
         let snap = &self.observations.snapshots()[s];
         let label = snap.label.as_str();
-        if let Some(rec) = self.store.get(label, self.param_names, params) {
+        if let Some((line, rec)) = self.store.get_with_line(label, self.param_names, params) {
             self.emit(Event::RunStarted {
                 iteration,
                 snapshot: label,
@@ -66,6 +81,20 @@ impl<M: Model> Runner<'_, M> {
                 cached: true,
             });
             let result = rec.result();
+            // A record this loop wrote passed these checks; one that fails them was
+            // edited or written by another tool, and must not reach the surrogate.
+            if let Some(Err(e)) = result.as_ref().ok().map(|o| self.checked(o.clone())) {
+                return Err(Error::Journal {
+                    path: self
+                        .store
+                        .path()
+                        .map_or_else(|| "(in memory)".to_string(), |p| p.display().to_string()),
+                    reason: format!(
+                        "line {line} (snapshot `{label}`, status ok): {e}; delete the line \
+                         to run the model there again"
+                    ),
+                });
+            }
             self.emit(Event::RunFinished {
                 iteration,
                 snapshot: label,
@@ -89,13 +118,7 @@ impl<M: Model> Runner<'_, M> {
         let result = self
             .model
             .evaluate(&snap.scenario, params)
-            .and_then(|o| check_outputs(o, self.output_names))
-            .and_then(|o| match &o.spread {
-                Some(sp) if sp.len() != o.values.len() || sp.iter().any(|v| !v.is_finite()) => Err(
-                    ModelError::failed("output spread has the wrong length or a non-finite value"),
-                ),
-                _ => Ok(o),
-            });
+            .and_then(|o| self.checked(o));
         let wall_s = t0.elapsed().as_secs_f64();
         self.store
             .record(label, self.param_names, params, &result, wall_s)?;

@@ -16,6 +16,10 @@ use super::parse::OutputParser;
 use super::{ExternalError, NamedScenario};
 use crate::{Param, ParamSpace, Scale};
 
+/// The most `retries` a `model.toml` may ask for: a run that fails that often will not
+/// succeed on the next try.
+pub const MAX_RETRIES: u32 = 100;
+
 /// Everything `kalibre calibrate --model command --config model.toml` needs from the file.
 #[derive(Debug)]
 pub struct CommandModelConfig {
@@ -271,6 +275,14 @@ impl CommandModelConfig {
 
         let mut retry = RetryPolicy::default();
         if let Some(r) = cx.count(&top, "retries")? {
+            // A failure that repeats every time would otherwise run (and fill `runs_root`)
+            // without end: one run is never retried more than this.
+            if r > MAX_RETRIES {
+                return Err(cx.err(
+                    "retries",
+                    format!("{r} is too many; expected at most {MAX_RETRIES}"),
+                ));
+            }
             retry.max_attempts = r.saturating_add(1);
         }
         if top.contains_key("retry_on") {

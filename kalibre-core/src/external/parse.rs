@@ -87,6 +87,8 @@ impl OutputParser {
 
     /// Reads the outputs `names` from `text` (the contents of `file`, named in errors).
     pub fn parse(&self, text: &str, file: &str, names: &[String]) -> Result<Vec<f64>, String> {
+        // Spreadsheet exports start with a byte-order mark, which is no part of a name.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         match self {
             OutputParser::CsvColumns => parse_columns(text, file, names),
             OutputParser::CsvLong => parse_long(text, file, names),
@@ -168,10 +170,15 @@ fn parse_columns(text: &str, file: &str, names: &[String]) -> Result<Vec<f64>, S
     names
         .iter()
         .map(|n| {
-            let i = header
-                .iter()
-                .position(|h| h == n)
+            let mut at = header.iter().enumerate().filter(|(_, h)| *h == n);
+            let (i, _) = at
+                .next()
                 .ok_or_else(|| format!("output `{n}`: no such column in {file}"))?;
+            if at.next().is_some() {
+                return Err(format!(
+                    "output `{n}`: the header of {file} names it twice; which is meant?"
+                ));
+            }
             number(&row[i], n, file)
         })
         .collect()
@@ -234,6 +241,15 @@ mod tests {
             .parse("a,b\n1\n", "o.csv", &names(&["a"]))
             .unwrap_err();
         assert!(e.contains("line 2"), "{e}");
+        // A column named twice is ambiguous; a byte-order mark is no part of a name.
+        let e = OutputParser::CsvColumns
+            .parse("a,b,a\n1,2,999\n", "o.csv", &names(&["a"]))
+            .unwrap_err();
+        assert!(e.contains("names it twice"), "{e}");
+        let v = OutputParser::CsvColumns
+            .parse("\u{feff}a,b\n1,2\n", "o.csv", &names(&["a"]))
+            .unwrap();
+        assert_eq!(v, [1.0]);
     }
 
     #[test]

@@ -54,7 +54,8 @@ impl<S: TemplateScenario> ExternalCommand<S> {
     }
 
     /// Checks that every placeholder of the templates, arguments and environment resolves
-    /// for `scenario` and that its variables clash with no parameter or built-in name.
+    /// for `scenario` (a number's format only on a number) and that its variables clash
+    /// with no parameter or built-in name.
     pub fn check_scenario(&self, scenario: &S) -> Result<(), ExternalError> {
         let zeros = vec![0.0; self.param_names.len()];
         let mut vars = self.base_variables(scenario, &zeros).map_err(|reason| {
@@ -62,14 +63,15 @@ impl<S: TemplateScenario> ExternalCommand<S> {
         })?;
         vars.insert("run_dir", TemplateValue::Text(String::new()));
         vars.insert("attempt", TemplateValue::Number(1.0));
-        let known = |n: &str| vars.contains(n);
+        // A trial rendering: an unknown name, or a number's format on a text value
+        // (`{{scenario:.3}}`), is refused here rather than failing every run.
         for t in self
             .args
             .iter()
             .chain(self.env.iter().map(|(_, t)| t))
             .chain(self.templates.iter().map(|t| &t.template))
         {
-            t.check_names(known)?;
+            t.render(&vars)?;
         }
         Ok(())
     }

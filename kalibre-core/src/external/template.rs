@@ -36,25 +36,37 @@ pub enum Format {
     },
 }
 
+/// The most decimals a format spec may ask for: every digit an `f64` holds and more
+/// (Rust's formatter panics from 65,536 on).
+pub const MAX_DECIMALS: usize = 100;
+
 impl Format {
-    fn parse(spec: &str) -> Option<Format> {
+    fn parse(spec: &str) -> Result<Format, String> {
+        let unknown = || "unknown format spec (use `.N`, `e`, `E`, `.Ne` or `.NE`)".to_string();
         let (precision, rest) = match spec.strip_prefix('.') {
             Some(s) => {
                 let digits = s.bytes().take_while(u8::is_ascii_digit).count();
                 if digits == 0 {
-                    return None;
+                    return Err(unknown());
                 }
-                (Some(s[..digits].parse::<usize>().ok()?), &s[digits..])
+                let n = s[..digits]
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|&n| n <= MAX_DECIMALS);
+                let n = n.ok_or_else(|| {
+                    format!("{} decimals: expected at most {MAX_DECIMALS}", &s[..digits])
+                })?;
+                (Some(n), &s[digits..])
             }
             None => (None, spec),
         };
         match (precision, rest) {
-            (Some(p), "") => Some(Format::Fixed(p)),
-            (_, "e") | (_, "E") => Some(Format::Exp {
+            (Some(p), "") => Ok(Format::Fixed(p)),
+            (_, "e") | (_, "E") => Ok(Format::Exp {
                 precision,
                 upper: rest == "E",
             }),
-            _ => None,
+            _ => Err(unknown()),
         }
     }
 
@@ -183,9 +195,7 @@ impl Template {
                 }
                 let format = match spec {
                     None => Format::Shortest,
-                    Some(s) => Format::parse(s).ok_or_else(|| {
-                        bad("unknown format spec (use `.N`, `e`, `E`, `.Ne` or `.NE`)")
-                    })?,
+                    Some(s) => Format::parse(s).map_err(|reason| bad(&reason))?,
                 };
                 if !literal.is_empty() {
                     parts.push(Part::Text(std::mem::take(&mut literal)));
@@ -349,6 +359,18 @@ mod tests {
         assert!(matches!(e, ExternalError::Template { line: 3, .. }), "{e}");
         let e = Template::parse("f", "{{k:.x}}").unwrap_err();
         assert!(e.to_string().contains("format spec"), "{e}");
+        // Rust's formatter panics from 65,536 decimals: refused when parsed.
+        for spec in [".101", ".65536", ".18446744073709551616e", ".99999999999E"] {
+            let e = Template::parse("f", format!("{{{{k:{spec}}}}}")).unwrap_err();
+            assert!(
+                e.to_string().contains("expected at most 100"),
+                "{spec}: {e}"
+            );
+        }
+        assert!(Template::parse("f", "{{k:.100e}}")
+            .unwrap()
+            .render(&vars())
+            .is_ok());
         let e = Template::parse("f", "{{ }}").unwrap_err();
         assert!(e.to_string().contains("empty name"), "{e}");
         let t = Template::parse("f", "{{scenario:.2}}").unwrap();

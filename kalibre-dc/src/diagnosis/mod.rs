@@ -18,7 +18,7 @@ use kalibre_core::diagnose::{
 };
 use kalibre_core::ParamSpace;
 
-use crate::effects::{Effect, EffectRegistry};
+use crate::effects::{placement, Effect, EffectRegistry};
 use crate::hall::{EffectSpec, Hall};
 use crate::sim::{SimConfig, Simulator};
 use crate::snapshots::{self, HallSnapshot, OperatingState};
@@ -235,15 +235,6 @@ fn candidate_name(spec: &EffectSpec) -> String {
         })
         .collect();
     format!("{}({})", spec.kind, fields.join(","))
-}
-
-/// The placement of an effect entry: the entry without its parameter values.
-fn placement(spec: &EffectSpec, effect: &dyn Effect) -> EffectSpec {
-    let mut spec = spec.clone();
-    for p in effect.parameters() {
-        spec.fields.remove(&p.name);
-    }
-    spec
 }
 
 /// A candidate's parameter value at which the effect is absent: 0 (clamped into its

@@ -4,7 +4,7 @@
 //!
 //! | field | required | meaning |
 //! |---|---|---|
-//! | `position_m`, `size_m` | one placement | floor opening: `[x, y]` minimum corner and `[dx, dy]` size (m) |
+//! | `position_m`, `size_m` | one placement | floor opening: `[x, y]` minimum corner and `[dx, dy]` size (m), inside the room and not under a rack or CRAC |
 //! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep) behind its exhaust |
 //! | `depth_m` | no | depth of the `behind_rack` strip (m), default 0.4 |
 //! | `fraction` | no | initial share of the CRAC flow, default 0.05 |
@@ -15,7 +15,7 @@ use serde_json::Value;
 
 use super::fields::{param_fields, spec, Fields};
 use super::{check_values, Effect, EffectFactory};
-use crate::hall::{Aabb, EffectSpec, Hall};
+use crate::hall::{Aabb, EffectSpec, Hall, GEOMETRY_TOL_M};
 use crate::sim::{SimMods, SupplyOpening};
 use crate::Result;
 
@@ -118,6 +118,19 @@ impl EffectFactory for BypassFactory {
                         min: [p[0], p[1], 0.0],
                         max: [p[0] + sz[0], p[1] + sz[1], 0.0],
                     };
+                    // Air cannot rise through a rack or a CRAC standing on the opening.
+                    if let Some((what, id, _)) = hall.solid_boxes().find(|(_, _, b)| {
+                        let footprint = Aabb {
+                            min: [b.min[0], b.min[1], 0.0],
+                            max: [b.max[0], b.max[1], 0.0],
+                        };
+                        footprint.contains_box(&region, GEOMETRY_TOL_M)
+                    }) {
+                        return Err(f.error(
+                            "position_m",
+                            format!("the opening lies under {what} `{id}`; expected open floor"),
+                        ));
+                    }
                     (
                         Placement::Floor {
                             position_m: p,

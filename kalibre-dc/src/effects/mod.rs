@@ -163,8 +163,20 @@ impl EffectRegistry {
         }
     }
 
-    /// Builds every entry of `hall.effects`, naming the entry index on error.
+    /// Builds every entry of `hall.effects`, naming the entry index on error. Two entries
+    /// of one kind in one place are refused ([`first_repeat`]).
     pub fn build_all(&self, hall: &Hall) -> Result<Vec<Box<dyn Effect>>> {
+        let effects = self.build_each(hall)?;
+        if let Some((first, again)) = first_repeat(&effects) {
+            return Err(Error::Effect {
+                kind: effects[again].kind().to_string(),
+                message: format!("effects/{again}: {}", repeat_message(first)),
+            });
+        }
+        Ok(effects)
+    }
+
+    fn build_each(&self, hall: &Hall) -> Result<Vec<Box<dyn Effect>>> {
         hall.effects
             .iter()
             .enumerate()
@@ -179,6 +191,39 @@ impl EffectRegistry {
             })
             .collect()
     }
+}
+
+/// The placement of an effect entry: the entry without its parameters' values and
+/// bounds, i.e. where and how the effect acts.
+pub fn placement(spec: &EffectSpec, effect: &dyn Effect) -> EffectSpec {
+    let mut spec = spec.clone();
+    for p in effect.parameters() {
+        spec.fields.remove(&p.name);
+        spec.fields.remove(&format!("{}_bounds", p.name));
+    }
+    spec
+}
+
+/// The first pair `(earlier, later)` of effects with the same kind and placement (as
+/// each writes itself, so a default written out or left off makes no difference). Two
+/// such entries act as one: only the sum of their parameters could be calibrated.
+pub fn first_repeat(effects: &[Box<dyn Effect>]) -> Option<(usize, usize)> {
+    let placements: Vec<EffectSpec> = effects
+        .iter()
+        .map(|e| placement(&e.to_spec(), e.as_ref()))
+        .collect();
+    (1..placements.len()).find_map(|j| {
+        (0..j)
+            .find(|&i| placements[i] == placements[j])
+            .map(|i| (i, j))
+    })
+}
+
+fn repeat_message(first: usize) -> String {
+    format!(
+        "the same kind in the same place as effects/{first}: the two could not be told \
+         apart (only their sum acts); keep one entry"
+    )
 }
 
 impl EffectRegistry {
@@ -202,6 +247,18 @@ impl EffectRegistry {
                     other => other,
                 });
             }
+        }
+        let effects = self.build_each(hall)?;
+        if let Some((first, again)) = first_repeat(&effects) {
+            return Err(Error::format(
+                file,
+                format!("/effects/{again}"),
+                format!(
+                    "effect `{}`: {}",
+                    effects[again].kind(),
+                    repeat_message(first)
+                ),
+            ));
         }
         Ok(())
     }

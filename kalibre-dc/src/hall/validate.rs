@@ -17,6 +17,10 @@ pub const MAX_ALPHA_CFM_PER_W: f64 = 100.0;
 /// The largest CRAC flow taken (m3/s): ten times the largest units built.
 pub const MAX_CRAC_FLOW_M3_S: f64 = 300.0;
 
+/// The most units a rack may have: the tallest racks built have about 60 (a unit is
+/// 44.45 mm), and a unit much thinner than the grid leaves a server no cell to draw from.
+pub const MAX_RACK_UNITS: u32 = 100;
+
 /// Tolerance of every geometric test (m): boxes that touch do not overlap.
 pub const GEOMETRY_TOL_M: f64 = 1e-3;
 
@@ -181,6 +185,15 @@ impl Hall {
             if r.units < 1 {
                 return Err(c.err(format!("{p}/units"), "expected units >= 1, found 0"));
             }
+            if r.units > MAX_RACK_UNITS {
+                return Err(c.err(
+                    format!("{p}/units"),
+                    format!(
+                        "expected at most {MAX_RACK_UNITS} units (racks have about 42-60), found {}",
+                        r.units
+                    ),
+                ));
+            }
             for (j, s) in r.servers.iter().enumerate() {
                 let sp = format!("{p}/servers/{j}");
                 if !types.contains(s.server_type.as_str()) {
@@ -255,7 +268,7 @@ impl Hall {
 
     /// Every rack and CRAC as (`"rack"` or `"CRAC"`, id, box): the solids that sensors
     /// and tiles must keep out of.
-    fn solid_boxes(&self) -> impl Iterator<Item = (&'static str, &str, Aabb)> + '_ {
+    pub(crate) fn solid_boxes(&self) -> impl Iterator<Item = (&'static str, &str, Aabb)> + '_ {
         let racks = self.racks.iter().map(|r| {
             let b = Aabb::from_position_size(r.position_m, r.size_m);
             ("rack", r.id.as_str(), b)

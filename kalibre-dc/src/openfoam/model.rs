@@ -565,6 +565,10 @@ impl Model for OpenFoamModel {
     fn evaluate(&self, scenario: &OperatingState, params: &[f64]) -> Result<Outputs, ModelError> {
         self.evaluate_timed(scenario, params).map(|(o, _)| o)
     }
+
+    fn check_plausible(&self, outputs: &Outputs) -> Result<(), ModelError> {
+        crate::check_sensor_c(outputs, &self.sensor_names)
+    }
 }
 
 /// JSON text of a value, for fingerprints.

@@ -146,7 +146,13 @@ pub(crate) fn pcg(
     }
 }
 
-/// Right-preconditioned BiCGSTAB; `x` holds the initial guess and the answer.
+/// Restarts of [`bicgstab`] after a breakdown before it gives up.
+const MAX_RESTARTS: usize = 8;
+
+/// Right-preconditioned BiCGSTAB; `x` holds the initial guess and the answer. A breakdown
+/// (a zero `r0 . r`, `r0 . v` or `omega`, e.g. for a sensor in a stagnant room corner)
+/// restarts from the current answer with its residual as the new shadow vector, as
+/// Saad's *Iterative Methods* (sec. 7.4) advises, rather than failing.
 pub(crate) fn bicgstab(
     op: &dyn Operator,
     pc: &mut dyn Precond,
@@ -155,6 +161,31 @@ pub(crate) fn bicgstab(
     tol: f64,
     max_iter: usize,
 ) -> SolveStats {
+    let mut total = SolveStats {
+        iterations: 0,
+        rel_residual: f64::INFINITY,
+    };
+    for _ in 0..=MAX_RESTARTS {
+        let (stats, broke_down) = bicgstab_once(op, pc, b, x, tol, max_iter - total.iterations);
+        total.iterations += stats.iterations;
+        total.rel_residual = stats.rel_residual;
+        let progressed = stats.iterations > 0;
+        if !broke_down || !progressed || total.rel_residual <= tol || total.iterations >= max_iter {
+            break;
+        }
+    }
+    total
+}
+
+/// One BiCGSTAB cycle; also says whether it stopped on a breakdown.
+fn bicgstab_once(
+    op: &dyn Operator,
+    pc: &mut dyn Precond,
+    b: &[f64],
+    x: &mut [f64],
+    tol: f64,
+    max_iter: usize,
+) -> (SolveStats, bool) {
     let n = b.len();
     let (mut r, bnorm) = initial_residual(op, b, x);
     let r0 = r.clone();
@@ -168,9 +199,11 @@ pub(crate) fn bicgstab(
     let mut rel = norm(&r) / bnorm;
     let mut r0r = dot(&r0, &r);
     let mut it = 0;
+    let mut broke_down = false;
     while rel > tol && it < max_iter {
         let rho_new = r0r;
         if rho_new == 0.0 || !rho_new.is_finite() {
+            broke_down = true;
             break;
         }
         let beta = (rho_new / rho) * (alpha / omega);
@@ -186,6 +219,7 @@ pub(crate) fn bicgstab(
         op.apply(&phat, &mut v);
         let r0v = dot(&r0, &v);
         if r0v == 0.0 || !r0v.is_finite() {
+            broke_down = true;
             break;
         }
         alpha = rho / r0v;
@@ -250,11 +284,15 @@ pub(crate) fn bicgstab(
         r0r = r0r_new;
         rel = rr.sqrt() / bnorm;
         if omega == 0.0 {
+            broke_down = true;
             break;
         }
     }
-    SolveStats {
-        iterations: it,
-        rel_residual: rel,
-    }
+    (
+        SolveStats {
+            iterations: it,
+            rel_residual: rel,
+        },
+        broke_down,
+    )
 }

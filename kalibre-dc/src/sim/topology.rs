@@ -7,6 +7,7 @@ use super::mods::WallSide;
 use super::panel::panel_face_g;
 use super::SimConfig;
 use crate::hall::{Aabb, Hall, Side, SupplyKind};
+use crate::snapshots::number;
 use crate::{Error, Result};
 
 /// Cells with weights summing to one.
@@ -121,7 +122,10 @@ impl Topology {
             let open: Vec<usize> = cells.into_iter().filter(|&c| !solid[c]).collect();
             if open.is_empty() {
                 return Err(Error::Simulation(format!(
-                    "return {ri} lies over solid cells only"
+                    "return {ri} lies over solid cells only on cells of {} x {} m (the cell \
+                     size asked for, fitted to the room): use finer cells",
+                    number(grid.d[0]),
+                    number(grid.d[1])
                 )));
             }
             for c in open {
@@ -150,8 +154,11 @@ impl Topology {
                 .collect();
             if cells.is_empty() {
                 return Err(Error::Simulation(format!(
-                    "tile {ti} at {:?} lies over solid cells only on a {} m grid",
-                    t.position_m, grid.d[0]
+                    "tile {ti} at {:?} lies over solid cells only on cells of {} x {} m (the \
+                     cell size asked for, fitted to the room): use finer cells",
+                    t.position_m,
+                    number(grid.d[0]),
+                    number(grid.d[1])
                 )));
             }
             let w = 1.0 / cells.len() as f64;

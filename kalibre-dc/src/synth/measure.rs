@@ -93,6 +93,16 @@ pub(crate) fn measure<R: Rng>(
         .iter()
         .map(|s| effects::from_spec(s, hall))
         .collect::<Result<_>>()?;
+    // The truth it writes must be a hall's `effects`, which refuse such a pair.
+    if let Some((first, again)) = effects::first_repeat(&built) {
+        return Err(crate::Error::Mismatch(format!(
+            "synth options: hidden effect {} (`{}`) is the same kind in the same place as \
+             hidden effect {}: only their sum would act; give one",
+            again + 1,
+            built[again].kind(),
+            first + 1
+        )));
+    }
     let values: Vec<Vec<f64>> = built
         .iter()
         .map(|e| e.parameters().iter().map(|p| p.initial).collect())

@@ -52,6 +52,12 @@ pub const DEFAULT_NOISE_C: f64 = 0.2;
 /// Default number of snapshots.
 pub const DEFAULT_SNAPSHOTS: usize = 3;
 
+/// The most snapshots one synthetic hall gets.
+pub const MAX_SNAPSHOTS: usize = 1000;
+
+/// The most sensor noise (standard deviation, C) a synthetic hall gets.
+pub const MAX_NOISE_C: f64 = 10.0;
+
 /// What to generate.
 ///
 /// | field | default | meaning |
@@ -170,8 +176,18 @@ impl SynthOptions {
                 self.noise_c
             ));
         }
-        if self.snapshots == 0 {
-            return bad("snapshots must be at least 1".into());
+        // Readings beyond [-50, 150] C would be refused by every reader of the file.
+        if self.noise_c > MAX_NOISE_C {
+            return bad(format!(
+                "noise_c must be at most {MAX_NOISE_C} C (a sensor noisier is no sensor), got {}",
+                self.noise_c
+            ));
+        }
+        if !(1..=MAX_SNAPSHOTS).contains(&self.snapshots) {
+            return bad(format!(
+                "snapshots must lie in [1, {MAX_SNAPSHOTS}] (each is a fine-grid solve), got {}",
+                self.snapshots
+            ));
         }
         for (name, v) in [
             ("model_cell_m", self.model_cell_m),

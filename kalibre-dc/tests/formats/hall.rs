@@ -367,5 +367,30 @@ pub fn hall_cases() -> Vec<HallCase> {
             |t| t + "\n{}",
         ),
         hall_text_case("empty file", "", "EOF while parsing", |_| String::new()),
+        hall_case(
+            "more units than racks have",
+            "/racks/0/units",
+            "at most 100",
+            |v| set(v, "/racks/0/units", json!(101)),
+        ),
+        {
+            // serde_json would keep the second value without a word.
+            let mut v = hall_value();
+            set(
+                &mut v,
+                "/effects",
+                json!([{ "kind": "bypass", "behind_rack": "R1", "fraction": 0.05 }]),
+            );
+            let text = serde_json::to_string(&v)
+                .unwrap()
+                .replace("\"fraction\":0.05", "\"fraction\":0.05,\"fraction\":0.2");
+            assert!(text.contains("0.2"));
+            HallCase {
+                name: "a key twice in one object",
+                text,
+                field: "/effects/0",
+                phrase: "key `fraction` appears twice",
+            }
+        },
     ]
 }

@@ -80,4 +80,8 @@ impl Model for HallCommand {
     fn evaluate(&self, state: &OperatingState, params: &[f64]) -> Result<Outputs, ModelError> {
         self.command.evaluate(&self.scenario(state), params)
     }
+
+    fn check_plausible(&self, outputs: &Outputs) -> Result<(), ModelError> {
+        kalibre_dc::check_sensor_c(outputs, self.command.output_names())
+    }
 }

@@ -322,6 +322,11 @@ fn check_model_flags(args: &CalibrateArgs) -> CliResult {
         (ModelArg::Builtin | ModelArg::Openfoam, Some(_)) => {
             Err(CliError::Input("--config is for --model command".into()))
         }
+        (ModelArg::Command, _) if args.grid_m.is_some() => Err(CliError::Input(
+            "--grid-m sets the grid of the built-in simulator or OpenFOAM; a command model \
+             meshes for itself"
+                .into(),
+        )),
         (ModelArg::Openfoam | ModelArg::Command, _) if args.influence_edges => {
             Err(CliError::Input(
                 "--influence-edges takes the air flow of the built-in simulator: it needs \
@@ -473,6 +478,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         )
     })??;
     let wall_s = started.elapsed().as_secs_f64();
+    warn_skipped_journal_lines(&journal, &report);
     let mut report = report;
     report.model = Some(model_record(&args, &hall, &settings)?.to_json());
     let report_path = args.out.join("report.json");
@@ -514,4 +520,27 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         html_path.display()
     );
     Ok(())
+}
+
+/// Journal lines the calibration could not read (and whose runs, if any, it did again):
+/// said on stderr, not only in `report.json`'s `journal`.
+fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::Report) {
+    let Some(load) = &report.journal else {
+        return;
+    };
+    let skipped: Vec<String> = load
+        .bad_lines
+        .iter()
+        .chain(&load.torn_tail)
+        .map(|b| format!("line {}: {}", b.line, b.reason))
+        .collect();
+    if let Some(first) = skipped.first() {
+        eprintln!(
+            "kalibre: warning: {}: {} unreadable line(s) skipped ({first}{}); see `journal` in \
+             report.json",
+            journal.display(),
+            skipped.len(),
+            if skipped.len() > 1 { ", ..." } else { "" }
+        );
+    }
 }

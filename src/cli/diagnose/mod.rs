@@ -153,6 +153,9 @@ const OPENFOAM_EFFECT_STEP: f64 = 0.2;
 pub fn run(args: DiagnoseArgs) -> CliResult {
     args.openfoam
         .refuse_unless(args.model == DiagnoseModel::Openfoam)?;
+    if let Some(path) = &args.write_hall {
+        check_writable_file(path)?;
+    }
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
@@ -504,4 +507,29 @@ fn write_next_hall(
         path.display(),
         h.name
     )))
+}
+
+/// A `--write-hall` path that could not be written, refused before the diagnosis's solves
+/// (minutes of them with OpenFOAM) rather than after.
+fn check_writable_file(path: &std::path::Path) -> CliResult {
+    let bad = |why: String| {
+        Err(CliError::Input(format!(
+            "--write-hall {}: {why}",
+            path.display()
+        )))
+    };
+    if path.is_dir() {
+        return bad("is a directory; expected a file path".into());
+    }
+    // Missing directories are made when the hall is written; the nearest one that
+    // exists must be a directory.
+    let existing = path
+        .ancestors()
+        .skip(1)
+        .find(|p| p.as_os_str().is_empty() || p.exists())
+        .filter(|p| !p.as_os_str().is_empty());
+    match existing {
+        Some(p) if !p.is_dir() => bad(format!("{} is not a directory", p.display())),
+        _ => Ok(()),
+    }
 }
