@@ -90,22 +90,26 @@ fn what_if_changes_beyond_the_air_are_refused() {
     assert!(!dir.join("pred.csv").exists());
 }
 
+/// `kalibre simulate` on the development hall with `text` as the `--params` file
+/// `params`, predictions to `dir/pred.csv`.
+fn simulate_with_params(dir: &Path, params: &Path, text: &str) -> std::process::Output {
+    std::fs::write(params, text).unwrap();
+    run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
+        .arg("--params")
+        .arg(params)
+        .arg("--out")
+        .arg(dir.join("pred.csv")))
+}
+
 #[test]
 fn a_report_of_another_schema_is_refused() {
     let dir = tmp("schema");
     let report = dir.join("report.json");
-    let simulate_with = |text: &str| {
-        std::fs::write(&report, text).unwrap();
-        run(kalibre()
-            .args(["simulate", "--hall"])
-            .arg(data("of-dev-clean/hall.json"))
-            .arg("--snapshots")
-            .arg(data("of-dev-clean/snapshots.csv"))
-            .arg("--params")
-            .arg(&report)
-            .arg("--out")
-            .arg(dir.join("pred.csv")))
-    };
+    let simulate_with = |text: &str| simulate_with_params(&dir, &report, text);
     let o = simulate_with(
         r#"{ "schema": "kalibre.report/9", "best": { "params": { "alpha/web": 0.13 } } }"#,
     );
@@ -127,18 +131,12 @@ fn a_report_of_another_schema_is_refused() {
 #[test]
 fn a_parameter_named_twice_is_refused() {
     let dir = tmp("twice");
-    let params = dir.join("params.json");
     // serde_json alone would keep 0.2 without a word.
-    std::fs::write(&params, r#"{ "alpha/web": 0.1, "alpha/web": 0.2 }"#).unwrap();
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
-        .arg("--snapshots")
-        .arg(data("of-dev-clean/snapshots.csv"))
-        .arg("--params")
-        .arg(&params)
-        .arg("--out")
-        .arg(dir.join("pred.csv")));
+    let o = simulate_with_params(
+        &dir,
+        &dir.join("params.json"),
+        r#"{ "alpha/web": 0.1, "alpha/web": 0.2 }"#,
+    );
     assert_input_error(&o, "params.json: /: key `alpha/web` appears twice");
     assert!(!dir.join("pred.csv").exists());
 }

@@ -31,6 +31,27 @@ pub fn first_duplicate_key(text: &str) -> Option<(String, String)> {
     found.into_inner()
 }
 
+/// [`first_duplicate_key`] as a field (`/` for the top-level object) and a message, the
+/// way the readers of `hall.json` and `--params` report it.
+///
+/// ```
+/// use kalibre_dc::json_keys::duplicate_key_problem;
+/// assert_eq!(
+///     duplicate_key_problem(r#"{"k": 1, "k": 2}"#),
+///     Some(("/".to_string(), "key `k` appears twice".to_string()))
+/// );
+/// ```
+pub fn duplicate_key_problem(text: &str) -> Option<(String, String)> {
+    first_duplicate_key(text).map(|(pointer, key)| {
+        let field = if pointer.is_empty() {
+            "/".to_string()
+        } else {
+            pointer
+        };
+        (field, format!("key `{key}` appears twice"))
+    })
+}
+
 /// Visits every value, carrying its pointer; stops at the first repeated key.
 struct Walk<'f> {
     pointer: String,

@@ -163,7 +163,7 @@ impl Model for HallModel {
     }
 
     fn check_plausible(&self, outputs: &Outputs) -> std::result::Result<(), ModelError> {
-        check_sensor_c(outputs, &self.sensor_names)
+        check_sensor_c(&outputs.values, &self.sensor_names)
     }
 }
 
@@ -172,23 +172,22 @@ impl Model for HallModel {
 /// give about 190 C on the presets) a solve has diverged or the value is not a model's.
 pub const PLAUSIBLE_SENSOR_C: std::ops::RangeInclusive<f64> = -273.15..=10_000.0;
 
-/// Every predicted sensor temperature in [`PLAUSIBLE_SENSOR_C`]: the
-/// [`Model::check_plausible`] of every hall model (built-in, OpenFOAM, external command).
+/// Every predicted sensor temperature (`sensor_c`, hall order) in
+/// [`PLAUSIBLE_SENSOR_C`]: the [`Model::check_plausible`] of every hall model (built-in,
+/// OpenFOAM, external command), and `kalibre simulate`'s check of its predictions.
 ///
 /// ```
-/// use kalibre_core::Outputs;
 /// use kalibre_dc::check_sensor_c;
 /// let names = vec!["s1".to_string(), "s2".to_string()];
-/// assert!(check_sensor_c(&Outputs::from(vec![24.0, 41.5]), &names).is_ok());
-/// assert!(check_sensor_c(&Outputs::from(vec![24.0, 1e308]), &names).is_err());
+/// assert!(check_sensor_c(&[24.0, 41.5], &names).is_ok());
+/// assert!(check_sensor_c(&[24.0, 1e308], &names).is_err());
 /// ```
 pub fn check_sensor_c(
-    outputs: &Outputs,
+    sensor_c: &[f64],
     sensor_names: &[String],
 ) -> std::result::Result<(), ModelError> {
     let (lo, hi) = (PLAUSIBLE_SENSOR_C.start(), PLAUSIBLE_SENSOR_C.end());
-    match outputs
-        .values
+    match sensor_c
         .iter()
         .enumerate()
         .find(|(_, v)| !PLAUSIBLE_SENSOR_C.contains(*v))

@@ -138,11 +138,8 @@ pub(super) fn read_params_file(
     let json: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| CliError::Input(format!("{file}: not valid JSON: {e}")))?;
     // A parameter named twice would keep its last value without a word.
-    if let Some((pointer, key)) = kalibre_dc::json_keys::first_duplicate_key(&text) {
-        return Err(CliError::Input(format!(
-            "{file}: {}: key `{key}` appears twice",
-            if pointer.is_empty() { "/" } else { &pointer }
-        )));
+    if let Some((field, message)) = kalibre_dc::json_keys::duplicate_key_problem(&text) {
+        return Err(CliError::Input(format!("{file}: {field}: {message}")));
     }
     // Only a report (one with `best`) records a model; a plain object is all parameters.
     let recorded = match json.get("best") {
@@ -350,6 +347,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     let mut air = Vec::new();
     let mut checks = Vec::with_capacity(snaps.len());
     let mut sources = Vec::new();
+    let sensor_names: Vec<String> = hall.sensors.iter().map(|s| s.id.clone()).collect();
     for snap in &snaps {
         let state = &snap.state;
         let failed =
@@ -374,9 +372,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         }
         // What calibration refuses as a run (e.g. air at 1e9 C, from a fan speed near 0)
         // is no prediction either.
-        let sensor_names: Vec<String> = hall.sensors.iter().map(|s| s.id.clone()).collect();
-        kalibre_dc::check_sensor_c(&solution.sensor_c().to_vec().into(), &sensor_names)
-            .map_err(|e| failed(&e))?;
+        kalibre_dc::check_sensor_c(solution.sensor_c(), &sensor_names).map_err(|e| failed(&e))?;
         if let Some(dir) = &args.vtk {
             kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
         }

@@ -233,22 +233,21 @@ impl EffectRegistry {
     /// call it right after loading a hall (loading alone cannot check the entries: the
     /// kinds depend on the registry).
     pub fn check_hall(&self, hall: &Hall, file: &str) -> Result<()> {
+        let mut effects = Vec::with_capacity(hall.effects.len());
         for (i, s) in hall.effects.iter().enumerate() {
-            if let Err(e) = self.build(s, hall) {
-                return Err(match e {
-                    Error::Effect { kind, message } => {
-                        let (field, rest) = fields::split_field(&message);
-                        Error::Format {
-                            file: file.to_string(),
-                            field: format!("/effects/{i}/{}", field.unwrap_or("kind")),
-                            message: format!("effect `{kind}`: {rest}"),
-                        }
-                    }
-                    other => other,
-                });
+            match self.build(s, hall) {
+                Ok(effect) => effects.push(effect),
+                Err(Error::Effect { kind, message }) => {
+                    let (field, rest) = fields::split_field(&message);
+                    return Err(Error::Format {
+                        file: file.to_string(),
+                        field: format!("/effects/{i}/{}", field.unwrap_or("kind")),
+                        message: format!("effect `{kind}`: {rest}"),
+                    });
+                }
+                Err(other) => return Err(other),
             }
         }
-        let effects = self.build_each(hall)?;
         if let Some((first, again)) = first_repeat(&effects) {
             return Err(Error::format(
                 file,

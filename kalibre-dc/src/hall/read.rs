@@ -31,16 +31,8 @@ impl Hall {
             .map_err(|e| Error::format(file, "", format!("expected the end of the file: {e}")))?;
         // Structs refuse a repeated field themselves; maps (an effect's fields) keep the
         // last value silently.
-        if let Some((pointer, key)) = crate::json_keys::first_duplicate_key(text) {
-            return Err(Error::format(
-                file,
-                if pointer.is_empty() {
-                    "/".into()
-                } else {
-                    pointer
-                },
-                format!("key `{key}` appears twice"),
-            ));
+        if let Some((field, message)) = crate::json_keys::duplicate_key_problem(text) {
+            return Err(Error::format(file, field, message));
         }
         hall.validate(file)?;
         Ok(hall)

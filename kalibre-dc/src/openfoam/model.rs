@@ -567,7 +567,7 @@ impl Model for OpenFoamModel {
     }
 
     fn check_plausible(&self, outputs: &Outputs) -> Result<(), ModelError> {
-        crate::check_sensor_c(outputs, &self.sensor_names)
+        crate::check_sensor_c(&outputs.values, &self.sensor_names)
     }
 }
 

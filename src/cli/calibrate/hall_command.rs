@@ -82,6 +82,6 @@ impl Model for HallCommand {
     }
 
     fn check_plausible(&self, outputs: &Outputs) -> Result<(), ModelError> {
-        kalibre_dc::check_sensor_c(outputs, self.command.output_names())
+        kalibre_dc::check_sensor_c(&outputs.values, self.command.output_names())
     }
 }

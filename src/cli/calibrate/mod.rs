@@ -528,19 +528,15 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
     let Some(load) = &report.journal else {
         return;
     };
-    let skipped: Vec<String> = load
-        .bad_lines
-        .iter()
-        .chain(&load.torn_tail)
-        .map(|b| format!("line {}: {}", b.line, b.reason))
-        .collect();
-    if let Some(first) = skipped.first() {
+    let count = load.bad_lines.len() + usize::from(load.torn_tail.is_some());
+    if let Some(first) = load.bad_lines.first().or(load.torn_tail.as_ref()) {
         eprintln!(
-            "kalibre: warning: {}: {} unreadable line(s) skipped ({first}{}); see `journal` in \
-             report.json",
+            "kalibre: warning: {}: {count} unreadable line(s) skipped (line {}: {}{}); see \
+             `journal` in report.json",
             journal.display(),
-            skipped.len(),
-            if skipped.len() > 1 { ", ..." } else { "" }
+            first.line,
+            first.reason,
+            if count > 1 { ", ..." } else { "" }
         );
     }
 }
