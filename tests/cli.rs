@@ -421,10 +421,19 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         .arg(&cal));
     assert_input_error(&o, "--refit-iterations: must be at least 1 with --refit");
     // The same geometry under another name is another hall: refused.
-    let o = run(on_dataset("diagnose", "of-dev-crac-offset")
+    let o = run(kalibre()
+        .args(["diagnose", "--hall"])
+        .arg(data("of-dev-crac-offset/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "runs of another model");
+    // And other measurements are not the calibration's.
+    let o = run(on_dataset("diagnose", "of-dev-crac-offset")
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "not the measurements");
     // A Student-t with no degrees of freedom is no likelihood.
     let o = run(on_dataset("diagnose", "of-dev-clean")
         .args(["--nu", "0"])
@@ -458,9 +467,18 @@ fn diagnose_and_simulate_run_the_model_the_calibration_recorded() {
     let report_path = cal.join("report.json");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    let mut model = report["model"].clone();
+    let fingerprint = model["fingerprint"].take();
+    assert!(
+        fingerprint
+            .as_str()
+            .is_some_and(|f| f.starts_with("kalibre-dc-sim/")),
+        "{fingerprint}"
+    );
     assert_eq!(
-        report["model"],
-        serde_json::json!({ "kind": "builtin", "grid_m": 0.25, "alpha": "per_server" })
+        model,
+        serde_json::json!({ "kind": "builtin", "grid_m": 0.25, "alpha": "per_server",
+            "fingerprint": null })
     );
     // Without --grid-m or --alpha: the calibration's grid and per-server parameters.
     let o = run(on_dataset("diagnose", "of-dev-clean")
@@ -494,7 +512,7 @@ fn diagnose_and_simulate_run_the_model_the_calibration_recorded() {
     let o = run(on_dataset("diagnose", "of-dev-clean")
         .args(["--grid-m", "0.2", "--calibration"])
         .arg(&cal));
-    assert_input_error(&o, "runs of another model");
+    assert_input_error(&o, "/model/fingerprint: runs of another model");
     // A built-in calibration is not diagnosed with OpenFOAM, before anything runs.
     let o = run(on_dataset("diagnose", "of-dev-clean")
         .args(["--model", "openfoam", "--calibration"])

@@ -1,14 +1,15 @@
 //! Inputs the command-line tool refuses before any model runs: outputs that would
 //! replace an input file, thread and run counts that would only thrash, what-if changes
 //! beyond the air's range, a parameter named twice, a journal line no model could have
-//! written, flags that cannot apply. Each is one line naming the flag, file or line, and
-//! exit code 2.
+//! written, flags that cannot apply, a diagnosis of another hall or other measurements
+//! than the calibration's. Each is one line naming the flag, file or line, and exit
+//! code 2.
 
 mod cli_support;
 
 use std::path::Path;
 
-use cli_support::{assert_input_error, data, kalibre, run, tmp};
+use cli_support::{assert_input_error, data, kalibre, on_dataset, run, stderr, tmp};
 
 #[test]
 fn an_output_over_an_input_file_is_refused_and_the_input_kept() {
@@ -252,4 +253,83 @@ fn flags_that_cannot_apply_are_refused_before_any_output() {
         "{err}"
     );
     assert!(!dir.join("pred.csv").exists());
+}
+
+#[test]
+fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
+    let dir = tmp("other-inputs");
+    let cal = dir.join("cal");
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args([
+            "--iterations",
+            "1",
+            "--polish",
+            "0",
+            "--no-grid-check",
+            "--quiet",
+            "--out",
+        ])
+        .arg(&cal));
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // Without the journal, the report's record of the model still names the hall it ran.
+    std::fs::remove_file(cal.join("runs.jsonl")).unwrap();
+    let text = std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap();
+    let mut hall: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let flow = hall["cracs"][0]["rated_flow_m3_s"].as_f64().unwrap();
+    hall["cracs"][0]["rated_flow_m3_s"] = (1.1 * flow).into();
+    let edited = dir.join("hall.json");
+    std::fs::write(&edited, hall.to_string()).unwrap();
+    let diagnose = |hall: &Path, snapshots: &Path, calibration: &Path| {
+        run(kalibre()
+            .args(["diagnose", "--hall"])
+            .arg(hall)
+            .arg("--snapshots")
+            .arg(snapshots)
+            .arg("--calibration")
+            .arg(calibration))
+    };
+    let snaps = data("of-dev-clean/snapshots.csv");
+    let o = diagnose(&edited, &snaps, &cal);
+    assert_input_error(&o, "report.json: /model/fingerprint: runs of another model");
+    // One reading moved by half a degree.
+    let text = std::fs::read_to_string(&snaps).unwrap();
+    let moved = text.replacen(
+        "t0,sensor_c,c-A1-hi,17.833",
+        "t0,sensor_c,c-A1-hi,18.333",
+        1,
+    );
+    assert_ne!(moved, text);
+    let other = dir.join("snapshots.csv");
+    std::fs::write(&other, moved).unwrap();
+    let hall = data("of-dev-clean/hall.json");
+    let o = diagnose(&hall, &other, &cal);
+    assert_input_error(
+        &o,
+        "snapshot `t0`, sensor `c-A1-hi` reads 18.333 C, the calibration's 17.833 C",
+    );
+    // A recorded grid too fine for the room is blamed on the record, not on a flag.
+    let report_path = cal.join("report.json");
+    let mut report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    report["model"]["grid_m"] = 0.001.into();
+    std::fs::write(&report_path, report.to_string()).unwrap();
+    let o = diagnose(&hall, &snaps, &cal);
+    assert_input_error(&o, "report.json: /model/grid_m: cells of 0.001 m need");
+    // A --write-hall nothing can be written in, before any solve.
+    let o = run(kalibre()
+        .args([
+            "diagnose",
+            "--write-hall",
+            "/proc/kalibre/hall.json",
+            "--hall",
+        ])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(
+        &o,
+        "--write-hall /proc/kalibre/hall.json: cannot write in /proc",
+    );
 }

@@ -72,6 +72,36 @@ impl ModelError {
             log_tail: None,
         }
     }
+
+    /// The gist of the run's log for a one-line message: the first and last non-empty
+    /// lines of its last section (stderr's, when the program wrote any), where a program
+    /// usually says what went wrong and how it ended; `None` without a log.
+    ///
+    /// ```
+    /// use kalibre_core::ModelError;
+    /// let e = ModelError::Failed {
+    ///     reason: "`solver` exited with code 2".into(),
+    ///     log_tail: Some("==> stderr.log <==\nerror: no mesh\n\nexiting\n".into()),
+    /// };
+    /// assert_eq!(e.log_gist().as_deref(), Some("`error: no mesh` ... `exiting`"));
+    /// ```
+    pub fn log_gist(&self) -> Option<String> {
+        let (ModelError::Failed { log_tail, .. } | ModelError::Timeout { log_tail, .. }) = self
+        else {
+            return None;
+        };
+        let section = log_tail.as_deref()?.rsplit("==> ").next()?;
+        let mut lines = section
+            .lines()
+            .skip(usize::from(section.contains(" <==")))
+            .map(str::trim)
+            .filter(|l| !l.is_empty());
+        let first = lines.next()?;
+        Some(match lines.last() {
+            Some(last) => format!("`{first}` ... `{last}`"),
+            None => format!("`{first}`"),
+        })
+    }
 }
 
 /// What one successful model run returns: one value per output (sensor).

@@ -1,10 +1,12 @@
 //! What `kalibre calibrate` records in `report.json` about the model it ran (`model`), so
 //! that `kalibre diagnose` and `kalibre simulate --params report.json` run the same model
-//! without the user repeating its options.
+//! without the user repeating its options, and what `diagnose` checks against it.
 
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use kalibre_dc::hall::{AlphaMode, Hall};
+use kalibre_dc::snapshots::HallSnapshot;
 use serde::{Deserialize, Serialize};
 
 use super::{CliError, CliResult};
@@ -26,6 +28,11 @@ pub struct CalibratedModel {
     /// OpenFOAM: processes per solve.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub np: Option<u32>,
+    /// The model's fingerprint (`Model::fingerprint`: its hall, effects, grid and
+    /// options), so that `diagnose` refuses another hall even when the run journal is
+    /// gone. Missing in older reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fingerprint: Option<String>,
 }
 
 impl CalibratedModel {
@@ -66,6 +73,26 @@ impl CalibratedModel {
         Ok(Some(record))
     }
 
+    /// Refuses a recorded built-in grid too fine for `hall`'s room, naming the record (the
+    /// simulator's own message would blame a `--grid-m` that was never given).
+    pub fn check_cells(&self, report_path: &Path, hall: &Hall) -> CliResult {
+        use kalibre_dc::sim::{Grid, MAX_CELLS};
+        let Some(dx) = self.grid_m.filter(|_| self.kind == "builtin") else {
+            return Ok(());
+        };
+        let cells = Grid::cell_count(hall.room.size_m, dx);
+        if cells > MAX_CELLS as f64 {
+            return Err(CliError::Input(format!(
+                "{}: /model/grid_m: cells of {dx} m need {cells:.3e} cells in hall `{}`; the \
+                 built-in simulator takes at most {MAX_CELLS} (give a coarser --grid-m to \
+                 run at another grid)",
+                report_path.display(),
+                hall.name
+            )));
+        }
+        Ok(())
+    }
+
     /// The hall as it was calibrated: its alpha mode set to the calibration's.
     pub fn calibrated_hall(&self, hall: &Hall) -> Hall {
         let mut hall = hall.clone();
@@ -77,4 +104,72 @@ impl CalibratedModel {
 /// `--grid-m` when given, else the calibration's grid.
 pub fn grid_or_recorded(flag: Option<f64>, recorded: Option<&CalibratedModel>) -> Option<f64> {
     flag.or_else(|| recorded.and_then(|m| m.grid_m))
+}
+
+/// Refuses measurements other than those the calibration fitted (`report.json`'s residual
+/// rows): a diagnosis of other readings would blame the model, or an effect, for the
+/// difference. A report with no rows (no run succeeded) has nothing to compare.
+pub fn check_same_measurements(
+    report_path: &Path,
+    residuals: &[kalibre_core::calibrate::Residual],
+    snapshots_path: &Path,
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+) -> CliResult {
+    if residuals.is_empty() {
+        return Ok(());
+    }
+    let differ = |what: String| {
+        Err(CliError::Input(format!(
+            "{}: not the measurements {} was calibrated on: {what}; diagnose with the \
+             calibration's snapshots, or calibrate again",
+            snapshots_path.display(),
+            report_path.display()
+        )))
+    };
+    let snapshot_at: HashMap<&str, &HallSnapshot> =
+        snaps.iter().map(|s| (s.state.label.as_str(), s)).collect();
+    let sensor_at: HashMap<&str, usize> = hall
+        .sensors
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.id.as_str(), i))
+        .collect();
+    let mut fitted = HashSet::with_capacity(residuals.len());
+    for r in residuals {
+        let Some(snap) = snapshot_at.get(r.snapshot.as_str()) else {
+            return differ(format!("snapshot `{}` is not there", r.snapshot));
+        };
+        let reading = sensor_at
+            .get(r.sensor.as_str())
+            .and_then(|&i| snap.sensor_c[i]);
+        match reading {
+            None => {
+                return differ(format!(
+                    "snapshot `{}` has no reading of sensor `{}`",
+                    r.snapshot, r.sensor
+                ))
+            }
+            // The report's decimal form parses back to within an ulp or so.
+            Some(c) if (c - r.measured_c).abs() > 1e-9 * c.abs().max(1.0) => {
+                return differ(format!(
+                    "snapshot `{}`, sensor `{}` reads {c} C, the calibration's {} C",
+                    r.snapshot, r.sensor, r.measured_c
+                ))
+            }
+            Some(_) => {}
+        }
+        fitted.insert((r.snapshot.as_str(), r.sensor.as_str()));
+    }
+    for s in snaps {
+        for (sensor, c) in hall.sensors.iter().zip(&s.sensor_c) {
+            if c.is_some() && !fitted.contains(&(s.state.label.as_str(), sensor.id.as_str())) {
+                return differ(format!(
+                    "snapshot `{}`, sensor `{}` has a reading the calibration did not have",
+                    s.state.label, sensor.id
+                ));
+            }
+        }
+    }
+    Ok(())
 }

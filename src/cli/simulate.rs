@@ -26,7 +26,7 @@ pub struct SimulateArgs {
     /// The hall (`hall.json`).
     #[arg(long)]
     pub(super) hall: PathBuf,
-    /// Operating conditions (`snapshots.csv`); sensor readings in it are ignored.
+    /// Operating conditions (`snapshots.csv`); sensor readings in it are optional and ignored.
     #[arg(long)]
     pub(super) snapshots: PathBuf,
     /// Parameter values: a JSON object `{ "alpha/<type>": 0.12, ... }`, or a calibration's
@@ -301,7 +301,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
-    let mut snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
+    let mut snaps = snapshots::load_states(&hall, &args.snapshots)?;
     args.what_if.apply(&hall, &mut snaps)?;
     if let Some(what) = args.what_if.describe() {
         println!("what if: {what} (in every snapshot)");
@@ -332,7 +332,16 @@ pub fn run(args: SimulateArgs) -> CliResult {
         None => hall,
     };
     let grid_m = match recorded.filter(|m| m.kind == "builtin") {
-        Some(m) => grid_or_recorded(args.grid_m, Some(m)),
+        Some(m) => {
+            if args.grid_m.is_none() {
+                let path = args
+                    .params
+                    .as_deref()
+                    .expect("a record comes from --params");
+                m.check_cells(path, &hall)?;
+            }
+            grid_or_recorded(args.grid_m, Some(m))
+        }
         None => args.grid_m,
     };
     let model = HallModel::new(&hall, sim_config(grid_m)?)?;

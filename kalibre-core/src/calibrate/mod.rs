@@ -195,7 +195,10 @@ where
             failed: design_failed,
         });
         if state.samples.is_empty() {
-            let why = first_failure.map_or_else(String::new, |e| format!("; the first: {e}"));
+            let why = first_failure.map_or_else(String::new, |e| match e.log_gist() {
+                Some(gist) => format!("; the first: {e}; its log: {gist}"),
+                None => format!("; the first: {e}"),
+            });
             return Err(Error::NoSuccessfulRun(format!(
                 "all {design_runs} runs of the initial design failed{why} (each run's reason \
                  is in the run journal)"

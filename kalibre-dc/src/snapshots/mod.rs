@@ -10,7 +10,7 @@ use kalibre_core::{Observations, OutputInfo, Snapshot};
 use crate::hall::Hall;
 use crate::{Error, Result};
 
-pub use read::{load_snapshots, parse_snapshots, parse_snapshots_bytes};
+pub use read::{load_snapshots, load_states, parse_snapshots, parse_snapshots_bytes};
 pub(crate) use write::quote;
 pub use write::{write_predictions, write_snapshots};
 

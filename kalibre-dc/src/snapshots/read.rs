@@ -27,9 +27,19 @@ pub fn load_snapshots(hall: &Hall, path: &Path) -> Result<Vec<HallSnapshot>> {
     parse_snapshots_bytes(hall, &bytes, &path.display().to_string())
 }
 
+/// Like [`load_snapshots`] for operating states to predict: a snapshot needs no reading.
+pub fn load_states(hall: &Hall, path: &Path) -> Result<Vec<HallSnapshot>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse(hall, &bytes, &path.display().to_string(), false)
+}
+
 /// Like [`parse_snapshots`] for raw bytes; a field that is not UTF-8 is an error naming
 /// its line and column.
 pub fn parse_snapshots_bytes(hall: &Hall, bytes: &[u8], file: &str) -> Result<Vec<HallSnapshot>> {
+    parse(hall, bytes, file, true)
+}
+
+fn parse(hall: &Hall, bytes: &[u8], file: &str, need_readings: bool) -> Result<Vec<HallSnapshot>> {
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
@@ -104,7 +114,7 @@ pub fn parse_snapshots_bytes(hall: &Hall, bytes: &[u8], file: &str) -> Result<Ve
     }
     order
         .into_iter()
-        .map(|acc| acc.finish(file, hall))
+        .map(|acc| acc.finish(file, hall, need_readings))
         .collect()
 }
 
@@ -419,7 +429,7 @@ impl Acc {
         Ok(())
     }
 
-    fn finish(self, file: &str, hall: &Hall) -> Result<HallSnapshot> {
+    fn finish(self, file: &str, hall: &Hall, need_readings: bool) -> Result<HallSnapshot> {
         let field = format!(
             "snapshot `{}` (first at line {})",
             show(&self.label),
@@ -455,7 +465,7 @@ impl Acc {
             let (v, _) = v.ok_or_else(|| missing("power_w", "server", &s.server.id, &hint))?;
             power_w.push(v);
         }
-        if self.sensor_c.iter().all(Option::is_none) {
+        if need_readings && self.sensor_c.iter().all(Option::is_none) {
             return Err(Error::format(
                 file,
                 field,

@@ -18,6 +18,9 @@ pub(super) struct HallCommand {
     pub(super) layout: ParamLayout,
     crac_ids: Vec<String>,
     server_ids: Vec<String>,
+    /// The `[[params]]` whose bounds, initial value or scale differ from the hall's, which
+    /// the search uses: said once, so an edit of `model.toml` is not taken to count.
+    pub(super) unused_param_settings: Vec<String>,
 }
 
 impl HallCommand {
@@ -41,6 +44,7 @@ impl HallCommand {
                 sensors.join(", ")
             )));
         }
+        let unused_param_settings = differing_params(layout.space(), &config.space);
         if !config.scenarios.is_empty() {
             return Err(bad(
                 "[[scenarios]] are not used with a hall: the snapshots come from --snapshots"
@@ -52,6 +56,7 @@ impl HallCommand {
             layout,
             crac_ids: hall.cracs.iter().map(|c| c.id.clone()).collect(),
             server_ids: hall.servers().map(|s| s.server.id.clone()).collect(),
+            unused_param_settings,
         };
         Ok(model)
     }
@@ -68,6 +73,29 @@ impl HallCommand {
         }
         s
     }
+}
+
+/// Each `model.toml` parameter (named as the hall's) whose bounds, initial value or scale
+/// differ from the hall's: `name [lower, upper] from initial, scale (the hall: ...)`.
+fn differing_params(
+    hall: &kalibre_core::ParamSpace,
+    config: &kalibre_core::ParamSpace,
+) -> Vec<String> {
+    let show = |p: &kalibre_core::Param| {
+        format!(
+            "[{}, {}] from {}, {:?}",
+            p.lower, p.upper, p.initial, p.scale
+        )
+        .to_lowercase()
+    };
+    hall.params()
+        .iter()
+        .zip(config.params())
+        .filter(|(h, c)| {
+            (h.lower, h.upper, h.initial, h.scale) != (c.lower, c.upper, c.initial, c.scale)
+        })
+        .map(|(h, c)| format!("{} {} (the hall: {})", h.name, show(c), show(h)))
+        .collect()
 }
 
 impl Model for HallCommand {

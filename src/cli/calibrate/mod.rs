@@ -13,7 +13,7 @@ use clap::{Args, ValueEnum};
 use kalibre_core::calibrate::Report;
 use kalibre_core::external::CommandModelConfig;
 use kalibre_core::search::{Adam, DifferentialEvolution, Hybrid};
-use kalibre_core::Observe;
+use kalibre_core::{Model, Observe};
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::{AlphaMode, Hall};
@@ -81,9 +81,9 @@ pub struct CalibrateArgs {
     /// Built-in model: finer grids (cell size relative to --grid-m, each in (0, 1)) at
     /// which the model runs once per snapshot at the best parameters. How far the grid
     /// alone moves each parameter is its numerical uncertainty, reported beside its
-    /// spread and counted when a parameter is called identified.
-    #[arg(long = "grid-check", value_delimiter = ',', default_values_t = [0.75, 0.5])]
-    grid_check: Vec<f64>,
+    /// spread and counted when a parameter is called identified. Default: 0.75,0.5.
+    #[arg(long = "grid-check", value_delimiter = ',')]
+    grid_check: Option<Vec<f64>>,
     /// Skip the finer-grid runs of --grid-check.
     #[arg(long = "no-grid-check")]
     no_grid_check: bool,
@@ -294,8 +294,11 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
         ..HallCalibrationSettings::default()
     };
     s.surrogate = s.surrogate.with_epochs(args.epochs);
-    if let Some(f) = args
+    let grid_check = args
         .grid_check
+        .clone()
+        .unwrap_or_else(|| HallCalibrationSettings::default().grid_check);
+    if let Some(f) = grid_check
         .iter()
         .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
     {
@@ -306,7 +309,7 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
     s.grid_check = if args.no_grid_check {
         Vec::new()
     } else {
-        args.grid_check.clone()
+        grid_check
     };
     Ok(s)
 }
@@ -327,6 +330,13 @@ fn check_model_flags(args: &CalibrateArgs) -> CliResult {
              meshes for itself"
                 .into(),
         )),
+        (ModelArg::Openfoam | ModelArg::Command, _) if args.grid_check.is_some() => {
+            Err(CliError::Input(
+                "--grid-check runs the built-in simulator on finer grids: it needs --model \
+                 builtin"
+                    .into(),
+            ))
+        }
         (ModelArg::Openfoam | ModelArg::Command, _) if args.influence_edges => {
             Err(CliError::Input(
                 "--influence-edges takes the air flow of the built-in simulator: it needs \
@@ -346,12 +356,12 @@ fn calibrate_with_model<'o>(
     settings: &HallCalibrationSettings,
     journal: &Path,
     observers: Vec<Box<dyn Observe + 'o>>,
-) -> CliResult<(Report, PenaltyReport)> {
+) -> CliResult<(Report, PenaltyReport, String)> {
     let hall = calibrated_hall(hall, settings);
     match args.model {
         ModelArg::Builtin => {
             let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)?;
-            Ok((c.report, c.penalty_report))
+            Ok((c.report, c.penalty_report, c.model.fingerprint()))
         }
         ModelArg::Openfoam => {
             let model = OpenFoamModel::new(
@@ -369,7 +379,7 @@ fn calibrate_with_model<'o>(
                 Some(journal),
                 observers,
             )?;
-            Ok((c.report, c.penalty_report))
+            Ok((c.report, c.penalty_report, model.fingerprint()))
         }
         ModelArg::Command => {
             let path = args
@@ -388,7 +398,7 @@ fn calibrate_with_model<'o>(
                 Some(journal),
                 observers,
             )?;
-            Ok((c.report, c.penalty_report))
+            Ok((c.report, c.penalty_report, model.fingerprint()))
         }
     }
 }
@@ -407,8 +417,10 @@ fn model_record(
     args: &CalibrateArgs,
     hall: &Hall,
     settings: &HallCalibrationSettings,
+    fingerprint: String,
 ) -> CliResult<CalibratedModel> {
     let alpha = settings.alpha_mode.unwrap_or(hall.calibrate.alpha);
+    let fingerprint = Some(fingerprint);
     Ok(match args.model {
         ModelArg::Builtin => CalibratedModel {
             kind: "builtin".into(),
@@ -416,6 +428,7 @@ fn model_record(
             alpha,
             of_iterations: None,
             np: None,
+            fingerprint,
         },
         ModelArg::Openfoam => {
             let of = args
@@ -427,6 +440,7 @@ fn model_record(
                 alpha,
                 of_iterations: Some(of.iterations),
                 np: Some(of.np),
+                fingerprint,
             }
         }
         ModelArg::Command => CalibratedModel {
@@ -435,6 +449,7 @@ fn model_record(
             alpha,
             of_iterations: None,
             np: None,
+            fingerprint,
         },
     })
 }
@@ -462,12 +477,20 @@ pub fn run(args: CalibrateArgs) -> CliResult {
                 .check_scenario(&model.scenario(&s.state))
                 .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
         }
+        if !model.unused_param_settings.is_empty() {
+            eprintln!(
+                "kalibre: warning: {}: the search uses the hall's bounds, initial values and \
+                 scales; these [[params]] give others, which are not used: {}",
+                path.display(),
+                model.unused_param_settings.join("; ")
+            );
+        }
     }
     let journal = args.out.join("runs.jsonl");
     let total_runs = ((4 + args.iterations) * snaps.len()) as u64;
     let progress = Progress::new(total_runs, args.quiet);
     let started = Instant::now();
-    let (report, penalty_report) = with_threads(args.threads, || {
+    let (report, penalty_report, fingerprint) = with_threads(args.threads, || {
         calibrate_with_model(
             &args,
             &hall,
@@ -480,7 +503,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let wall_s = started.elapsed().as_secs_f64();
     warn_skipped_journal_lines(&journal, &report);
     let mut report = report;
-    report.model = Some(model_record(&args, &hall, &settings)?.to_json());
+    report.model = Some(model_record(&args, &hall, &settings, fingerprint)?.to_json());
     let report_path = args.out.join("report.json");
     let json = serde_json::to_string_pretty(&report)
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;

@@ -25,7 +25,7 @@ use print::{
 };
 pub(super) use print::{sensor_line, warming_racks, worst_sensors};
 
-use super::calibrated_model::{grid_or_recorded, CalibratedModel};
+use super::calibrated_model::{check_same_measurements, grid_or_recorded, CalibratedModel};
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::simulate::sim_config;
 use super::{with_threads, CliError, CliResult};
@@ -176,6 +176,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             report.schema
         )));
     }
+    check_same_measurements(
+        &report_path,
+        &report.residuals,
+        &args.snapshots,
+        &hall,
+        &snaps,
+    )?;
     // The model the calibration ran, as it recorded it: its grid, alpha mode and
     // OpenFOAM options stand unless given again here.
     let recorded = CalibratedModel::of_report(&report_path, report.model.as_ref())?;
@@ -199,6 +206,9 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         Some(m) => m.calibrated_hall(&hall),
         None => hall,
     };
+    if let (None, Some(m)) = (args.grid_m, &recorded) {
+        m.check_cells(&report_path, &hall)?;
+    }
     let grid_m = grid_or_recorded(args.grid_m, recorded.as_ref());
     let mut of_args = args.openfoam.clone();
     if let Some(m) = &recorded {
@@ -221,6 +231,16 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             (Box::new(OpenFoamEffectSolver::new(&hall, of)?), fp)
         }
     };
+    if let Some(recorded_fp) = recorded.as_ref().and_then(|m| m.fingerprint.as_ref()) {
+        if *recorded_fp != fp {
+            return Err(CliError::Input(format!(
+                "{}: /model/fingerprint: runs of another model (a different hall.json, \
+                 effects, --grid-m, --model or OpenFOAM option) than `{}` with --model {chosen}",
+                report_path.display(),
+                args.hall.display(),
+            )));
+        }
+    }
     let space = model.layout().space();
     let names: Vec<&str> = report
         .best
@@ -528,8 +548,29 @@ fn check_writable_file(path: &std::path::Path) -> CliResult {
         .skip(1)
         .find(|p| p.as_os_str().is_empty() || p.exists())
         .filter(|p| !p.as_os_str().is_empty());
-    match existing {
-        Some(p) if !p.is_dir() => bad(format!("{} is not a directory", p.display())),
+    let dir = match existing {
+        Some(p) if !p.is_dir() => return bad(format!("{} is not a directory", p.display())),
+        Some(p) => p.to_path_buf(),
+        None => std::path::PathBuf::from("."),
+    };
+    // Permissions, a read-only or virtual file system: only writing tells, so write.
+    if path.exists() {
+        return std::fs::OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map(drop)
+            .or_else(|e| bad(format!("cannot write it: {e}")));
+    }
+    let file = dir.join(format!(".kalibre-write-check-{}", std::process::id()));
+    let made = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&file);
+    let _ = std::fs::remove_file(&file);
+    match made {
+        Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => {
+            bad(format!("cannot write in {}: {e}", dir.display()))
+        }
         _ => Ok(()),
     }
 }

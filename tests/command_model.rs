@@ -1,0 +1,163 @@
+//! `kalibre calibrate --model command` end to end. The external command is `kalibre
+//! simulate` itself, fed each snapshot and the parameters through `model.toml`'s
+//! templates and read back by the regex parser, so the calibration must be the built-in
+//! model's, run for run: the templates, the scenario variables, the parser and the hall's
+//! parameter layout are all checked by one comparison.
+
+mod cli_support;
+use cli_support::*;
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// `{{name}}` in a template: the shortest text that reads back to the same number.
+fn placeholder(name: &str) -> String {
+    format!("{{{{{name}}}}}")
+}
+
+/// `model.toml` and its two templates in `dir`: one snapshot of the hall as a
+/// `snapshots.csv`, and the parameters as `params.json`; `initial_alpha` is what the
+/// file gives as every alpha's initial value.
+fn write_command_model(dir: &Path, hall: &serde_json::Value, initial_alpha: f64) {
+    let ids = |list: &serde_json::Value| -> Vec<String> {
+        list.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x["id"].as_str().unwrap().to_string())
+            .collect()
+    };
+    let cracs = ids(&hall["cracs"]);
+    let servers: Vec<String> = hall["racks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|r| ids(&r["servers"]))
+        .collect();
+    let types = ids(&hall["server_types"]);
+    let sensors = ids(&hall["sensors"]);
+
+    let mut snapshot = String::from("snapshot,kind,id,value\n");
+    for c in &cracs {
+        for kind in ["setpoint_c", "fan_speed"] {
+            let value = placeholder(&format!("{kind}/{c}"));
+            writeln!(snapshot, "{},{kind},{c},{value}", placeholder("scenario")).unwrap();
+        }
+    }
+    for s in &servers {
+        let value = placeholder(&format!("power_w/{s}"));
+        writeln!(snapshot, "{},power_w,{s},{value}", placeholder("scenario")).unwrap();
+    }
+    std::fs::write(dir.join("snapshot.csv.tmpl"), snapshot).unwrap();
+    let params: Vec<String> = types
+        .iter()
+        .map(|t| format!("\"alpha/{t}\": {}", placeholder(&format!("alpha/{t}"))))
+        .collect();
+    std::fs::write(
+        dir.join("params.json.tmpl"),
+        format!("{{{}}}\n", params.join(", ")),
+    )
+    .unwrap();
+
+    let quoted = |v: &[String]| {
+        v.iter()
+            .map(|s| format!("\"{s}\""))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut toml = format!(
+        "program = \"{}\"\n\
+         args = [\"simulate\", \"--hall\", \"{}\", \"--snapshots\", \
+         \"snapshot.csv\", \"--params\", \"params.json\", \"--out\", \"pred.csv\"]\n\
+         runs_root = \"runs\"\n\
+         timeout_s = 120\n\
+         [[templates]]\nsource = \"snapshot.csv.tmpl\"\ndestination = \"snapshot.csv\"\n\
+         [[templates]]\nsource = \"params.json.tmpl\"\ndestination = \"params.json\"\n\
+         [output]\nfile = \"pred.csv\"\nparser = \"regex\"\nnames = [{}]\n\
+         [output.regex]\n",
+        env!("CARGO_BIN_EXE_kalibre"),
+        data("of-dev-clean/hall.json").display(),
+        quoted(&sensors)
+    );
+    for s in &sensors {
+        writeln!(toml, "\"{s}\" = ',sensor_c,{s},(\\S+)'").unwrap();
+    }
+    for t in &types {
+        let b = &hall["server_types"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["id"] == t.as_str())
+            .unwrap()["alpha_cfm_per_w"];
+        write!(
+            toml,
+            "[[params]]\nname = \"alpha/{t}\"\nlower = {}\nupper = {}\ninitial = {initial_alpha}\n",
+            b["min"], b["max"]
+        )
+        .unwrap();
+    }
+    std::fs::write(dir.join("model.toml"), toml).unwrap();
+}
+
+/// The best MAE and parameters of a calibration's `report.json`.
+fn best(out: &Path) -> (f64, serde_json::Value, serde_json::Value) {
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&text).unwrap();
+    (
+        report["best"]["mae_c"].as_f64().unwrap(),
+        report["best"]["params"].clone(),
+        report["runs"].clone(),
+    )
+}
+
+#[test]
+fn a_command_running_the_builtin_simulator_calibrates_as_the_builtin_model() {
+    let dir = tmp("command-model");
+    let hall_path = data("of-dev-clean/hall.json");
+    let hall: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&hall_path).unwrap()).unwrap();
+    // Initial values other than the hall's: the search starts from the hall's, and says so.
+    write_command_model(&dir, &hall, 0.3);
+    let calibrate = |extra: &[&str], out: &str| {
+        run(on_dataset("calibrate", "of-dev-clean")
+            .args(["--iterations", "1", "--polish", "0", "--quiet", "--out"])
+            .arg(dir.join(out))
+            .args(extra))
+    };
+    let builtin = calibrate(&["--no-grid-check"], "builtin");
+    assert_eq!(builtin.status.code(), Some(0), "{}", stderr(&builtin));
+    let config = dir.join("model.toml");
+    let command = calibrate(
+        &["--model", "command", "--config", config.to_str().unwrap()],
+        "command",
+    );
+    let err = stderr(&command);
+    assert_eq!(command.status.code(), Some(0), "{err}");
+    assert!(
+        err.contains("kalibre: warning: ")
+            && err.contains("these [[params]] give others, which are not used: alpha/web"),
+        "{err}"
+    );
+
+    let (mae_builtin, params_builtin, runs_builtin) = best(&dir.join("builtin"));
+    let (mae_command, params_command, runs_command) = best(&dir.join("command"));
+    // The same runs in the same order: each value passes through text exactly.
+    assert_eq!(runs_command, runs_builtin);
+    assert_eq!(params_command, params_builtin);
+    assert_eq!(mae_command, mae_builtin);
+    let journal = std::fs::read_to_string(dir.join("command/runs.jsonl")).unwrap();
+    assert!(!journal.contains(r#""status":"failed""#), "{journal}");
+
+    // The grid check runs the built-in simulator on finer grids: not for a command.
+    let o = calibrate(
+        &[
+            "--model",
+            "command",
+            "--config",
+            config.to_str().unwrap(),
+            "--grid-check",
+            "0.5",
+        ],
+        "refused",
+    );
+    assert_input_error(&o, "--grid-check runs the built-in simulator");
+}
