@@ -1,5 +1,5 @@
 //! Inputs the command-line tool refuses before any model runs: outputs that would
-//! replace an input file, thread and run counts that would only thrash, what-if changes
+//! replace an input file or a user's hall, thread and run counts that would only thrash, what-if changes
 //! beyond the air's range, a parameter named twice, a journal line no model could have
 //! written, flags that cannot apply, a diagnosis of another hall or other measurements
 //! than the calibration's. Each is one line naming the flag, file or line, and exit
@@ -9,7 +9,9 @@ mod cli_support;
 
 use std::path::Path;
 
-use cli_support::{assert_input_error, data, kalibre, on_dataset, run, stderr, tmp};
+use cli_support::{
+    assert_input_error, data, kalibre, on_dataset, run, stderr, tmp, QUICK_CALIBRATION,
+};
 
 #[test]
 fn an_output_over_an_input_file_is_refused_and_the_input_kept() {
@@ -41,6 +43,27 @@ fn an_output_over_an_input_file_is_refused_and_the_input_kept() {
     );
     let o = simulate(&dir.join("pred.csv"), Some(&hall));
     assert_input_error(&o, "--servers");
+    // A user's own hall is not a synthetic one to replace, nor a calibration a demo's.
+    let mine = dir.join("mine");
+    std::fs::create_dir_all(&mine).unwrap();
+    std::fs::copy(&hall, mine.join("hall.json")).unwrap();
+    let o = run(kalibre().args(["synth", "--out"]).arg(&mine));
+    assert_input_error(&o, "holds hall.json with no truth.json beside it");
+    let cal = dir.join("cal");
+    std::fs::create_dir_all(&cal).unwrap();
+    std::fs::write(cal.join("runs.jsonl"), "").unwrap();
+    let o = run(kalibre().args(["demo", "--out"]).arg(&cal));
+    assert_input_error(&o, "holds runs.jsonl with no truth.json beside it");
+    assert_eq!(
+        std::fs::read(mine.join("hall.json")).unwrap(),
+        std::fs::read(&hall).unwrap()
+    );
+    // A synthetic hall is replaced when asked again.
+    let synthetic = dir.join("synthetic");
+    for _ in 0..2 {
+        let o = run(kalibre().args(["synth", "--out"]).arg(&synthetic));
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    }
 }
 
 #[test]
@@ -65,6 +88,28 @@ fn thread_and_run_counts_that_would_thrash_are_refused() {
         &calibrate("--parallel-runs", "10000"),
         "must be at most 1024, got 10000",
     );
+    // Search and training sizes that would run for hours (or fill the memory: 1e8 members
+    // took 8 GB) inside one step, where --max-wall-s is not looked at.
+    for (flag, n, why) in [
+        (
+            "--population",
+            "100000000",
+            "`population`: must be at most 10000",
+        ),
+        (
+            "--de-iterations",
+            "4000000000",
+            "`iterations`: must be in 1..=100000",
+        ),
+        (
+            "--adam-steps",
+            "4000000000",
+            "`steps`: must be in 1..=1000000",
+        ),
+        ("--epochs", "4000000000", "--epochs: must be in 1..=100000"),
+    ] {
+        assert_input_error(&calibrate(flag, n), why);
+    }
     assert!(
         !dir.join("cal").join("runs.jsonl").exists(),
         "a refused calibration started a journal"
@@ -206,6 +251,21 @@ fn flags_that_cannot_apply_are_refused_before_any_output() {
         .arg(dir.join("pred.csv")));
     assert_input_error(&o, "--grid-check: 2 is not a finer grid");
     assert!(!dir.join("pred.csv").exists());
+    // In (0, 1) but no check: the model's own grid, or one too fine to build.
+    for (factor, why) in [
+        ("0.999999", "the model's own cells in this room"),
+        ("1e-9", "above the built-in simulator's 30000000"),
+    ] {
+        let o = run(kalibre()
+            .args(["calibrate", "--grid-check", factor, "--hall"])
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(&snaps)
+            .arg("--out")
+            .arg(dir.join("cal")));
+        assert_input_error(&o, why);
+    }
+    assert!(!dir.join("cal").join("runs.jsonl").exists());
     // An unwritable --write-hall used to be found after the diagnosis's solves.
     let o = run(kalibre()
         .args(["diagnose", "--hall"])
@@ -260,15 +320,8 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
     let dir = tmp("other-inputs");
     let cal = dir.join("cal");
     let o = run(on_dataset("calibrate", "of-dev-clean")
-        .args([
-            "--iterations",
-            "1",
-            "--polish",
-            "0",
-            "--no-grid-check",
-            "--quiet",
-            "--out",
-        ])
+        .args(QUICK_CALIBRATION)
+        .arg("--out")
         .arg(&cal));
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     // Without the journal, the report's record of the model still names the hall it ran.

@@ -136,10 +136,11 @@ where
             .snapshots()
             .par_iter()
             .map(|snap| {
+                let inputs = self.model.scenario_key(&snap.scenario);
                 let cached = self
                     .store
-                    .and_then(|s| s.get(&snap.label, &self.param_names, params));
-                if let Some(rec) = cached {
+                    .and_then(|s| s.get_keyed(&snap.label, &inputs, &self.param_names, params));
+                if let Some((_, rec)) = cached {
                     return Ok(rec.result());
                 }
                 let t0 = Instant::now();
@@ -148,8 +149,9 @@ where
                     .evaluate(&snap.scenario, params)
                     .and_then(|o| check_outputs(o, &self.output_names));
                 if let Some(s) = self.store {
-                    s.record(
+                    s.record_keyed(
                         &snap.label,
+                        &inputs,
                         &self.param_names,
                         params,
                         &r,

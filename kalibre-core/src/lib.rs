@@ -115,7 +115,7 @@ pub use calibrate::{Calibrator, Report, Settings, StopReason};
 
 pub use data::{Observations, OutputInfo, Snapshot};
 pub use error::{Error, Result};
-pub use model::{check_outputs, Model, ModelError, Outputs};
+pub use model::{check_outputs, scenario_digest, Model, ModelError, Outputs};
 pub use observe::{Event, Observe};
 pub use param::{Param, ParamSpace, Scale};
 pub use search::{

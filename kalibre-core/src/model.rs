@@ -104,6 +104,20 @@ impl ModelError {
     }
 }
 
+/// A stable digest (FNV-1a 128, hex) of a scenario's inputs written as text, for
+/// [`Model::scenario_key`]; the same on every build and platform.
+///
+/// ```
+/// let a = kalibre_core::scenario_digest("setpoints [18.0]");
+/// assert_eq!(a, kalibre_core::scenario_digest("setpoints [18.0]"));
+/// assert_ne!(a, kalibre_core::scenario_digest("setpoints [18.5]"));
+/// ```
+pub fn scenario_digest(inputs: &str) -> String {
+    let mut h = crate::external::StableHasher::new();
+    h.field(inputs);
+    format!("{:032x}", h.finish())
+}
+
 /// What one successful model run returns: one value per output (sensor).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Outputs {
@@ -157,6 +171,15 @@ pub trait Model: Sync {
     fn check_plausible(&self, outputs: &Outputs) -> std::result::Result<(), ModelError> {
         let _ = outputs;
         Ok(())
+    }
+
+    /// A digest of the scenario's inputs (e.g. [`scenario_digest`] of its setpoints and
+    /// powers), journaled with each run: a run is reused only under the same label *and*
+    /// the same inputs, so a snapshot edited under its old label is run again, never
+    /// answered from the old conditions. The default, empty, trusts the label alone.
+    fn scenario_key(&self, scenario: &Self::Scenario) -> String {
+        let _ = scenario;
+        String::new()
     }
 }
 

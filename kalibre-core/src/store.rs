@@ -38,6 +38,10 @@ pub struct RunRecord {
     pub fingerprint: String,
     /// Snapshot label of the scenario.
     pub scenario: String,
+    /// The scenario's inputs ([`crate::Model::scenario_key`]); absent when the model
+    /// gives none. A run is reused only under the same key.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub scenario_key: String,
     /// Parameter names, in order.
     pub param_names: Vec<String>,
     /// Physical parameter values, in order.
@@ -125,12 +129,14 @@ impl LoadReport {
     }
 }
 
-/// Cache key: scenario label, parameter names and the exact bits of the values.
-type Key = (String, Vec<String>, Vec<u64>);
+/// Cache key: scenario label and inputs, parameter names and the exact bits of the
+/// values.
+type Key = (String, String, Vec<String>, Vec<u64>);
 
-fn key(scenario: &str, names: &[String], params: &[f64]) -> Key {
+fn key(scenario: &str, scenario_key: &str, names: &[String], params: &[f64]) -> Key {
     (
         scenario.to_string(),
+        scenario_key.to_string(),
         names.to_vec(),
         params.iter().map(|x| x.to_bits()).collect(),
     )
@@ -208,7 +214,12 @@ impl RunStore {
                 load.other_fingerprint += 1;
                 return;
             }
-            let k = key(&rec.scenario, &rec.param_names, &rec.params);
+            let k = key(
+                &rec.scenario,
+                &rec.scenario_key,
+                &rec.param_names,
+                &rec.params,
+            );
             match runs.entry(k) {
                 Entry::Occupied(_) => load.duplicates += 1,
                 Entry::Vacant(v) => {
@@ -316,7 +327,19 @@ impl RunStore {
         names: &[String],
         params: &[f64],
     ) -> Option<(usize, RunRecord)> {
-        self.lock().runs.get(&key(scenario, names, params)).cloned()
+        self.get_keyed(scenario, "", names, params)
+    }
+
+    /// [`Self::get_with_line`] under the scenario's inputs ([`crate::Model::scenario_key`]).
+    pub fn get_keyed(
+        &self,
+        scenario: &str,
+        scenario_key: &str,
+        names: &[String],
+        params: &[f64],
+    ) -> Option<(usize, RunRecord)> {
+        let k = key(scenario, scenario_key, names, params);
+        self.lock().runs.get(&k).cloned()
     }
 
     /// Journals a finished run (appended, flushed and synced before returning) and caches it.
@@ -324,6 +347,19 @@ impl RunStore {
     pub fn record(
         &self,
         scenario: &str,
+        names: &[String],
+        params: &[f64],
+        result: &std::result::Result<Outputs, ModelError>,
+        wall_s: f64,
+    ) -> Result<RunRecord> {
+        self.record_keyed(scenario, "", names, params, result, wall_s)
+    }
+
+    /// [`Self::record`] under the scenario's inputs ([`crate::Model::scenario_key`]).
+    pub fn record_keyed(
+        &self,
+        scenario: &str,
+        scenario_key: &str,
         names: &[String],
         params: &[f64],
         result: &std::result::Result<Outputs, ModelError>,
@@ -350,6 +386,7 @@ impl RunStore {
             seq: inner.next_seq,
             fingerprint: self.fingerprint.clone(),
             scenario: scenario.to_string(),
+            scenario_key: scenario_key.to_string(),
             param_names: names.to_vec(),
             params: params.to_vec(),
             status,
@@ -379,9 +416,10 @@ impl RunStore {
             0
         };
         inner.next_seq += 1;
-        inner
-            .runs
-            .insert(key(scenario, names, params), (line, rec.clone()));
+        inner.runs.insert(
+            key(scenario, scenario_key, names, params),
+            (line, rec.clone()),
+        );
         Ok(rec)
     }
 

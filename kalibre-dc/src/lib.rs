@@ -24,5 +24,5 @@ pub mod surrogate;
 pub mod synth;
 
 pub use error::{Error, Result};
-pub use model::{check_sensor_c, HallModel, PLAUSIBLE_SENSOR_C};
+pub use model::{check_sensor_c, operating_state_key, HallModel, PLAUSIBLE_SENSOR_C};
 pub use params::ParamLayout;

@@ -165,6 +165,20 @@ impl Model for HallModel {
     fn check_plausible(&self, outputs: &Outputs) -> std::result::Result<(), ModelError> {
         check_sensor_c(&outputs.values, &self.sensor_names)
     }
+
+    fn scenario_key(&self, scenario: &OperatingState) -> String {
+        operating_state_key(scenario)
+    }
+}
+
+/// [`Model::scenario_key`] of a hall model: a digest of the snapshot's setpoints, fan
+/// speeds and powers (not its label), so that a journaled run is reused only under the
+/// conditions it ran at.
+pub fn operating_state_key(state: &OperatingState) -> String {
+    kalibre_core::scenario_digest(&format!(
+        "setpoint_c {:?} fan_speed {:?} power_w {:?}",
+        state.setpoint_c, state.fan_speed, state.power_w
+    ))
 }
 
 /// The sensor temperatures (C) a hall model can give. Below absolute zero is impossible;

@@ -84,6 +84,10 @@ pub fn run(args: DemoArgs) -> CliResult {
     if let Some(e) = &hidden {
         opts = opts.with_effect(e.clone());
     }
+    super::synth::check_out_dir(
+        &args.out,
+        &["report.json", "runs.jsonl", "report.html", "story.json"],
+    )?;
     let synth = with_threads(args.threads, || synth::generate(&opts))??;
     synth::write_dir(&args.out, &synth)?;
     let hall = &synth.hall;

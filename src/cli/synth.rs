@@ -58,6 +58,7 @@ pub fn run(args: SynthArgs) -> CliResult {
     for e in effects {
         options = options.with_effect(e);
     }
+    check_out_dir(&args.out, &[])?;
     let out = synth::generate(&options)?;
     synth::write_dir(&args.out, &out)?;
     println!(
@@ -70,4 +71,25 @@ pub fn run(args: SynthArgs) -> CliResult {
         out.snapshots.len()
     );
     Ok(())
+}
+
+/// Refuses an `--out` that holds a hall or measurements `synth` did not write (no
+/// `truth.json` beside them: a user's own files), or any of `also`, rather than replace
+/// them; an earlier synthetic hall is replaced, as asked.
+pub(super) fn check_out_dir(out: &std::path::Path, also: &[&str]) -> CliResult {
+    if out.join("truth.json").exists() {
+        return Ok(());
+    }
+    let theirs = ["hall.json", "snapshots.csv"]
+        .iter()
+        .chain(also)
+        .find(|name| out.join(name).exists());
+    match theirs {
+        Some(name) => Err(CliError::Input(format!(
+            "--out {}: holds {name} with no truth.json beside it, so not a synthetic hall's; \
+             kalibre does not replace it: give another --out",
+            out.display()
+        ))),
+        None => Ok(()),
+    }
 }

@@ -5,6 +5,17 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// `kalibre calibrate` flags for a calibration of a second or two: one iteration, no
+/// polish, no grid check, no progress.
+pub const QUICK_CALIBRATION: [&str; 6] = [
+    "--iterations",
+    "1",
+    "--polish",
+    "0",
+    "--no-grid-check",
+    "--quiet",
+];
+
 pub fn kalibre() -> Command {
     Command::new(env!("CARGO_BIN_EXE_kalibre"))
 }

@@ -73,7 +73,11 @@ impl<M: Model> Runner<'_, M> {
     fn run_one(&self, iteration: usize, s: usize, params: &[f64]) -> Result<RunResult> {
         let snap = &self.observations.snapshots()[s];
         let label = snap.label.as_str();
-        if let Some((line, rec)) = self.store.get_with_line(label, self.param_names, params) {
+        let inputs = self.model.scenario_key(&snap.scenario);
+        if let Some((line, rec)) = self
+            .store
+            .get_keyed(label, &inputs, self.param_names, params)
+        {
             self.emit(Event::RunStarted {
                 iteration,
                 snapshot: label,
@@ -121,7 +125,7 @@ impl<M: Model> Runner<'_, M> {
             .and_then(|o| self.checked(o));
         let wall_s = t0.elapsed().as_secs_f64();
         self.store
-            .record(label, self.param_names, params, &result, wall_s)?;
+            .record_keyed(label, &inputs, self.param_names, params, &result, wall_s)?;
         self.emit(Event::RunFinished {
             iteration,
             snapshot: label,

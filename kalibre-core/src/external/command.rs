@@ -532,4 +532,9 @@ impl<S: TemplateScenario + Sync> Model for ExternalCommand<S> {
     fn evaluate(&self, scenario: &S, params: &[f64]) -> Result<Outputs, ModelError> {
         self.run(scenario, params).outcome
     }
+
+    /// The scenario's variables: a scenario edited under its label is run again.
+    fn scenario_key(&self, scenario: &S) -> String {
+        crate::scenario_digest(&format!("{:?}", scenario.variables()))
+    }
 }

@@ -62,6 +62,10 @@ impl Default for Adam {
     }
 }
 
+/// The most steps a builder accepts (the loop's default: 100): a bound on one search's
+/// time, which the loop's wall-time budget checks only between steps of the loop.
+pub const MAX_ADAM_STEPS: usize = 1_000_000;
+
 /// Unchecked [`Adam`] settings; [`build`](Self::build) checks them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AdamBuilder(Adam);
@@ -125,7 +129,9 @@ impl AdamBuilder {
         require(s.epsilon.is_finite() && s.epsilon > 0.0, "epsilon", || {
             format!("must be positive and finite, got {}", s.epsilon)
         })?;
-        require(s.steps >= 1, "steps", || "must be at least 1".into())?;
+        require((1..=MAX_ADAM_STEPS).contains(&s.steps), "steps", || {
+            format!("must be in 1..={MAX_ADAM_STEPS}, got {}", s.steps)
+        })?;
         Ok(s)
     }
 }

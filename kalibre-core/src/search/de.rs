@@ -79,6 +79,12 @@ impl Default for DifferentialEvolution {
     }
 }
 
+/// The largest population a builder accepts: far beyond any useful search (the paper: 10),
+/// and a bound on memory, which grows with it before any time limit is looked at.
+pub const MAX_POPULATION: usize = 10_000;
+/// The most generations a builder accepts (the paper: 100).
+pub const MAX_GENERATIONS: usize = 100_000;
+
 /// Unchecked [`DifferentialEvolution`] settings; [`build`](Self::build) checks them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DifferentialEvolutionBuilder(DifferentialEvolution);
@@ -132,9 +138,14 @@ impl DifferentialEvolutionBuilder {
         require(s.weight > 0.0 && s.weight <= 2.0, "weight", || {
             format!("must be in (0, 2], got {}", s.weight)
         })?;
-        require(s.iterations >= 1, "iterations", || {
-            "must be at least 1".into()
+        require(s.population <= MAX_POPULATION, "population", || {
+            format!("must be at most {MAX_POPULATION}, got {}", s.population)
         })?;
+        require(
+            (1..=MAX_GENERATIONS).contains(&s.iterations),
+            "iterations",
+            || format!("must be in 1..={MAX_GENERATIONS}, got {}", s.iterations),
+        )?;
         require(s.give_up_after != Some(0), "give_up_after", || {
             "must be at least 1 generation (or none)".into()
         })?;

@@ -14,12 +14,12 @@ mod objective;
 mod problem;
 mod spg;
 
-pub use adam::{Adam, AdamBuilder, AdamSolver};
+pub use adam::{Adam, AdamBuilder, AdamSolver, MAX_ADAM_STEPS};
 pub(crate) use correction::{cholesky, cholesky_solve};
 pub use correction::{OutputCorrection, CORRECTION_LENGTH_UNIT, CORRECTION_RIDGE_REL};
 pub use de::{
     DeSolver, DifferentialEvolution, DifferentialEvolutionBuilder, PopulationEval,
-    AUTO_PARALLEL_MIN_EVAL_US,
+    AUTO_PARALLEL_MIN_EVAL_US, MAX_GENERATIONS, MAX_POPULATION,
 };
 pub use hybrid::{Hybrid, HYBRID_DE_GIVE_UP_AFTER};
 pub use objective::{Regularizer, SurrogateObjective};

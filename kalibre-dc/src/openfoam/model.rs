@@ -569,6 +569,10 @@ impl Model for OpenFoamModel {
     fn check_plausible(&self, outputs: &Outputs) -> Result<(), ModelError> {
         crate::check_sensor_c(&outputs.values, &self.sensor_names)
     }
+
+    fn scenario_key(&self, scenario: &OperatingState) -> String {
+        crate::operating_state_key(scenario)
+    }
 }
 
 /// JSON text of a value, for fingerprints.

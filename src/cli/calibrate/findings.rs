@@ -46,9 +46,10 @@ pub(super) fn openfoam_intakes(
     let alpha = model.layout().alpha_per_server(&params);
     let mut checks = Vec::with_capacity(snaps.len());
     for snap in snaps {
+        let inputs = model.scenario_key(&snap.state);
         let outputs = store
-            .get(&snap.state.label, &names, &params)
-            .and_then(|run| run.result().ok());
+            .get_keyed(&snap.state.label, &inputs, &names, &params)
+            .and_then(|(_, run)| run.result().ok());
         let Some(intake_c) = outputs
             .as_ref()
             .and_then(|o| o.extras.get(SERVER_INTAKE_KEY))

@@ -109,6 +109,10 @@ impl Model for HallCommand {
         self.command.evaluate(&self.scenario(state), params)
     }
 
+    fn scenario_key(&self, scenario: &OperatingState) -> String {
+        self.command.scenario_key(&self.scenario(scenario))
+    }
+
     fn check_plausible(&self, outputs: &Outputs) -> Result<(), ModelError> {
         kalibre_dc::check_sensor_c(&outputs.values, self.command.output_names())
     }

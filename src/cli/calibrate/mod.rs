@@ -293,6 +293,12 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
             .then_some(kalibre_dc::calibration::SERVER_INFLUENCE_CUT),
         ..HallCalibrationSettings::default()
     };
+    if !(1..=MAX_EPOCHS).contains(&args.epochs) {
+        return Err(CliError::Input(format!(
+            "--epochs: must be in 1..={MAX_EPOCHS}, got {}",
+            args.epochs
+        )));
+    }
     s.surrogate = s.surrogate.with_epochs(args.epochs);
     let grid_check = args
         .grid_check
@@ -454,6 +460,38 @@ fn model_record(
     })
 }
 
+/// The most surrogate training epochs per fit `--epochs` takes (the paper: 150): a bound
+/// on one fit's time, which `--max-wall-s` checks only between the loop's steps.
+const MAX_EPOCHS: usize = 100_000;
+
+/// Refuses a `--grid-check` factor whose grid is the model's own in this room (a check
+/// that would report no numerical uncertainty at all) or too fine to build, before the
+/// calibration rather than in its report.
+fn check_finer_grids(hall: &Hall, cell_m: f64, factors: &[f64]) -> CliResult {
+    use kalibre_dc::sim::{Grid, MAX_CELLS};
+    let size = hall.room.size_m;
+    for &f in factors {
+        let fine_m = cell_m * f;
+        let cells = Grid::cell_count(size, fine_m);
+        let why = if cells > MAX_CELLS as f64 {
+            format!("{cells:.3e} cells, above the built-in simulator's {MAX_CELLS}")
+        } else if Grid::new(size, fine_m).n == Grid::new(size, cell_m).n {
+            "the model's own cells in this room, so it would check nothing".into()
+        } else {
+            continue;
+        };
+        return Err(CliError::Input(format!(
+            "--grid-check: {f} gives cells of {} m: {why}",
+            if fine_m < 1e-3 {
+                format!("{fine_m:.1e}")
+            } else {
+                format!("{:.4}", fine_m)
+            }
+        )));
+    }
+    Ok(())
+}
+
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     let settings = settings(&args)?;
@@ -462,6 +500,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
+    check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     std::fs::create_dir_all(&args.out).map_err(|e| io_err(&args.out, e))?;
     if args.model == ModelArg::Command {
         // Checked before the loop so a bad template fails at once, not per run.
