@@ -74,6 +74,8 @@ pub struct ModelMae<'a, M: Model> {
     store: Option<&'a RunStore>,
     param_names: Vec<String>,
     output_names: Vec<String>,
+    /// Each snapshot's [`Model::scenario_key`], computed once.
+    scenario_keys: Vec<String>,
 }
 
 impl<'a, M: Model> ModelMae<'a, M>
@@ -108,6 +110,9 @@ where
             store,
             param_names: space.names(),
             output_names: observations.output_names(),
+            scenario_keys: (observations.snapshots().iter())
+                .map(|snap| model.scenario_key(&snap.scenario))
+                .collect(),
         })
     }
 
@@ -135,11 +140,11 @@ where
             .observations
             .snapshots()
             .par_iter()
-            .map(|snap| {
-                let inputs = self.model.scenario_key(&snap.scenario);
+            .zip(&self.scenario_keys)
+            .map(|(snap, inputs)| {
                 let cached = self
                     .store
-                    .and_then(|s| s.get_keyed(&snap.label, &inputs, &self.param_names, params));
+                    .and_then(|s| s.get_keyed(&snap.label, inputs, &self.param_names, params));
                 if let Some((_, rec)) = cached {
                     return Ok(rec.result());
                 }
@@ -151,7 +156,7 @@ where
                 if let Some(s) = self.store {
                     s.record_keyed(
                         &snap.label,
-                        &inputs,
+                        inputs,
                         &self.param_names,
                         params,
                         &r,

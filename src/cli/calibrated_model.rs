@@ -76,12 +76,11 @@ impl CalibratedModel {
     /// Refuses a recorded built-in grid too fine for `hall`'s room, naming the record (the
     /// simulator's own message would blame a `--grid-m` that was never given).
     pub fn check_cells(&self, report_path: &Path, hall: &Hall) -> CliResult {
-        use kalibre_dc::sim::{Grid, MAX_CELLS};
+        use kalibre_dc::sim::{cells_beyond_cap, MAX_CELLS};
         let Some(dx) = self.grid_m.filter(|_| self.kind == "builtin") else {
             return Ok(());
         };
-        let cells = Grid::cell_count(hall.room.size_m, dx);
-        if cells > MAX_CELLS as f64 {
+        if let Some(cells) = cells_beyond_cap(hall.room.size_m, dx) {
             return Err(CliError::Input(format!(
                 "{}: /model/grid_m: cells of {dx} m need {cells:.3e} cells in hall `{}`; the \
                  built-in simulator takes at most {MAX_CELLS} (give a coarser --grid-m to \

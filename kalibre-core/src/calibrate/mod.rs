@@ -145,11 +145,15 @@ where
             ),
             None => None,
         };
+        let scenario_keys: Vec<String> = (obs.snapshots().iter())
+            .map(|s| self.model.scenario_key(&s.scenario))
+            .collect();
         let runner = Runner {
             model: self.model,
             observations: obs,
             store,
             param_names: &names,
+            scenario_keys: &scenario_keys,
             output_names: &output_names,
             observers: &self.observers,
             pool: pool.as_ref(),

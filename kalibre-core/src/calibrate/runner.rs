@@ -21,6 +21,8 @@ pub(crate) struct Runner<'r, M: Model> {
     pub observations: &'r Observations<M::Scenario>,
     pub store: &'r RunStore,
     pub param_names: &'r [String],
+    /// Each snapshot's [`Model::scenario_key`], computed once.
+    pub scenario_keys: &'r [String],
     pub output_names: &'r [String],
     pub observers: &'r [Box<dyn Observe + 'r>],
     pub pool: Option<&'r rayon::ThreadPool>,
@@ -73,10 +75,10 @@ impl<M: Model> Runner<'_, M> {
     fn run_one(&self, iteration: usize, s: usize, params: &[f64]) -> Result<RunResult> {
         let snap = &self.observations.snapshots()[s];
         let label = snap.label.as_str();
-        let inputs = self.model.scenario_key(&snap.scenario);
+        let inputs = &self.scenario_keys[s];
         if let Some((line, rec)) = self
             .store
-            .get_keyed(label, &inputs, self.param_names, params)
+            .get_keyed(label, inputs, self.param_names, params)
         {
             self.emit(Event::RunStarted {
                 iteration,
@@ -125,7 +127,7 @@ impl<M: Model> Runner<'_, M> {
             .and_then(|o| self.checked(o));
         let wall_s = t0.elapsed().as_secs_f64();
         self.store
-            .record_keyed(label, &inputs, self.param_names, params, &result, wall_s)?;
+            .record_keyed(label, inputs, self.param_names, params, &result, wall_s)?;
         self.emit(Event::RunFinished {
             iteration,
             snapshot: label,

@@ -55,7 +55,7 @@ pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
 pub use solution::Solution;
 pub use supply::tile_flows_m3_s;
-pub use topology::MAX_CELLS;
+pub use topology::{cells_beyond_cap, MAX_CELLS};
 pub use vtk::write_vtk;
 
 use crate::effects::Effect;

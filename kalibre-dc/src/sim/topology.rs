@@ -59,11 +59,17 @@ fn full_g(grid: &Grid, a: usize) -> f64 {
 /// (the `demo` hall at 0.1 m: 302,400 cells, 100 MB resident), so this is about 9 GB.
 pub const MAX_CELLS: usize = 30_000_000;
 
+/// How many cells a room of `size_m` needs at `cell_m`, when that is more than the
+/// built-in simulator builds ([`MAX_CELLS`]); counted before any grid is, so that a room
+/// of 1e308 m cannot overflow `usize`.
+pub fn cells_beyond_cap(size_m: [f64; 3], cell_m: f64) -> Option<f64> {
+    let cells = Grid::cell_count(size_m, cell_m);
+    (cells.is_nan() || cells > MAX_CELLS as f64).then_some(cells)
+}
+
 impl Topology {
     pub fn build(hall: &Hall, config: &SimConfig) -> Result<Self> {
-        // Counted before the grid is built: a room of 1e308 m would overflow `usize`.
-        let cells = Grid::cell_count(hall.room.size_m, config.cell_m);
-        if cells.is_nan() || cells > MAX_CELLS as f64 {
+        if let Some(cells) = cells_beyond_cap(hall.room.size_m, config.cell_m) {
             let [x, y, z] = hall.room.size_m.map(crate::snapshots::number);
             return Err(Error::Simulation(format!(
                 "the room ({x} x {y} x {z} m) at cells of {} m needs {cells:.3e} cells; \

@@ -303,7 +303,7 @@ fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
     let grid_check = args
         .grid_check
         .clone()
-        .unwrap_or_else(|| HallCalibrationSettings::default().grid_check);
+        .unwrap_or_else(|| std::mem::take(&mut s.grid_check));
     if let Some(f) = grid_check
         .iter()
         .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
@@ -468,12 +468,11 @@ const MAX_EPOCHS: usize = 100_000;
 /// that would report no numerical uncertainty at all) or too fine to build, before the
 /// calibration rather than in its report.
 fn check_finer_grids(hall: &Hall, cell_m: f64, factors: &[f64]) -> CliResult {
-    use kalibre_dc::sim::{Grid, MAX_CELLS};
+    use kalibre_dc::sim::{cells_beyond_cap, Grid, MAX_CELLS};
     let size = hall.room.size_m;
     for &f in factors {
         let fine_m = cell_m * f;
-        let cells = Grid::cell_count(size, fine_m);
-        let why = if cells > MAX_CELLS as f64 {
+        let why = if let Some(cells) = cells_beyond_cap(size, fine_m) {
             format!("{cells:.3e} cells, above the built-in simulator's {MAX_CELLS}")
         } else if Grid::new(size, fine_m).n == Grid::new(size, cell_m).n {
             "the model's own cells in this room, so it would check nothing".into()
