@@ -116,6 +116,78 @@ fn thread_and_run_counts_that_would_thrash_are_refused() {
     );
 }
 
+/// Search settings that leave the search unable to move, or mean nothing, are refused
+/// by flag: `--trust-region 1e-300` used to pin every iteration to the initial design.
+#[test]
+fn search_settings_out_of_their_ranges_are_refused_by_flag() {
+    let dir = tmp("ranges");
+    for (flag, value, why) in [
+        (
+            "--trust-region",
+            "1e-300",
+            "--trust-region: must be in [0.001, 1]",
+        ),
+        ("--focus", "1e-300", "--focus: must be finite and >= 0.01"),
+        ("--explore", "2", "--explore: must be in (0, 1]"),
+        (
+            "--rise-weight",
+            "1e308",
+            "`weight`: must be in [0, 1e6], got 1e308",
+        ),
+        (
+            "--rise-range",
+            "0,1e308",
+            "`upper_c`: must be at most 100 K, got 1e308",
+        ),
+        (
+            "--max-runs",
+            "5",
+            "--max-runs: 5 is smaller than the initial design's 12 runs",
+        ),
+    ] {
+        let o = run(kalibre()
+            .args(["calibrate", flag, value, "--hall"])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(data("of-dev-clean/snapshots.csv"))
+            .arg("--out")
+            .arg(dir.join("cal")));
+        assert_input_error(&o, why);
+    }
+}
+
+/// An `--out` that cannot take a calibration's files is refused before any run: a
+/// `report.html` that is a directory used to fail after the whole calibration, and a FIFO
+/// named `runs.jsonl` blocked it for good.
+#[test]
+fn an_out_that_cannot_take_the_files_is_refused_first() {
+    let dir = tmp("out-kinds");
+    std::fs::create_dir_all(dir.join("html").join("report.html")).unwrap();
+    std::fs::write(dir.join("plain"), "not a directory").unwrap();
+    std::fs::create_dir_all(dir.join("fifo")).unwrap();
+    let made = std::process::Command::new("mkfifo")
+        .arg(dir.join("fifo").join("runs.jsonl"))
+        .status()
+        .unwrap();
+    assert!(made.success());
+    for (out, why) in [
+        ("html", "report.html is a directory"),
+        ("plain", "is a file, not a directory"),
+        ("fifo", "runs.jsonl is not a regular file"),
+    ] {
+        let o = run(kalibre()
+            .args(["calibrate", "--hall"])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(data("of-dev-clean/snapshots.csv"))
+            .arg("--out")
+            .arg(dir.join(out)));
+        assert_input_error(&o, why);
+    }
+    let o = run(kalibre().args(["synth", "--out"]).arg(dir.join("plain")));
+    assert_input_error(&o, "is a file, not a directory");
+}
+
 #[test]
 fn what_if_changes_beyond_the_air_are_refused() {
     let dir = tmp("what-if");

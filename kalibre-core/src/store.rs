@@ -8,7 +8,7 @@
 //! parameter values, so a restarted calibration finds every run it already did.
 
 use std::collections::hash_map::Entry;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -150,6 +150,9 @@ struct Inner {
     /// Lines in the journal file, so an appended run knows its line.
     lines: usize,
     file: Option<File>,
+    /// Runs asked for or recorded since the store was opened: the rest of the journal is
+    /// what this session did not reach ([`RunStore::unreached`]).
+    reached: HashSet<Key>,
 }
 
 /// The journal and cache of model runs of one model fingerprint.
@@ -182,6 +185,7 @@ impl RunStore {
                 next_seq: 0,
                 lines: 0,
                 file: None,
+                reached: HashSet::new(),
             }),
             load: LoadReport::default(),
         }
@@ -283,6 +287,7 @@ impl RunStore {
                 next_seq: max_seq.map_or(0, |m| m + 1),
                 lines,
                 file: Some(file),
+                reached: HashSet::new(),
             }),
             load,
         })
@@ -339,7 +344,25 @@ impl RunStore {
         params: &[f64],
     ) -> Option<(usize, RunRecord)> {
         let k = key(scenario, scenario_key, names, params);
-        self.lock().runs.get(&k).cloned()
+        let mut inner = self.lock();
+        let hit = inner.runs.get(&k).cloned();
+        if hit.is_some() {
+            inner.reached.insert(k);
+        }
+        hit
+    }
+
+    /// The journal's runs (of this fingerprint) that nobody asked for since the store was
+    /// opened, in journal order with their lines: after a calibration, the runs an
+    /// earlier, longer calibration made beyond this one's budget.
+    pub fn unreached(&self) -> Vec<(usize, RunRecord)> {
+        let inner = self.lock();
+        let mut out: Vec<(usize, RunRecord)> = (inner.runs.iter())
+            .filter(|(k, _)| !inner.reached.contains(*k))
+            .map(|(_, run)| run.clone())
+            .collect();
+        out.sort_by_key(|(line, rec)| (*line, rec.seq));
+        out
     }
 
     /// Journals a finished run (appended, flushed and synced before returning) and caches it.
@@ -416,10 +439,9 @@ impl RunStore {
             0
         };
         inner.next_seq += 1;
-        inner.runs.insert(
-            key(scenario, scenario_key, names, params),
-            (line, rec.clone()),
-        );
+        let k = key(scenario, scenario_key, names, params);
+        inner.reached.insert(k.clone());
+        inner.runs.insert(k, (line, rec.clone()));
         Ok(rec)
     }
 

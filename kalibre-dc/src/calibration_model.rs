@@ -178,12 +178,10 @@ where
             let store = RunStore::open(path, model.fingerprint())?;
             let load = store.load_report();
             if load.other_fingerprint > 0 {
-                return Err(Error::Mismatch(format!(
-                    "{}: holds {} runs of another model (a different model, hall, grid, effects \
-                     or settings); calibrate into another directory",
-                    path.display(),
-                    load.other_fingerprint
-                )));
+                return Err(Error::OtherModelJournal {
+                    path: path.display().to_string(),
+                    runs: load.other_fingerprint,
+                });
             }
             store
         }

@@ -40,6 +40,19 @@ pub enum Error {
     /// Inputs that do not fit together (lengths, ids).
     #[error("{0}")]
     Mismatch(String),
+    /// A run journal holds runs of another model than the one calibrating (another hall,
+    /// effects, grid, parameters or model options): its runs cannot be reused, and mixing
+    /// them in one file would make it unreadable to both.
+    #[error(
+        "{path}: holds {runs} runs of another model (a different model, hall, grid, effects \
+         or settings); calibrate into another directory"
+    )]
+    OtherModelJournal {
+        /// The journal file.
+        path: String,
+        /// How many of its runs are of another model.
+        runs: usize,
+    },
     /// An error of the calibration core.
     #[error(transparent)]
     Core(#[from] kalibre_core::Error),

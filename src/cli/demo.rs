@@ -89,6 +89,8 @@ pub fn run(args: DemoArgs) -> CliResult {
         &["report.json", "runs.jsonl", "report.html", "story.json"],
     )?;
     let synth = with_threads(args.threads, || synth::generate(&opts))??;
+    // Taken once the effect is known to build: bad input leaves no directory behind.
+    let _lock = super::out_dir::lock(&args.out, "demo")?;
     synth::write_dir(&args.out, &synth)?;
     let hall = &synth.hall;
     let reference = synth.truth.reference.clone();

@@ -7,6 +7,7 @@ mod diagnose;
 mod error;
 mod inlets;
 mod openfoam_args;
+mod out_dir;
 mod simulate;
 mod simulate_openfoam;
 mod synth;

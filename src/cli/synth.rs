@@ -77,6 +77,7 @@ pub fn run(args: SynthArgs) -> CliResult {
 /// `truth.json` beside them: a user's own files), or any of `also`, rather than replace
 /// them; an earlier synthetic hall is replaced, as asked.
 pub(super) fn check_out_dir(out: &std::path::Path, also: &[&str]) -> CliResult {
+    super::out_dir::check_is_dir(out)?;
     if out.join("truth.json").exists() {
         return Ok(());
     }

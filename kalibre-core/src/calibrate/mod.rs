@@ -17,18 +17,20 @@ mod slopes;
 mod state;
 mod trust;
 mod uncertainty;
+mod unreached;
 
 pub use numerical::NumericalCheck;
 pub use report::{
     Best, Errors, Initial, IterationRecord, NamedValues, PassedOver, Report, Residual, RunCounts,
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
 };
-pub use settings::Settings;
+pub use settings::{Settings, MIN_FOCUS, MIN_TRUST_REGION};
 pub use slopes::UncertaintySlopes;
 pub use uncertainty::{
     ParamUncertainty, CONVERGED_SHIFT_STDS, IDENTIFIED_REL_STD, REPEATED_RESIDUAL_ICC,
     UNCERTAINTY_MAX_PARAMS,
 };
+pub use unreached::{UnreachedBest, UnreachedRuns};
 
 use std::time::Instant;
 
@@ -127,7 +129,8 @@ where
                 return Err(Error::InvalidSetting {
                     name: "max_model_runs".into(),
                     reason: format!(
-                        "{budget} is smaller than the initial design ({} points x {n_snap} snapshots)",
+                        "{budget} is smaller than the initial design's {design_runs} runs ({} \
+                         points x {n_snap} snapshots)",
                         design_units.len()
                     ),
                 });
@@ -442,7 +445,7 @@ where
                 *r = if improved {
                     (*r * 2.0).min(1.0)
                 } else {
-                    (*r * 0.5).max(1e-3)
+                    (*r * 0.5).max(settings::MIN_TRUST_REGION)
                 };
             }
             let record = polish::record(
@@ -604,6 +607,7 @@ where
             stop_reason: stop,
             runs: state.counts,
             journal: store.path().map(|_| store.load_report().clone()),
+            unreached: unreached::summarise(store, obs, &self.validator, &names, &scenario_keys),
             wall_s: t_start.elapsed().as_secs_f64(),
             model: None,
         })

@@ -354,6 +354,10 @@ pub struct Report {
     pub runs: RunCounts,
     /// What loading the journal found (`None` without a journal file).
     pub journal: Option<LoadReport>,
+    /// The journal's runs this calibration did not reach (a budget smaller than the one
+    /// that wrote them), and the best point among them; missing when it reached all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unreached: Option<super::UnreachedRuns>,
     /// Wall time of the whole calibration, seconds.
     pub wall_s: f64,
     /// How the calibrated model was set up, as its domain describes it (e.g. the CLI's

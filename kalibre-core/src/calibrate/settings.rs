@@ -19,16 +19,16 @@ use crate::{Error, Result};
 /// | `regularizer_weight` | 1 | weight of the regulariser in the search loss (when one is given) | finite, >= 0 |
 /// | `duplicate_tol` | 1e-9 | max-norm distance in the unit box under which two points are the same | finite, >= 0 |
 /// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point, unit box | finite, > 0 |
-/// | `explore_on_repeat` | none | when the search proposes a point already run: none stops (converged); a sigma moves the proposal with that much seeded noise (unit box) and goes on | finite, > 0 |
+/// | `explore_on_repeat` | none | when the search proposes a point already run: none stops (converged); a sigma moves the proposal with that much seeded noise (unit box) and goes on | (0, 1] |
 /// | `output_correction` | false | search the surrogate plus, per snapshot and output, the model's outputs minus the surrogate's at the best run (the corrected surrogate matches the model there) | bool |
 /// | `linear_correction` | false | with `output_correction`: add a linear term in the unit box fitted to the model-minus-surrogate discrepancy at the other runs (weighted by distance, minimum norm), so the search also follows the model's slopes along explored directions | bool |
 /// | `stall_step` | none | with `linear_correction`: when the search's proposal promises less than 10% below the best run's loss (or repeats a run), run instead at the best point moved by this much (max norm, unit box) along the direction the runs near it covered least, so the next correction learns the model's slope there | finite, (0, 1] |
-/// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | (0, 1] |
+/// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | [0.001, 1] |
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
 /// | `robust_nu` | none | the data term's likelihood: none is the paper's mean squared error; `nu` a Student-t with `nu` degrees of freedom (4 is the usual robust choice), its scale fitted to the residuals, in the polish (reweighted Levenberg-Marquardt) and the uncertainty, so that a few outputs the model cannot match do not set the parameters; the iterations' search keeps the squared error (it finds the basin) | finite, > 0 |
 /// | `numerical_weighting` | false | with numerical variants ([`crate::Calibrator::with_numerical_variant`]) and a polish: the variants run at the loop's best before the polish, and the polish weighs each measured output by `s^2 / (s^2 + u^2)`, `u` its largest change over the variants and `s^2` the noise variance that leaves the weighted residuals their degrees of freedom (generalised least squares with the numerics as a per-output error); the uncertainty uses the same weights | bool |
 /// | `prior_in_best` | false | with a regulariser: judge which run is the best by its score plus the weighted regulariser at its parameters (the run's own value of what the search minimises, with the score for the misfit), so that a run whose lower error comes from parameters the prior rules out does not become the search's centre | bool |
-/// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, > 0 |
+/// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, >= 0.01 |
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Settings {
@@ -133,6 +133,14 @@ fn non_negative(name: &str, v: f64) -> Result<()> {
     }
 }
 
+/// The smallest [`Settings::trust_region`]: the radius is never halved below it, and a
+/// region smaller than this cannot move the search off its start.
+pub const MIN_TRUST_REGION: f64 = 1e-3;
+
+/// The narrowest [`Settings::focus`]: below it a run 5 % worse than the best weighs
+/// under 1e-5, so the surrogate learns from the best run alone.
+pub const MIN_FOCUS: f64 = 0.01;
+
 /// The most model runs [`Settings::max_parallel_runs`] allows at once.
 pub const MAX_PARALLEL_RUNS: usize = 1024;
 
@@ -194,22 +202,29 @@ impl Settings {
         non_negative("augment_sigma", self.augment_sigma)?;
         non_negative("regularizer_weight", self.regularizer_weight)?;
         non_negative("duplicate_tol", self.duplicate_tol)?;
+        // The unit box is 1 wide: noise beyond that only lands on its faces.
         if let Some(s) = self.explore_on_repeat {
-            if !(s.is_finite() && s > 0.0) {
+            if !(s.is_finite() && s > 0.0 && s <= 1.0) {
                 return Err(bad(
                     "explore_on_repeat",
-                    format!("must be finite and > 0, got {s}"),
+                    format!("must be in (0, 1], got {s}"),
                 ));
             }
         }
         if let Some(r) = self.trust_region {
-            if !(r.is_finite() && r > 0.0 && r <= 1.0) {
-                return Err(bad("trust_region", format!("must be in (0, 1], got {r}")));
+            if !(r.is_finite() && (MIN_TRUST_REGION..=1.0).contains(&r)) {
+                return Err(bad(
+                    "trust_region",
+                    format!("must be in [{MIN_TRUST_REGION}, 1], got {r}"),
+                ));
             }
         }
         if let Some(f) = self.focus {
-            if !(f.is_finite() && f > 0.0) {
-                return Err(bad("focus", format!("must be finite and > 0, got {f}")));
+            if !(f.is_finite() && f >= MIN_FOCUS) {
+                return Err(bad(
+                    "focus",
+                    format!("must be finite and >= {MIN_FOCUS}, got {f}"),
+                ));
             }
         }
         if let Some(nu) = self.robust_nu {

@@ -27,8 +27,17 @@ impl Hall {
             let inner = e.into_inner();
             structural_error(text, file, pointer, &inner)
         })?;
-        de.end()
-            .map_err(|e| Error::format(file, "", format!("expected the end of the file: {e}")))?;
+        de.end().map_err(|e| {
+            let message = e.to_string();
+            Error::format(
+                file,
+                text_place(&e),
+                format!(
+                    "expected the end of the file: {}",
+                    without_place(&message, &e)
+                ),
+            )
+        })?;
         // Structs refuse a repeated field themselves; maps (an effect's fields) keep the
         // last value silently.
         if let Some((field, message)) = crate::json_keys::duplicate_key_problem(text) {
@@ -112,7 +121,28 @@ fn structural_error(
     } else {
         ""
     };
+    let mut text = text.as_str();
+    // A syntax error before any field is read has no pointer: its place is the text's.
+    if pointer.is_empty() {
+        pointer = text_place(e);
+        text = without_place(text, e);
+    }
     Error::format(file, pointer, format!("invalid JSON: {text}{hint}"))
+}
+
+/// Where in the text a serde_json error is, for the field of an error no field can
+/// name: `line 3, column 7` (`line 1` in an empty file, whose column is 0).
+fn text_place(e: &serde_json::Error) -> String {
+    match e.column() {
+        0 => format!("line {}", e.line()),
+        c => format!("line {}, column {c}", e.line()),
+    }
+}
+
+/// A serde_json message without the place it appends, once that place is the field.
+fn without_place<'m>(message: &'m str, e: &serde_json::Error) -> &'m str {
+    let place = format!(" at line {} column {}", e.line(), e.column());
+    message.strip_suffix(&place).unwrap_or(message)
 }
 
 /// True when the text at a serde_json error position (1-based line and column) spells a

@@ -233,27 +233,35 @@ impl SimConfig {
             v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi
         };
         if !in_range(self.cell_m, 0.0, 5.0, true) {
-            return bad("cell_m", self.cell_m.to_string(), "(0, 5]");
+            return bad("cell_m", crate::snapshots::number(self.cell_m), "(0, 5]");
         }
         if !in_range(self.diffusivity_m2_s, 0.0, 10.0, false) {
             return bad(
                 "diffusivity_m2_s",
-                self.diffusivity_m2_s.to_string(),
+                crate::snapshots::number(self.diffusivity_m2_s),
                 "[0, 10]",
             );
         }
         if !in_range(self.containment_leak_fraction, 0.0, 1.0, false) {
             return bad(
                 "containment_leak_fraction",
-                self.containment_leak_fraction.to_string(),
+                crate::snapshots::number(self.containment_leak_fraction),
                 "[0, 1]",
             );
         }
         if !in_range(self.pressure_tol, 0.0, 1e-3, true) {
-            return bad("pressure_tol", self.pressure_tol.to_string(), "(0, 1e-3]");
+            return bad(
+                "pressure_tol",
+                crate::snapshots::number(self.pressure_tol),
+                "(0, 1e-3]",
+            );
         }
         if !in_range(self.heat_tol, 0.0, 1e-3, true) {
-            return bad("heat_tol", self.heat_tol.to_string(), "(0, 1e-3]");
+            return bad(
+                "heat_tol",
+                crate::snapshots::number(self.heat_tol),
+                "(0, 1e-3]",
+            );
         }
         if self.max_iterations < 10 {
             return bad("max_iterations", self.max_iterations.to_string(), ">= 10");
@@ -261,12 +269,16 @@ impl SimConfig {
         if !in_range(self.air_density_kg_m3, 0.0, f64::MAX, true) {
             return bad(
                 "air_density_kg_m3",
-                self.air_density_kg_m3.to_string(),
+                crate::snapshots::number(self.air_density_kg_m3),
                 "> 0",
             );
         }
         if !in_range(self.air_cp_j_kg_k, 0.0, f64::MAX, true) {
-            return bad("air_cp_j_kg_k", self.air_cp_j_kg_k.to_string(), "> 0");
+            return bad(
+                "air_cp_j_kg_k",
+                crate::snapshots::number(self.air_cp_j_kg_k),
+                "> 0",
+            );
         }
         if !(1..=100).contains(&self.advection_max_outer) {
             return bad(
@@ -278,13 +290,13 @@ impl SimConfig {
         if !in_range(self.advection_tol_c, 0.0, 1.0, true) {
             return bad(
                 "advection_tol_c",
-                self.advection_tol_c.to_string(),
+                crate::snapshots::number(self.advection_tol_c),
                 "(0, 1]",
             );
         }
         if let Some(t) = self.containment_panel_m {
             if !in_range(t, 0.0, 5.0, true) {
-                return bad("containment_panel_m", t.to_string(), "(0, 5]");
+                return bad("containment_panel_m", crate::snapshots::number(t), "(0, 5]");
             }
         }
         Ok(())

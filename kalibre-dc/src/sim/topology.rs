@@ -128,10 +128,11 @@ impl Topology {
             let open: Vec<usize> = cells.into_iter().filter(|&c| !solid[c]).collect();
             if open.is_empty() {
                 return Err(Error::Simulation(format!(
-                    "return {ri} lies over solid cells only on cells of {} x {} m (the cell \
-                     size asked for, fitted to the room): use finer cells",
+                    "return {ri} lies over solid cells only on cells of {} x {} m (the {} m \
+                     asked for, fitted to the room): use finer cells (`--grid-m`)",
                     number(grid.d[0]),
-                    number(grid.d[1])
+                    number(grid.d[1]),
+                    number(config.cell_m)
                 )));
             }
             for c in open {
@@ -160,11 +161,12 @@ impl Topology {
                 .collect();
             if cells.is_empty() {
                 return Err(Error::Simulation(format!(
-                    "tile {ti} at {:?} lies over solid cells only on cells of {} x {} m (the \
-                     cell size asked for, fitted to the room): use finer cells",
+                    "tile {ti} at {:?} lies over solid cells only on cells of {} x {} m (the {} \
+                     m asked for, fitted to the room): use finer cells (`--grid-m`)",
                     t.position_m,
                     number(grid.d[0]),
-                    number(grid.d[1])
+                    number(grid.d[1]),
+                    number(config.cell_m)
                 )));
             }
             let w = 1.0 / cells.len() as f64;

@@ -30,5 +30,6 @@ pub use local_flow::{LocalRecirculationSettings, LocalRecirculationTerm, LOCAL_R
 pub use objective::ThermalGraphObjective;
 pub use penalty::{
     PenaltyReport, PenaltySettings, RiseBound, RiseViolation, TemperatureRisePenalty, M3_S_PER_CFM,
+    MAX_RISE_C, MAX_WEIGHT,
 };
 pub use term::SurrogateTerm;

@@ -28,13 +28,21 @@ use crate::{Error, ParamLayout, Result};
 /// m3/s per cfm.
 pub const M3_S_PER_CFM: f64 = 4.71947e-4;
 
+/// The highest plausible rise a prior may name (K): air leaving a server 100 K above its
+/// intake is already far beyond any server's limits.
+pub const MAX_RISE_C: f64 = 100.0;
+
+/// The largest penalty weight: at 1e6 a violation of 1 mK already costs as much as a 1 K
+/// misfit, a hard constraint; larger weights only overflow the search loss.
+pub const MAX_WEIGHT: f64 = 1e6;
+
 /// Settings of the [`TemperatureRisePenalty`].
 ///
 /// | Name | Default | Meaning | Range |
 /// |---|---|---|---|
 /// | `lower_c` | 5 | lowest plausible server temperature rise (K) | `>= 0` |
-/// | `upper_c` | 20 | highest plausible rise (K); the paper's 15 ([`Self::paper`]) is below what real servers run (15-20 K) and, where the truth lies above it, pulls every calibration away from the truth | `> lower_c` |
-/// | `weight` | 1 | the paper's lambda: pass it to the objective with the penalty | `>= 0` |
+/// | `upper_c` | 20 | highest plausible rise (K); the paper's 15 ([`Self::paper`]) is below what real servers run (15-20 K) and, where the truth lies above it, pulls every calibration away from the truth | `> lower_c`, `<= 100` ([`MAX_RISE_C`]) |
+/// | `weight` | 1 | the paper's lambda: pass it to the objective with the penalty | `[0, 1e6]` ([`MAX_WEIGHT`]) |
 /// | `air_density_kg_m3` | 1.2 | rho | `> 0` |
 /// | `air_heat_capacity_j_kg_k` | 1005 | cp | `> 0` |
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -100,10 +108,16 @@ impl PenaltySettings {
                 format!("must exceed lower_c {}, got {}", self.lower_c, self.upper_c),
             ));
         }
-        if !(self.weight.is_finite() && self.weight >= 0.0) {
+        if self.upper_c > MAX_RISE_C {
+            return Err(setting(
+                "upper_c",
+                format!("must be at most {MAX_RISE_C} K, got {:e}", self.upper_c),
+            ));
+        }
+        if !(self.weight.is_finite() && (0.0..=MAX_WEIGHT).contains(&self.weight)) {
             return Err(setting(
                 "weight",
-                format!("must be >= 0, got {}", self.weight),
+                format!("must be in [0, {MAX_WEIGHT:e}], got {:e}", self.weight),
             ));
         }
         for (name, v) in [

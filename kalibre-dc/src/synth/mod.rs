@@ -173,14 +173,14 @@ impl SynthOptions {
         if !(self.noise_c.is_finite() && self.noise_c >= 0.0) {
             return bad(format!(
                 "noise_c must be finite and >= 0, got {}",
-                self.noise_c
+                crate::snapshots::number(self.noise_c)
             ));
         }
         // Readings beyond [-50, 150] C would be refused by every reader of the file.
         if self.noise_c > MAX_NOISE_C {
             return bad(format!(
                 "noise_c must be at most {MAX_NOISE_C} C (a sensor noisier is no sensor), got {}",
-                self.noise_c
+                crate::snapshots::number(self.noise_c)
             ));
         }
         if !(1..=MAX_SNAPSHOTS).contains(&self.snapshots) {

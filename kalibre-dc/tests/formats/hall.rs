@@ -8,7 +8,7 @@ use super::{hall_value, set};
 pub struct HallCase {
     pub name: &'static str,
     pub text: String,
-    pub field: &'static str,
+    pub field: String,
     pub phrase: &'static str,
 }
 
@@ -23,7 +23,7 @@ fn hall_case(
     HallCase {
         name,
         text: serde_json::to_string_pretty(&v).unwrap(),
-        field,
+        field: field.to_string(),
         phrase,
     }
 }
@@ -38,7 +38,7 @@ fn hall_text_case(
     HallCase {
         name,
         text,
-        field,
+        field: field.to_string(),
         phrase,
     }
 }
@@ -360,13 +360,20 @@ pub fn hall_cases() -> Vec<HallCase> {
                 t[..cut].to_string()
             },
         ),
-        hall_text_case(
-            "trailing characters",
-            "",
-            "expected the end of the file",
-            |t| t + "\n{}",
-        ),
-        hall_text_case("empty file", "", "EOF while parsing", |_| String::new()),
+        {
+            // No field to blame: the place in the text is named instead.
+            let mut c = hall_text_case(
+                "trailing characters",
+                "",
+                "expected the end of the file",
+                |t| t + "\n{}",
+            );
+            c.field = format!("line {}, column 1", c.text.lines().count());
+            c
+        },
+        hall_text_case("empty file", "line 1", "EOF while parsing", |_| {
+            String::new()
+        }),
         hall_case(
             "more units than racks have",
             "/racks/0/units",
@@ -388,7 +395,7 @@ pub fn hall_cases() -> Vec<HallCase> {
             HallCase {
                 name: "a key twice in one object",
                 text,
-                field: "/effects/0",
+                field: "/effects/0".into(),
                 phrase: "key `fraction` appears twice",
             }
         },

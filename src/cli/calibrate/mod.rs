@@ -3,7 +3,9 @@
 
 mod findings;
 mod hall_command;
+mod journal_mismatch;
 mod progress;
+mod settings;
 mod summary;
 
 use std::path::{Path, PathBuf};
@@ -12,24 +14,23 @@ use std::time::Instant;
 use clap::{Args, ValueEnum};
 use kalibre_core::calibrate::Report;
 use kalibre_core::external::CommandModelConfig;
-use kalibre_core::search::{Adam, DifferentialEvolution, Hybrid};
 use kalibre_core::{Model, Observe};
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
-use kalibre_dc::hall::{AlphaMode, Hall};
+use kalibre_dc::hall::Hall;
 use kalibre_dc::openfoam::OpenFoamModel;
 use kalibre_dc::snapshots::{self, HallSnapshot};
-use kalibre_dc::surrogate::{PenaltyReport, PenaltySettings};
+use kalibre_dc::surrogate::PenaltyReport;
 
 use super::calibrated_model::CalibratedModel;
 use super::diagnose::Likelihood;
 use super::openfoam_args::{of_err, OpenFoamArgs};
-use super::simulate::sim_config;
 use super::{io_err, with_threads, CliError, CliResult};
 use findings::{builtin_findings, openfoam_intakes};
 use hall_command::HallCommand;
 use progress::Progress;
-use summary::{print_summary, Intakes};
+use settings::{check_finer_grids, flag_error, settings};
+use summary::{print_summary, warn_unreached, Intakes};
 
 /// How alpha is calibrated (overrides `calibrate.alpha` in hall.json).
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -108,9 +109,16 @@ pub struct CalibrateArgs {
     /// Model runs at once (default: one per snapshot, up to the threads).
     #[arg(long = "parallel-runs")]
     parallel_runs: Option<usize>,
-    /// Surrogate training epochs per fit (the paper: 150).
+    /// Adam epochs per surrogate fit (the paper: 150). They train the graph's edges with
+    /// --trainable-adjacency; with the default fixed adjacency the fit's least-squares
+    /// start already minimises its loss, and Adam keeps it.
     #[arg(long, default_value_t = 150)]
     epochs: usize,
+    /// Train the surrogate's sensor-to-CRAC and sensor-to-server edges too, by Adam
+    /// (--epochs), instead of fixing them from the hall's geometry (docs/experiments.md,
+    /// Fig. 7 compares the two).
+    #[arg(long = "trainable-adjacency")]
+    trainable_adjacency: bool,
     /// Differential evolution: population (the paper: 10).
     #[arg(long, default_value_t = 10)]
     population: usize,
@@ -132,11 +140,12 @@ pub struct CalibrateArgs {
     #[arg(long = "rise-range", default_value = "5,20")]
     rise_range: String,
     /// Weight the surrogate's fit towards runs near the measurements: a run with `m` times
-    /// the best run's MAE weighs exp(-((m-1)/FOCUS)^2/2); 0 turns it off (every run weighs 1).
+    /// the best run's MAE weighs exp(-((m-1)/FOCUS)^2/2), FOCUS at least 0.01; 0 turns it
+    /// off (every run weighs 1).
     #[arg(long, default_value_t = 1.0)]
     focus: f64,
-    /// When the search proposes a point already run, move it by this much noise (unit box)
-    /// and go on; 0 stops the calibration there instead (converged).
+    /// When the search proposes a point already run, move it by this much noise (unit box,
+    /// at most 1) and go on; 0 stops the calibration there instead (converged).
     #[arg(long = "explore", default_value_t = 0.015)]
     explore: f64,
     /// Search the surrogate corrected to match the model at the best run so far
@@ -148,7 +157,8 @@ pub struct CalibrateArgs {
     #[arg(long = "linear-correction", default_value_t = true, action = clap::ArgAction::Set)]
     linear_correction: bool,
     /// Search only within this distance (unit box) of the best point, growing after a
-    /// step that improved the model and shrinking after one that did not; 0: whole box.
+    /// step that improved the model and shrinking after one that did not (0.001 to 1);
+    /// 0: whole box.
     #[arg(long = "trust-region", default_value_t = 0.1)]
     trust_region: f64,
     /// After the iterations, up to this many Levenberg-Marquardt steps on the model itself
@@ -201,125 +211,6 @@ pub struct CalibrateArgs {
     quiet: bool,
 }
 
-/// The command-line flag of a loop setting, for error messages.
-fn flag_of(setting: &str) -> &str {
-    match setting {
-        "max_iterations" => "iterations",
-        "target_score" => "target-mae",
-        "max_model_runs" => "max-runs",
-        "max_wall_s" => "max-wall-s",
-        "max_parallel_runs" => "parallel-runs",
-        "explore_on_repeat" => "explore",
-        "trust_region" => "trust-region",
-        "robust_nu" => "nu",
-        other => other,
-    }
-}
-
-/// Builds the hall calibration settings from the arguments.
-fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
-    let (lo, hi) = args
-        .rise_range
-        .split_once(',')
-        .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)))
-        .ok_or_else(|| {
-            CliError::Input(format!(
-                "--rise-range: expected LOW,HIGH in C (e.g. 5,15), got `{}`",
-                args.rise_range
-            ))
-        })?;
-    let penalty = PenaltySettings::default()
-        .with_range_c(lo, hi)
-        .with_weight(args.rise_weight)
-        .check()
-        .map_err(|e| CliError::Input(format!("--rise-range/--rise-weight: {e}")))?;
-    let de = DifferentialEvolution::builder()
-        .with_population(args.population)
-        .with_crossover(args.crossover)
-        .with_iterations(args.de_iterations)
-        .with_give_up_after(Some(kalibre_core::search::HYBRID_DE_GIVE_UP_AFTER))
-        .build()
-        .map_err(|e| CliError::Input(format!("--population/--crossover/--de-iterations: {e}")))?;
-    let adam = Adam::builder()
-        .with_steps(args.adam_steps)
-        .build()
-        .map_err(|e| CliError::Input(format!("--adam-steps: {e}")))?;
-    let core = kalibre_core::Settings {
-        seed: args.seed,
-        max_iterations: args.iterations,
-        target_score: args.target_mae,
-        max_model_runs: args.max_runs,
-        max_wall_s: args.max_wall_s,
-        max_parallel_runs: args.parallel_runs,
-        // 0 turns an option off; anything else is checked below with the loop's own rules.
-        focus: (args.focus != 0.0).then_some(args.focus),
-        explore_on_repeat: (args.explore != 0.0).then_some(args.explore),
-        trust_region: (args.trust_region != 0.0).then_some(args.trust_region),
-        output_correction: args.output_correction,
-        linear_correction: args.linear_correction && args.output_correction,
-        stall_step: HallCalibrationSettings::loop_defaults()
-            .stall_step
-            .filter(|_| args.linear_correction && args.output_correction),
-        polish_iterations: args.polish.unwrap_or(match args.model {
-            ModelArg::Builtin => HallCalibrationSettings::loop_defaults().polish_iterations,
-            ModelArg::Openfoam | ModelArg::Command => 0,
-        }),
-        robust_nu: args.likelihood.robust_nu(args.nu)?,
-        numerical_weighting: !args.no_grid_weighting,
-        ..HallCalibrationSettings::loop_defaults()
-    };
-    core.check().map_err(|e| match e {
-        kalibre_core::Error::InvalidSetting { name, reason } => {
-            CliError::Input(format!("--{}: {reason}", flag_of(&name)))
-        }
-        other => CliError::Input(other.to_string()),
-    })?;
-    let mut s = HallCalibrationSettings {
-        core,
-        alpha_mode: args.alpha.map(|a| match a {
-            AlphaArg::PerType => AlphaMode::PerType,
-            AlphaArg::PerServer => AlphaMode::PerServer,
-            AlphaArg::Fixed => AlphaMode::Fixed,
-        }),
-        sim: sim_config(args.grid_m)?,
-        penalty,
-        searcher: Hybrid::new(de, adam),
-        flow_balance_terms: !args.paper_surrogate,
-        local_recirculation: args
-            .local_recirculation
-            .then(kalibre_dc::surrogate::LocalRecirculationSettings::default),
-        server_influence: args
-            .influence_edges
-            .then_some(kalibre_dc::calibration::SERVER_INFLUENCE_CUT),
-        ..HallCalibrationSettings::default()
-    };
-    if !(1..=MAX_EPOCHS).contains(&args.epochs) {
-        return Err(CliError::Input(format!(
-            "--epochs: must be in 1..={MAX_EPOCHS}, got {}",
-            args.epochs
-        )));
-    }
-    s.surrogate = s.surrogate.with_epochs(args.epochs);
-    let grid_check = args
-        .grid_check
-        .clone()
-        .unwrap_or_else(|| std::mem::take(&mut s.grid_check));
-    if let Some(f) = grid_check
-        .iter()
-        .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
-    {
-        return Err(CliError::Input(format!(
-            "--grid-check: {f} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)"
-        )));
-    }
-    s.grid_check = if args.no_grid_check {
-        Vec::new()
-    } else {
-        grid_check
-    };
-    Ok(s)
-}
-
 /// Refuses model options that do not belong to the chosen model.
 fn check_model_flags(args: &CalibrateArgs) -> CliResult {
     args.openfoam
@@ -364,9 +255,19 @@ fn calibrate_with_model<'o>(
     observers: Vec<Box<dyn Observe + 'o>>,
 ) -> CliResult<(Report, PenaltyReport, String)> {
     let hall = calibrated_hall(hall, settings);
+    let refused = |e: kalibre_dc::Error| match e {
+        kalibre_dc::Error::OtherModelJournal { path, runs } => {
+            match model_record(args, &hall, settings, String::new()) {
+                Ok(current) => journal_mismatch::explain(Path::new(&path), runs, &current, &hall),
+                Err(e) => e,
+            }
+        }
+        e => flag_error(e),
+    };
     match args.model {
         ModelArg::Builtin => {
-            let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)?;
+            let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)
+                .map_err(refused)?;
             Ok((c.report, c.penalty_report, c.model.fingerprint()))
         }
         ModelArg::Openfoam => {
@@ -384,7 +285,8 @@ fn calibrate_with_model<'o>(
                 settings,
                 Some(journal),
                 observers,
-            )?;
+            )
+            .map_err(refused)?;
             Ok((c.report, c.penalty_report, model.fingerprint()))
         }
         ModelArg::Command => {
@@ -403,7 +305,8 @@ fn calibrate_with_model<'o>(
                 settings,
                 Some(journal),
                 observers,
-            )?;
+            )
+            .map_err(refused)?;
             Ok((c.report, c.penalty_report, model.fingerprint()))
         }
     }
@@ -460,37 +363,6 @@ fn model_record(
     })
 }
 
-/// The most surrogate training epochs per fit `--epochs` takes (the paper: 150): a bound
-/// on one fit's time, which `--max-wall-s` checks only between the loop's steps.
-const MAX_EPOCHS: usize = 100_000;
-
-/// Refuses a `--grid-check` factor whose grid is the model's own in this room (a check
-/// that would report no numerical uncertainty at all) or too fine to build, before the
-/// calibration rather than in its report.
-fn check_finer_grids(hall: &Hall, cell_m: f64, factors: &[f64]) -> CliResult {
-    use kalibre_dc::sim::{cells_beyond_cap, Grid, MAX_CELLS};
-    let size = hall.room.size_m;
-    for &f in factors {
-        let fine_m = cell_m * f;
-        let why = if let Some(cells) = cells_beyond_cap(size, fine_m) {
-            format!("{cells:.3e} cells, above the built-in simulator's {MAX_CELLS}")
-        } else if Grid::new(size, fine_m).n == Grid::new(size, cell_m).n {
-            "the model's own cells in this room, so it would check nothing".into()
-        } else {
-            continue;
-        };
-        return Err(CliError::Input(format!(
-            "--grid-check: {f} gives cells of {} m: {why}",
-            if fine_m < 1e-3 {
-                format!("{fine_m:.1e}")
-            } else {
-                format!("{:.4}", fine_m)
-            }
-        )));
-    }
-    Ok(())
-}
-
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     let settings = settings(&args)?;
@@ -500,7 +372,9 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
-    std::fs::create_dir_all(&args.out).map_err(|e| io_err(&args.out, e))?;
+    // Held until the report is written: a second calibration here would repeat the runs.
+    let _lock = super::out_dir::lock(&args.out, "calibrate")?;
+    super::out_dir::check_files(&args.out, &["runs.jsonl", "report.json", "report.html"])?;
     if args.model == ModelArg::Command {
         // Checked before the loop so a bad template fails at once, not per run.
         let path = args
@@ -540,6 +414,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     })??;
     let wall_s = started.elapsed().as_secs_f64();
     warn_skipped_journal_lines(&journal, &report);
+    warn_unreached(&journal, &report);
     let mut report = report;
     report.model = Some(model_record(&args, &hall, &settings, fingerprint)?.to_json());
     let report_path = args.out.join("report.json");

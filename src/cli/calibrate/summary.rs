@@ -228,3 +228,27 @@ fn intakes_line(i: &Intakes) -> Option<String> {
         hottest.intake_c, hottest.server, check.above_limit, check.servers, check.limit_c
     ))
 }
+
+/// A journal holding a better point than this calibration reached (it stopped sooner than
+/// the calibration that wrote the journal): said on stderr, since `report.json` now holds
+/// the worse answer.
+pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report) {
+    let Some(u) = &report.unreached else {
+        return;
+    };
+    let Some(best) = u.best.as_ref().filter(|b| b.score < report.best.score) else {
+        return;
+    };
+    eprintln!(
+        "kalibre: warning: {}: this calibration stopped ({:?}) before reaching {} journaled \
+         run(s); among them, line {} has MAE {:.3} C, better than its best, {:.3} C. A larger \
+         budget (--max-runs, --iterations, --max-wall-s) replays them without running the \
+         model again",
+        journal.display(),
+        report.stop_reason,
+        u.runs,
+        best.line,
+        best.mae_c,
+        report.best.mae_c
+    );
+}

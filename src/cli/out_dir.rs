@@ -1,0 +1,137 @@
+//! The `--out` directory of `calibrate`, `synth` and `demo`: checked before any work, and
+//! held by one command at a time.
+//!
+//! A calibration's expensive runs go to `runs.jsonl` in `--out`. Two calibrations in one
+//! directory at once would each run every point the other runs (the journal is read once,
+//! when a calibration starts), so the second is refused while the first holds the lock.
+//! The lock is the operating system's (`flock`): it ends with the process, even a killed
+//! one, so a crash never leaves the directory locked.
+
+use std::fs::{File, OpenOptions, TryLockError};
+use std::path::Path;
+
+use super::{io_err, CliError, CliResult};
+
+/// The lock file's name in `--out`.
+pub const LOCK_FILE: &str = ".kalibre.lock";
+
+/// Holds `--out` for one command until dropped (or the process ends).
+#[derive(Debug)]
+pub struct OutLock {
+    _file: File,
+}
+
+/// Refuses an `--out` that exists and is not a directory (a file, a dangling link),
+/// naming it, before any work is done.
+pub fn check_is_dir(out: &Path) -> CliResult {
+    let Ok(link) = std::fs::symlink_metadata(out) else {
+        return Ok(());
+    };
+    let why = match std::fs::metadata(out) {
+        Ok(m) if m.is_dir() => return Ok(()),
+        Ok(_) => "is a file, not a directory",
+        Err(_) if link.file_type().is_symlink() => "is a symbolic link to nothing",
+        Err(_) => "cannot be read",
+    };
+    Err(CliError::Input(format!(
+        "--out {}: {why}; give a directory (it is made if missing)",
+        out.display()
+    )))
+}
+
+/// Refuses any of `names` in `--out` that exists and is not a regular file (a directory,
+/// a FIFO that would block the journal's read, a device): found now, not after the
+/// calibration's runs.
+pub fn check_files(out: &Path, names: &[&str]) -> CliResult {
+    for name in names {
+        let path = out.join(name);
+        let Ok(meta) = std::fs::metadata(&path) else {
+            continue;
+        };
+        let kind = meta.file_type();
+        if kind.is_file() {
+            continue;
+        }
+        let what = if kind.is_dir() {
+            "a directory"
+        } else {
+            "not a regular file (a FIFO, socket or device)"
+        };
+        return Err(CliError::Input(format!(
+            "--out {}: {name} is {what}; kalibre writes a file there: move it or give another \
+             --out",
+            out.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Makes `out` (and its parents) and takes its lock, refusing when another command
+/// holds it.
+pub fn lock(out: &Path, command: &str) -> CliResult<OutLock> {
+    check_is_dir(out)?;
+    std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
+    let path = out.join(LOCK_FILE);
+    let file = OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| io_err(&path, e))?;
+    match file.try_lock() {
+        Ok(()) => Ok(OutLock { _file: file }),
+        Err(TryLockError::WouldBlock) => Err(CliError::Input(format!(
+            "--out {}: another kalibre command is working in this directory (it holds \
+             {LOCK_FILE}); wait for it to finish, or give {command} another --out",
+            out.display()
+        ))),
+        Err(TryLockError::Error(e)) => Err(io_err(&path, e)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("kalibre-out-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn a_second_lock_is_refused_until_the_first_is_dropped() {
+        let d = dir("lock");
+        let first = lock(&d, "calibrate").unwrap();
+        let err = lock(&d, "calibrate").unwrap_err().to_string();
+        assert!(err.contains("another kalibre command"), "{err}");
+        drop(first);
+        lock(&d, "calibrate").unwrap();
+    }
+
+    #[test]
+    fn an_out_that_is_a_file_or_holds_a_directory_is_named() {
+        let d = dir("kinds");
+        std::fs::create_dir_all(d.join("report.json")).unwrap();
+        let err = check_files(&d, &["runs.jsonl", "report.json"]).unwrap_err();
+        assert!(
+            err.to_string().contains("report.json is a directory"),
+            "{err}"
+        );
+        let file = d.join("plain");
+        std::fs::write(&file, "x").unwrap();
+        let err = check_is_dir(&file).unwrap_err();
+        assert_eq!(err.exit_code(), 2);
+        assert!(
+            err.to_string().contains("is a file, not a directory"),
+            "{err}"
+        );
+        #[cfg(unix)]
+        {
+            let dangling = d.join("dangling");
+            std::os::unix::fs::symlink(d.join("nowhere"), &dangling).unwrap();
+            let err = check_is_dir(&dangling).unwrap_err().to_string();
+            assert!(err.contains("symbolic link to nothing"), "{err}");
+        }
+    }
+}

@@ -1,0 +1,94 @@
+//! Resuming from `--out`'s run journal. A resumed calibration with a smaller budget than
+//! the one that wrote the journal stops before some journaled runs: its `report.json`
+//! says which it left and the best point among them, and stderr warns when that point
+//! beats the new best (it used to replace a better answer without a word: 0.221 C by
+//! 1.115 C in the fuzz case). A journal of another model is refused naming what differs.
+
+mod cli_support;
+use cli_support::*;
+
+use std::path::Path;
+
+/// Calibrates of-dev-clean into `out` with `extra` flags; `report.json` and stderr.
+fn calibrate(out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
+    let o = calibrate_output(out, extra);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    (serde_json::from_str(&text).unwrap(), stderr(&o))
+}
+
+fn calibrate_output(out: &Path, extra: &[&str]) -> std::process::Output {
+    run(kalibre()
+        .args(["calibrate", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
+        .args([
+            "--polish",
+            "0",
+            "--no-grid-check",
+            "--quiet",
+            "--threads",
+            "1",
+        ])
+        .args(extra)
+        .arg("--out")
+        .arg(out))
+}
+
+#[test]
+fn a_smaller_budget_names_the_better_runs_it_did_not_reach() {
+    let out = tmp("resume-budget");
+    let (long, _) = calibrate(&out, &["--iterations", "3"]);
+    let long_best = long["best"]["mae_c"].as_f64().unwrap();
+    let long_runs = long["runs"]["total"].as_u64().unwrap();
+    assert!(long.get("unreached").is_none(), "{}", long["unreached"]);
+
+    // The same flags again: every run is replayed, none left.
+    let (again, warned) = calibrate(&out, &["--iterations", "3"]);
+    assert_eq!(again["runs"]["cached"].as_u64(), Some(long_runs));
+    assert!(again.get("unreached").is_none(), "{}", again["unreached"]);
+    assert!(!warned.contains("not reach"), "{warned}");
+
+    // Only the initial design (4 points x 3 snapshots): the loop's runs are left.
+    let (short, warned) = calibrate(&out, &["--iterations", "3", "--max-runs", "12"]);
+    assert_eq!(short["runs"]["cached"].as_u64(), Some(12));
+    assert_eq!(short["stop_reason"], "model_run_budget");
+    let unreached = &short["unreached"];
+    assert_eq!(
+        unreached["runs"].as_u64(),
+        Some(long_runs - 12),
+        "{unreached}"
+    );
+    let short_best = short["best"]["mae_c"].as_f64().unwrap();
+    assert!(
+        long_best < short_best,
+        "the loop found nothing better than its design: {long_best} vs {short_best}"
+    );
+    // The journal's best is among the runs left, scored as the long run scored it.
+    assert_eq!(unreached["best"]["mae_c"].as_f64(), Some(long_best));
+    let named = format!("{long_best:.3} C, better than its best, {short_best:.3} C");
+    assert!(warned.contains(&named), "{warned}");
+}
+
+#[test]
+fn a_journal_of_another_model_is_refused_naming_what_differs() {
+    let out = tmp("journal-other");
+    calibrate(&out, &["--iterations", "1"]);
+    for (flags, why) in [
+        (
+            &["--grid-m", "0.3"][..],
+            "its runs are --grid-m 0.2, this calibration's 0.3",
+        ),
+        (
+            &["--alpha", "per-server"][..],
+            "its runs are --alpha per-type, this calibration's per-server",
+        ),
+    ] {
+        let o = calibrate_output(&out, &[&["--iterations", "1"], flags].concat());
+        assert_input_error(&o, "holds 15 runs of another model: ");
+        assert_input_error(&o, why);
+    }
+    let o = calibrate_output(&out, &["--iterations", "1", "--alpha", "per-server"]);
+    assert_input_error(&o, "this calibration has parameters they lack: alpha/");
+}
