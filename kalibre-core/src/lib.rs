@@ -103,6 +103,7 @@ mod data;
 pub mod diagnose;
 mod error;
 pub mod external;
+mod fsio;
 mod model;
 pub mod observe;
 mod param;
@@ -115,6 +116,7 @@ pub use calibrate::{Calibrator, Report, Settings, StopReason};
 
 pub use data::{Observations, OutputInfo, Snapshot};
 pub use error::{Error, Result};
+pub use fsio::write_atomic;
 pub use model::{check_outputs, scenario_digest, Model, ModelError, Outputs};
 pub use observe::{Event, Observe};
 pub use param::{Param, ParamSpace, Scale};

@@ -421,7 +421,7 @@ pub fn run_story(
         write_json(dir, "story.json", &report)?;
         let html = crate::report::story_html(&current, snaps, &report);
         let path = dir.join("report.html");
-        std::fs::write(&path, html).map_err(|e| Error::io(&path, e))?;
+        kalibre_core::write_atomic(&path, html).map_err(|e| Error::io(&path, e))?;
     }
     Ok(report)
 }
@@ -575,5 +575,5 @@ fn write_json<T: Serialize>(dir: &Path, name: &str, value: &T) -> Result<()> {
     let path = dir.join(name);
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| Error::Mismatch(format!("{}: cannot serialise: {e}", path.display())))?;
-    std::fs::write(&path, text + "\n").map_err(|e| Error::io(&path, e))
+    kalibre_core::write_atomic(&path, text + "\n").map_err(|e| Error::io(&path, e))
 }

@@ -98,6 +98,19 @@ fn bad_entries_get_errors_naming_the_field() {
             "field `fraction`",
         ),
         (json!({"kind": "containment_leakage"}), "no containment"),
+        // A typo is named before the required field it leaves missing.
+        (
+            json!({"kind": "bypass", "foo": 1}),
+            "field `foo`: unknown field",
+        ),
+        (
+            json!({"kind": "rack_recirculation", "rak": "A01"}),
+            "field `rak`: unknown field",
+        ),
+        (
+            json!({"kind": "crac_supply_offset", "offset_c_bound": [0, 1]}),
+            "field `offset_c_bound`: unknown field (known: crac, offset_c, offset_c_bounds)",
+        ),
     ];
     for (v, want) in cases {
         let msg = effect_error(v.clone(), &hall);

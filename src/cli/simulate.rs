@@ -394,7 +394,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         predicted.push(solution.sensor_c().to_vec());
     }
     let csv = snapshots::write_predictions(&hall, &labels, &predicted);
-    std::fs::write(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
+    kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
     if let Some(path) = &args.servers {
         std::fs::write(path, kalibre_dc::sim::write_server_air(&air))
             .map_err(|e| io_err(path, e))?;

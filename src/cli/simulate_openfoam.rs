@@ -115,7 +115,7 @@ pub(super) fn run(
         predicted.push(out.values);
     }
     let csv = snapshots::write_predictions(&hall, &labels, &predicted);
-    std::fs::write(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
+    kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
     if let Some(path) = &args.servers {
         std::fs::write(path, write_server_air(&air)).map_err(|e| io_err(path, e))?;
     }

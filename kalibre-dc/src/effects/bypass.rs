@@ -92,7 +92,10 @@ impl EffectFactory for BypassFactory {
     }
 
     fn build(&self, s: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
-        let mut f = Fields::new(s);
+        let mut f = Fields::new(s).expecting(
+            &["position_m", "size_m", "behind_rack", "depth_m"],
+            &["fraction"],
+        )?;
         let pos = f.opt_array::<2>("position_m")?;
         let size = f.opt_array::<2>("size_m")?;
         let behind = f.opt_str("behind_rack")?;

@@ -25,6 +25,25 @@ impl<'a> Fields<'a> {
         }
     }
 
+    /// Refuses, before any field is read, a field that is none of `fields` nor a
+    /// parameter of `params` (its value or its `_bounds`): a typo is named first, not a
+    /// required field that the reading then misses.
+    pub fn expecting(self, fields: &[&str], params: &[&str]) -> Result<Self> {
+        let known: Vec<String> = (fields.iter().map(|f| f.to_string()))
+            .chain(
+                params
+                    .iter()
+                    .flat_map(|p| [p.to_string(), format!("{p}_bounds")]),
+            )
+            .collect();
+        let mut unknown: Vec<&String> = self.map.keys().filter(|k| !known.contains(k)).collect();
+        unknown.sort();
+        match unknown.first() {
+            None => Ok(self),
+            Some(k) => Err(self.error(k, format!("unknown field (known: {})", known.join(", ")))),
+        }
+    }
+
     /// An error about `field`.
     pub fn error(&self, field: &str, message: impl std::fmt::Display) -> Error {
         Error::Effect {

@@ -83,7 +83,7 @@ impl EffectFactory for ContainmentLeakageFactory {
     }
 
     fn build(&self, s: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
-        let mut f = Fields::new(s);
+        let mut f = Fields::new(s).expecting(&["containment", "sides"], &["open_fraction"])?;
         if hall.containment.is_empty() {
             return Err(f.error("kind", "the hall has no containment"));
         }

@@ -73,7 +73,7 @@ impl EffectFactory for CracSupplyOffsetFactory {
     }
 
     fn build(&self, s: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
-        let mut f = Fields::new(s);
+        let mut f = Fields::new(s).expecting(&["crac"], &["offset_c"])?;
         let crac = match f.opt_str("crac")? {
             None => None,
             Some(id) => match hall.cracs.iter().position(|c| c.id == id) {

@@ -73,7 +73,7 @@ impl EffectFactory for RackRecirculationFactory {
     }
 
     fn build(&self, s: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
-        let mut f = Fields::new(s);
+        let mut f = Fields::new(s).expecting(&["rack", "z_m"], &["fraction"])?;
         let id = f.str("rack")?;
         let rack = hall
             .racks

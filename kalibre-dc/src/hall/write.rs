@@ -18,6 +18,6 @@ impl Hall {
         self.validate(&path.display().to_string())?;
         let mut text = self.to_json_pretty();
         text.push('\n');
-        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+        kalibre_core::write_atomic(path, text).map_err(|e| Error::io(path, e))
     }
 }

@@ -386,7 +386,7 @@ pub fn write_dir(dir: &Path, synth: &Synthesised) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let write = |name: &str, text: String| {
         let path = dir.join(name);
-        std::fs::write(&path, text).map_err(|e| Error::io(&path, e))
+        kalibre_core::write_atomic(&path, text).map_err(|e| Error::io(&path, e))
     };
     synth.hall.save(&dir.join("hall.json"))?;
     write(

@@ -420,7 +420,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let report_path = args.out.join("report.json");
     let json = serde_json::to_string_pretty(&report)
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;
-    std::fs::write(&report_path, json).map_err(|e| io_err(&report_path, e))?;
+    kalibre_core::write_atomic(&report_path, json).map_err(|e| io_err(&report_path, e))?;
     let html_path = args.out.join("report.html");
     let (intakes, warming) = match args.model {
         ModelArg::Builtin => {
@@ -447,7 +447,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         checks,
         under_read: kalibre_dc::sim::coldest_under_read(&hall, &report.residuals),
     });
-    std::fs::write(&html_path, html).map_err(|e| io_err(&html_path, e))?;
+    kalibre_core::write_atomic(&html_path, html).map_err(|e| io_err(&html_path, e))?;
     print_summary(&report, wall_s, &penalty_report, intakes.as_ref());
     println!(
         "wrote {}, {}, {}",
