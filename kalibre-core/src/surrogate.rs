@@ -34,6 +34,10 @@ pub struct FitSummary {
     pub train_mse: f64,
     /// Epochs (or iterations) run.
     pub epochs: usize,
+    /// The deadline ([`Surrogate::fit_until`]) ended training early: the surrogate holds
+    /// the best weights found by then, and `epochs` counts the epochs that ran.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub timed_out: bool,
 }
 
 /// A cheap, differentiable stand-in for the model.
@@ -47,6 +51,21 @@ pub trait Surrogate {
 
     /// Trains on all samples. Deterministic for a given `seed`.
     fn fit(&mut self, data: TrainingSet<'_, Self::Scenario>, seed: u64) -> Result<FitSummary>;
+
+    /// [`Self::fit`] that stops training at `deadline` (checked once per epoch) with the
+    /// best weights so far and [`FitSummary::timed_out`] set; a wall-clock budget
+    /// (`Settings::max_wall_s`) reaches inside the fit this way. Without a deadline it
+    /// is `fit`, bit for bit. The default ignores the deadline: a surrogate whose
+    /// training can run long should override it.
+    fn fit_until(
+        &mut self,
+        data: TrainingSet<'_, Self::Scenario>,
+        seed: u64,
+        deadline: Option<std::time::Instant>,
+    ) -> Result<FitSummary> {
+        let _ = deadline;
+        self.fit(data, seed)
+    }
 
     /// Predicted outputs at a scenario and physical parameters.
     fn predict(&self, scenario: &Self::Scenario, params: &[f64]) -> Vec<f64>;

@@ -282,6 +282,26 @@ fn stops_on_the_wall_clock_budget_and_on_convergence() {
     assert!(r.history.is_empty());
     assert_eq!(model.calls(), 8, "the design always runs");
 
+    // A search of a million Adam steps (0.8 s here, 15 s over the 20 iterations) is cut
+    // at the budget, inside the first iteration's search, and the model does not run at
+    // its proposal: checked between steps only, that iteration would finish and run.
+    let model = Poly::new();
+    let adam = kalibre_core::Adam::builder()
+        .with_steps(1_000_000)
+        .build()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_searcher(adam)
+        .with_max_wall_s(0.5)
+        .run()
+        .unwrap();
+    let took = started.elapsed().as_secs_f64();
+    assert_eq!(r.stop_reason, StopReason::WallClockBudget);
+    assert!(took < 30.0, "{took:.1} s against a 0.5 s budget");
+    assert!(r.history.is_empty(), "{} iterations ran", r.history.len());
+    assert_eq!(model.calls(), 8);
+
     // On an exact surrogate the search lands on the same point twice: converged.
     let model = Poly::new();
     let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)

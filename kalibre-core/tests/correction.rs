@@ -43,6 +43,7 @@ impl Surrogate for Plane {
             }
         }
         Ok(FitSummary {
+            timed_out: false,
             train_mse: 0.0,
             epochs: 1,
         })

@@ -68,6 +68,7 @@ impl Searcher for StuckOnFailure {
         _seed: u64,
     ) -> kalibre_core::Result<SearchOutcome> {
         Ok(SearchOutcome {
+            timed_out: false,
             best_unit: vec![1.0, 1.0],
             best_cost: 0.0,
             evaluations: 0,

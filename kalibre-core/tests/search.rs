@@ -489,3 +489,46 @@ fn bad_start_points_are_rejected() {
         ));
     }
 }
+
+// ---------------------------------------------------------------- deadlines
+
+/// A deadline already past stops each searcher after its first generation or step, with a
+/// point in the box and `timed_out` set; without one the search is `search`, bit for bit.
+#[test]
+fn a_passed_deadline_stops_every_searcher_with_its_best_so_far() {
+    let f = Sphere {
+        centre: vec![0.2, 0.7, 0.4],
+    };
+    let start = [0.5; 3];
+    let long_de = DifferentialEvolution::builder()
+        .with_population(40)
+        .with_iterations(100_000)
+        .build()
+        .unwrap();
+    let long_adam = Adam::builder().with_steps(1_000_000).build().unwrap();
+    let searchers: [(&str, Box<dyn Searcher>); 3] = [
+        ("de", Box::new(long_de.clone())),
+        ("adam", Box::new(long_adam.clone())),
+        ("hybrid", Box::new(Hybrid::new(long_de, long_adam))),
+    ];
+    let past = std::time::Instant::now();
+    for (name, s) in &searchers {
+        let o = s.search_until(&f, &start, 7, Some(past)).unwrap();
+        assert!(o.timed_out, "{name}");
+        assert!(
+            o.trace.len() <= 2,
+            "{name}: {} iterations ran",
+            o.trace.len()
+        );
+        assert!(
+            o.best_unit.iter().all(|u| (0.0..=1.0).contains(u)),
+            "{name}"
+        );
+        assert!(o.best_cost <= f.cost(&start), "{name}");
+    }
+    let de = de_small();
+    let plain = de.search(&f, &start, 7).unwrap();
+    let unbounded = de.search_until(&f, &start, 7, None).unwrap();
+    assert!(!unbounded.timed_out);
+    assert_eq!(bits(&plain), bits(&unbounded));
+}

@@ -321,6 +321,7 @@ impl Mlp {
         &mut self,
         data: TrainingSet<'_, OperatingState>,
         seed: u64,
+        deadline: Option<std::time::Instant>,
     ) -> Result<FitSummary> {
         let fail = |m: String| crate::Error::Core(kalibre_core::Error::Fit(m));
         let n = data.samples.len();
@@ -379,7 +380,7 @@ impl Mlp {
         let net = Network::new(&sizes, st.activation, &mut rng);
         // On a pool thread, the products' and Adam's rayon splits are cheap pushes to the
         // local queue instead of a hand-over from an outside thread per call.
-        let best = rayon::scope(|_| train(net, &x, &y, &w, st, &mut rng));
+        let best = rayon::scope(|_| train(net, &x, &y, &w, st, &mut rng, deadline));
         if !best.0.is_finite() {
             return Err(fail(format!("training loss is not finite ({})", best.0)));
         }
@@ -395,7 +396,8 @@ impl Mlp {
         self.fitted = Some(Fitted { net, x: xs, y: ys });
         Ok(FitSummary {
             train_mse: se / (n * self.n_sensors) as f64,
-            epochs: st.epochs,
+            epochs: best.2,
+            timed_out: best.2 < st.epochs,
         })
     }
 }
@@ -409,11 +411,15 @@ fn train(
     w: &[f64],
     st: &MlpSettings,
     rng: &mut Xoshiro256PlusPlus,
-) -> (f64, Network) {
+    deadline: Option<std::time::Instant>,
+) -> (f64, Network, usize) {
     let mut adam = AdamState::new(&net);
     let mut order: Vec<usize> = (0..x.nrows()).collect();
     let mut best = (epoch_loss(&net, x, y, w, &order), net.clone());
     for epoch in 0..st.epochs {
+        if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+            return (best.0, best.1, epoch);
+        }
         let lr = st.learning_rate * st.decay.powf((epoch / st.decay_every) as f64);
         order.shuffle(rng);
         for batch in order.chunks(st.batch_size) {
@@ -425,7 +431,7 @@ fn train(
             best = (loss, net.clone());
         }
     }
-    best
+    (best.0, best.1, st.epochs)
 }
 
 fn standardise(a: &mut Array2<f64>, s: &Scaler) {
@@ -504,7 +510,16 @@ impl Surrogate for Mlp {
         data: TrainingSet<'_, OperatingState>,
         seed: u64,
     ) -> kalibre_core::Result<FitSummary> {
-        self.fit_checked(data, seed).map_err(|e| match e {
+        self.fit_until(data, seed, None)
+    }
+
+    fn fit_until(
+        &mut self,
+        data: TrainingSet<'_, OperatingState>,
+        seed: u64,
+        deadline: Option<std::time::Instant>,
+    ) -> kalibre_core::Result<FitSummary> {
+        self.fit_checked(data, seed, deadline).map_err(|e| match e {
             crate::Error::Core(c) => c,
             other => kalibre_core::Error::Fit(other.to_string()),
         })

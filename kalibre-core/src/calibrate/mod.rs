@@ -236,6 +236,11 @@ where
             obs.snapshots().iter().map(|s| s.scenario.clone()).collect();
         let mut history = Vec::new();
         let mut radius = st.trust_region;
+        // The wall budget reaches inside the fits and searches too (none when too far off
+        // to represent).
+        let deadline = (st.max_wall_s)
+            .and_then(|w| std::time::Duration::try_from_secs_f64(w).ok())
+            .and_then(|w| t_start.checked_add(w));
         let mut iteration = 0;
         let stop = loop {
             let best_score = state.best.as_ref().map(|b| b.score);
@@ -279,12 +284,13 @@ where
                 None => samples,
             };
             let t = Instant::now();
-            let fit = self.surrogate.fit(
+            let fit = self.surrogate.fit_until(
                 TrainingSet {
                     scenarios: &scenarios,
                     samples,
                 },
                 derive_seed(st.seed, iteration, Stream::Fit),
+                deadline,
             )?;
             let training_samples = samples.len();
             let fit_s = t.elapsed().as_secs_f64();
@@ -294,6 +300,10 @@ where
                 summary: &fit,
                 wall_s: fit_s,
             });
+            // The budget is spent: a model run at a proposal would only overrun it more.
+            if fit.timed_out {
+                break StopReason::WallClockBudget;
+            }
 
             // Step 2: search from the best point so far.
             let t = Instant::now();
@@ -316,28 +326,15 @@ where
             if let Some(reg) = self.regularizer {
                 objective = objective.with_regularizer(reg, st.regularizer_weight);
             }
-            let region = match (radius, &state.best) {
-                (Some(r), Some(b)) => Some(trust::SubBox::around(&objective, &b.unit, r)),
-                _ => None,
-            };
-            let mut outcome = match &region {
-                Some(sub) => {
-                    let mut o = self.searcher.search(
-                        sub,
-                        &sub.to_inner(&start),
-                        derive_seed(st.seed, iteration, Stream::Search),
-                    )?;
-                    if o.best_unit.len() == space.dim() {
-                        o.best_unit = sub.to_outer(&o.best_unit);
-                    }
-                    o
-                }
-                None => self.searcher.search(
-                    &objective,
-                    &start,
-                    derive_seed(st.seed, iteration, Stream::Search),
-                )?,
-            };
+            let centre = state.best.as_ref().map(|b| b.unit.as_slice());
+            let mut outcome = trust::search_within(
+                self.searcher.as_ref(),
+                &objective,
+                &start,
+                centre.zip(radius),
+                derive_seed(st.seed, iteration, Stream::Search),
+                deadline,
+            )?;
             outcome.best_unit.iter_mut().for_each(|u| {
                 if u.is_finite() {
                     *u = u.clamp(0.0, 1.0)
@@ -354,6 +351,9 @@ where
                 outcome: &outcome,
                 wall_s: search_s,
             });
+            if outcome.timed_out {
+                break StopReason::WallClockBudget;
+            }
             if outcome.best_unit.len() != space.dim()
                 || outcome.best_unit.iter().any(|u| !u.is_finite())
             {

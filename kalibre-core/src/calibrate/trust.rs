@@ -2,7 +2,31 @@
 //! best point, which grows after a step that improved the model and shrinks after one
 //! that did not (trust-region model management).
 
-use crate::Objective;
+use std::time::Instant;
+
+use crate::{Objective, Result, SearchOutcome, Searcher};
+
+/// Searches `objective` from `start` (unit box) until `deadline`: within the box of
+/// half-width `radius` around `centre` when `region` gives them, the whole box otherwise;
+/// the outcome's point is in whole-box coordinates either way.
+pub(crate) fn search_within(
+    searcher: &dyn Searcher,
+    objective: &dyn Objective,
+    start: &[f64],
+    region: Option<(&[f64], f64)>,
+    seed: u64,
+    deadline: Option<Instant>,
+) -> Result<SearchOutcome> {
+    let Some((centre, radius)) = region else {
+        return searcher.search_until(objective, start, seed, deadline);
+    };
+    let sub = SubBox::around(objective, centre, radius);
+    let mut o = searcher.search_until(&sub, &sub.to_inner(start), seed, deadline)?;
+    if o.best_unit.len() == start.len() {
+        o.best_unit = sub.to_outer(&o.best_unit);
+    }
+    Ok(o)
+}
 
 /// The objective restricted to `[lo, hi]`, seen by the searcher as the unit box.
 pub(crate) struct SubBox<'o> {

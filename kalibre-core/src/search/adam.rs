@@ -7,6 +7,8 @@
 use argmin::core::{Problem, Solver, State, TerminationReason, TerminationStatus, KV};
 use ndarray::Array1;
 
+use std::time::Instant;
+
 use super::kernels::{adam_update, norm_and_finite, AdamStep};
 use super::problem::{
     check_start, finite_or_inf, require, run_from_start, BoxState, UnitBoxProblem,
@@ -179,23 +181,26 @@ impl Adam {
         }
     }
 
-    /// Runs Adam from `start`, numbering trace points from `trace_offset`.
+    /// Runs Adam from `start` until its steps are done or `deadline`, numbering trace
+    /// points from `trace_offset`.
     pub(crate) fn run(
         &self,
         objective: &dyn Objective,
         start: &[f64],
         trace_offset: usize,
+        deadline: Option<Instant>,
     ) -> Result<SearchOutcome> {
         check_start(objective, start)?;
         let mut solver = self.solver();
         solver.phase_offset = trace_offset;
-        let (best_unit, best_cost, evaluations, solver) =
-            run_from_start(objective, solver, start, self.steps as u64)?;
+        let (best_unit, best_cost, evaluations, solver, timed_out) =
+            run_from_start(objective, solver, start, self.steps as u64, deadline)?;
         Ok(SearchOutcome {
             best_unit,
             best_cost,
             evaluations,
             trace: solver.trace,
+            timed_out,
         })
     }
 }
@@ -208,7 +213,17 @@ impl Searcher for Adam {
         start: &[f64],
         _seed: u64,
     ) -> Result<SearchOutcome> {
-        self.run(objective, start, 0)
+        self.run(objective, start, 0, None)
+    }
+
+    fn search_until(
+        &self,
+        objective: &dyn Objective,
+        start: &[f64],
+        _seed: u64,
+        deadline: Option<Instant>,
+    ) -> Result<SearchOutcome> {
+        self.run(objective, start, 0, deadline)
     }
 }
 

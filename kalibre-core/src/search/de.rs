@@ -17,7 +17,8 @@ use rayon::prelude::*;
 
 use super::kernels::{bounce, crossover, fill_draws, Mutation};
 use super::problem::{
-    check_start, evaluations, from_argmin, require, BoxState, UnitBoxProblem, COST_COUNT,
+    check_start, evaluations, from_argmin, require, timed_out, with_deadline, BoxState,
+    UnitBoxProblem, COST_COUNT,
 };
 use super::{Objective, SearchOutcome, Searcher, TracePoint};
 use crate::Result;
@@ -209,17 +210,29 @@ impl DifferentialEvolution {
 
 impl Searcher for DifferentialEvolution {
     fn search(&self, objective: &dyn Objective, start: &[f64], seed: u64) -> Result<SearchOutcome> {
+        self.search_until(objective, start, seed, None)
+    }
+
+    fn search_until(
+        &self,
+        objective: &dyn Objective,
+        start: &[f64],
+        seed: u64,
+        deadline: Option<Instant>,
+    ) -> Result<SearchOutcome> {
         check_start(objective, start)?;
         let iterations = self.iterations as u64;
-        let result = Executor::new(UnitBoxProblem::new(objective), self.solver(seed))
+        let executor = Executor::new(UnitBoxProblem::new(objective), self.solver(seed))
             .configure(|state| {
                 state
                     .param(Array1::from(start.to_vec()))
                     .max_iters(iterations)
             })
-            .ctrlc(false)
+            .ctrlc(false);
+        let result = with_deadline(executor, deadline)
             .run()
             .map_err(from_argmin)?;
+        let timed_out = timed_out(&result.state);
         let solver = result.solver;
         let (best_unit, best_cost) = solver.best();
         Ok(SearchOutcome {
@@ -227,6 +240,7 @@ impl Searcher for DifferentialEvolution {
             best_cost,
             evaluations: evaluations(&result.problem),
             trace: solver.trace,
+            timed_out,
         })
     }
 }

@@ -1,5 +1,7 @@
 //! The paper's search: differential evolution, then Adam from its best point.
 
+use std::time::Instant;
+
 use super::{Adam, DifferentialEvolution, Objective, ProjectedGradient, SearchOutcome, Searcher};
 use crate::Result;
 
@@ -102,8 +104,24 @@ impl Hybrid {
 
 impl Searcher for Hybrid {
     fn search(&self, objective: &dyn Objective, start: &[f64], seed: u64) -> Result<SearchOutcome> {
-        let de = self.de.search(objective, start, seed)?;
-        let adam = self.adam.run(objective, &de.best_unit, de.trace.len())?;
+        self.search_until(objective, start, seed, None)
+    }
+
+    fn search_until(
+        &self,
+        objective: &dyn Objective,
+        start: &[f64],
+        seed: u64,
+        deadline: Option<Instant>,
+    ) -> Result<SearchOutcome> {
+        let de = self.de.search_until(objective, start, seed, deadline)?;
+        if de.timed_out {
+            return Ok(de);
+        }
+        let adam = self
+            .adam
+            .run(objective, &de.best_unit, de.trace.len(), deadline)?;
+        let mut timed_out = adam.timed_out;
         let mut trace = de.trace;
         trace.extend(adam.trace);
         // Adam starts at DE's best, so it can only match or improve it; `<` keeps DE's
@@ -114,23 +132,28 @@ impl Searcher for Hybrid {
             (de.best_unit, de.best_cost)
         };
         let mut evaluations = de.evaluations + adam.evaluations;
-        let (best_unit, best_cost) = if self.local.steps() > 0 && best_cost.is_finite() {
-            let local = self.local.run(objective, &best_unit, trace.len())?;
-            trace.extend(local.trace);
-            evaluations += local.evaluations;
-            if local.best_cost < best_cost {
-                (local.best_unit, local.best_cost)
+        let (best_unit, best_cost) =
+            if self.local.steps() > 0 && best_cost.is_finite() && !timed_out {
+                let local = self
+                    .local
+                    .run(objective, &best_unit, trace.len(), deadline)?;
+                timed_out = local.timed_out;
+                trace.extend(local.trace);
+                evaluations += local.evaluations;
+                if local.best_cost < best_cost {
+                    (local.best_unit, local.best_cost)
+                } else {
+                    (best_unit, best_cost)
+                }
             } else {
                 (best_unit, best_cost)
-            }
-        } else {
-            (best_unit, best_cost)
-        };
+            };
         Ok(SearchOutcome {
             best_unit,
             best_cost,
             evaluations,
             trace,
+            timed_out,
         })
     }
 }

@@ -66,10 +66,30 @@ pub struct SearchOutcome {
     pub evaluations: usize,
     /// Per-iteration trace.
     pub trace: Vec<TracePoint>,
+    /// The deadline ([`Searcher::search_until`]) ended the search before its own stop
+    /// rule: `best_unit` is the best point found by then.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub timed_out: bool,
 }
 
 /// Minimises an objective in the unit box, starting from (or seeded with) `start`.
 pub trait Searcher: Sync {
     /// Runs the search. Deterministic for a given `seed`, at any thread count.
     fn search(&self, objective: &dyn Objective, start: &[f64], seed: u64) -> Result<SearchOutcome>;
+
+    /// [`Self::search`] that stops at `deadline`, checked once per generation or step,
+    /// with the best point so far and [`SearchOutcome::timed_out`] set; a wall-clock
+    /// budget (`Settings::max_wall_s`) reaches inside the search this way. Without a
+    /// deadline it is `search`, bit for bit. The default ignores the deadline: a
+    /// searcher that can run long should override it.
+    fn search_until(
+        &self,
+        objective: &dyn Objective,
+        start: &[f64],
+        seed: u64,
+        deadline: Option<std::time::Instant>,
+    ) -> Result<SearchOutcome> {
+        let _ = deadline;
+        self.search(objective, start, seed)
+    }
 }

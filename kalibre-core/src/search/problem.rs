@@ -1,6 +1,8 @@
 //! An [`Objective`] seen as an argmin problem, and what the searchers share at the
 //! argmin boundary (state type, start-point checks, error conversion, NaN handling).
 
+use std::time::Instant;
+
 use argmin::core::{CostFunction, Gradient, IterState, State};
 use ndarray::Array1;
 
@@ -105,28 +107,35 @@ pub(crate) fn check_start(objective: &dyn Objective, start: &[f64]) -> Result<()
     Ok(())
 }
 
-/// Converts argmin's `anyhow`-style error at the boundary.
+/// What [`run_from_start`] returns: the best point, its cost, the evaluations, the solver
+/// (whose trace the caller keeps) and whether the deadline ended the run.
+pub(crate) type RunOutcome<S> = (Vec<f64>, f64, usize, S, bool);
+
 /// Runs a unit-box `solver` from `start` for at most `max_iters` iterations through argmin's
-/// executor: the best point (the start when none was recorded), its cost, the evaluations
-/// and the solver (whose trace the caller keeps).
+/// executor, and past `deadline` no further than the iteration under way: the best point
+/// (the start when none was recorded), its cost, the evaluations, the solver and whether
+/// the deadline stopped it.
 pub(crate) fn run_from_start<'a, S>(
     objective: &'a dyn Objective,
     solver: S,
     start: &[f64],
     max_iters: u64,
-) -> Result<(Vec<f64>, f64, usize, S)>
+    deadline: Option<Instant>,
+) -> Result<RunOutcome<S>>
 where
     S: argmin::core::Solver<UnitBoxProblem<'a>, BoxState>,
 {
-    let result = argmin::core::Executor::new(UnitBoxProblem::new(objective), solver)
+    let executor = argmin::core::Executor::new(UnitBoxProblem::new(objective), solver)
         .configure(|state| {
             state
                 .param(Array1::from(start.to_vec()))
                 .max_iters(max_iters)
         })
-        .ctrlc(false)
+        .ctrlc(false);
+    let result = with_deadline(executor, deadline)
         .run()
         .map_err(from_argmin)?;
+    let timed_out = timed_out(&result.state);
     let best_cost = result.state.get_best_cost();
     let best_unit = match result.state.get_best_param() {
         Some(p) => p.to_vec(),
@@ -137,7 +146,28 @@ where
         best_cost,
         evaluations(&result.problem),
         result.solver,
+        timed_out,
     ))
+}
+
+/// The executor with argmin's timeout at `deadline` (checked after each iteration; a
+/// deadline already past ends the run after its first).
+pub(crate) fn with_deadline<O, S: argmin::core::Solver<O, I>, I: State>(
+    executor: argmin::core::Executor<O, S, I>,
+    deadline: Option<Instant>,
+) -> argmin::core::Executor<O, S, I> {
+    match deadline {
+        Some(d) => executor.timeout(d.saturating_duration_since(Instant::now())),
+        None => executor,
+    }
+}
+
+/// Whether argmin stopped a run at its timeout.
+pub(crate) fn timed_out<I: State>(state: &I) -> bool {
+    matches!(
+        state.get_termination_reason(),
+        Some(argmin::core::TerminationReason::Timeout)
+    )
 }
 
 pub(crate) fn from_argmin(e: argmin::core::Error) -> Error {

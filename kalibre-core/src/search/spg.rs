@@ -10,6 +10,8 @@
 use argmin::core::{Problem, Solver, State, TerminationReason, TerminationStatus, KV};
 use ndarray::Array1;
 
+use std::time::Instant;
+
 use super::kernels::norm_and_finite;
 use super::problem::{
     check_start, finite_or_inf, require, run_from_start, BoxState, UnitBoxProblem, COST_COUNT,
@@ -80,12 +82,14 @@ impl ProjectedGradient {
         self.steps
     }
 
-    /// Runs from `start`; trace iterations are numbered from `trace_offset`.
+    /// Runs from `start` until done or `deadline`; trace iterations are numbered from
+    /// `trace_offset`.
     pub(crate) fn run(
         &self,
         objective: &dyn Objective,
         start: &[f64],
         trace_offset: usize,
+        deadline: Option<Instant>,
     ) -> Result<SearchOutcome> {
         check_start(objective, start)?;
         let solver = SpgSolver {
@@ -95,13 +99,14 @@ impl ProjectedGradient {
             phase_offset: trace_offset,
             trace: Vec::new(),
         };
-        let (best_unit, best_cost, evaluations, solver) =
-            run_from_start(objective, solver, start, self.steps as u64)?;
+        let (best_unit, best_cost, evaluations, solver, timed_out) =
+            run_from_start(objective, solver, start, self.steps as u64, deadline)?;
         Ok(SearchOutcome {
             best_unit,
             best_cost,
             evaluations,
             trace: solver.trace,
+            timed_out,
         })
     }
 }
@@ -113,7 +118,17 @@ impl Searcher for ProjectedGradient {
         start: &[f64],
         _seed: u64,
     ) -> Result<SearchOutcome> {
-        self.run(objective, start, 0)
+        self.run(objective, start, 0, None)
+    }
+
+    fn search_until(
+        &self,
+        objective: &dyn Objective,
+        start: &[f64],
+        _seed: u64,
+        deadline: Option<Instant>,
+    ) -> Result<SearchOutcome> {
+        self.run(objective, start, 0, deadline)
     }
 }
 

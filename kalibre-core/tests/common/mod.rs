@@ -195,6 +195,7 @@ impl Surrogate for QuadSurface {
             }
         }
         Ok(FitSummary {
+            timed_out: false,
             train_mse: se / n.max(1) as f64,
             epochs: 1,
         })

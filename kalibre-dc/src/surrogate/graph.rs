@@ -478,9 +478,20 @@ impl Surrogate for ThermalGraph {
     fn fit(
         &mut self,
         data: kalibre_core::TrainingSet<'_, OperatingState>,
-        _seed: u64,
+        seed: u64,
     ) -> kalibre_core::Result<kalibre_core::FitSummary> {
-        self.fit_checked(data).map_err(|e| match e {
+        self.fit_until(data, seed, None)
+    }
+
+    /// [`Self::fit`], with Adam's epochs stopped at `deadline` (the least-squares start
+    /// always runs: it is one solve, and the weights Adam would refine).
+    fn fit_until(
+        &mut self,
+        data: kalibre_core::TrainingSet<'_, OperatingState>,
+        _seed: u64,
+        deadline: Option<std::time::Instant>,
+    ) -> kalibre_core::Result<kalibre_core::FitSummary> {
+        self.fit_checked(data, deadline).map_err(|e| match e {
             Error::Core(c) => c,
             other => kalibre_core::Error::Fit(other.to_string()),
         })

@@ -390,6 +390,7 @@ impl ThermalGraph {
     pub(crate) fn fit_checked(
         &mut self,
         data: TrainingSet<'_, OperatingState>,
+        deadline: Option<std::time::Instant>,
     ) -> Result<FitSummary> {
         let prep = self.prepare(data)?;
         let n = self.hot.len();
@@ -508,6 +509,7 @@ impl ThermalGraph {
         let mut best = (f64::INFINITY, f64::INFINITY, theta.clone());
         let omega_start = n * (4 + nt);
         let fixed = (!st.trainable_adjacency).then(|| self.standardise(&prep, &cache, &scaling));
+        let mut epochs_run = st.epochs;
         for epoch in 0..=st.epochs {
             let mse = match &fixed {
                 Some(f) => self.loss_and_grad_fixed(f, &prep.y, &prep.wt, &theta, &mut grad),
@@ -535,6 +537,10 @@ impl ThermalGraph {
             if epoch == st.epochs {
                 break;
             }
+            if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+                epochs_run = epoch;
+                break;
+            }
             let lr = st.learning_rate * st.decay_rate.powi((epoch / st.decay_every_epochs) as i32);
             let t = (epoch + 1) as i32;
             let (c1, c2) = (1.0 - b1.powi(t), 1.0 - b2.powi(t));
@@ -553,7 +559,8 @@ impl ThermalGraph {
         self.fitted = true;
         Ok(FitSummary {
             train_mse: best.1,
-            epochs: st.epochs,
+            epochs: epochs_run,
+            timed_out: epochs_run < st.epochs,
         })
     }
 }

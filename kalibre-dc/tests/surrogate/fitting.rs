@@ -211,3 +211,40 @@ fn hall_wide_terms_do_not_take_the_local_slopes() {
         "default {default} against {adam_only} with the ridge in Adam only"
     );
 }
+
+/// A deadline already past stops Adam before its first epoch: the least-squares start
+/// stands (a usable surrogate), `timed_out` says so; without one, every epoch runs.
+#[test]
+fn a_passed_deadline_keeps_the_least_squares_start() {
+    let mode = AlphaMode::PerType;
+    let h = hall(SMALL, mode);
+    let scenarios: Vec<_> = (0..2)
+        .map(|i| state(&h, &format!("t{i}"), 20 + i))
+        .collect();
+    let truth = planted(&h, mode, &scenarios, 3);
+    let settings = ThermalGraphSettings::default()
+        .with_trainable_adjacency(true)
+        .with_epochs(100_000);
+    let mut learner = graph(&h, mode, settings);
+    let train = samples(&truth, &scenarios, &design(&learner, 12, 5));
+    let data = || TrainingSet {
+        scenarios: &scenarios,
+        samples: &train,
+    };
+    let cut = learner
+        .fit_until(data(), 0, Some(std::time::Instant::now()))
+        .unwrap();
+    assert!(cut.timed_out);
+    assert_eq!(cut.epochs, 0);
+    assert!(cut.train_mse.is_finite() && cut.train_mse < 1.0, "{cut:?}");
+    let p = learner.layout().space().initial();
+    assert!(learner
+        .predict(&scenarios[0], &p)
+        .iter()
+        .all(|v| v.is_finite()));
+
+    let mut short = graph(&h, mode, settings.with_epochs(20));
+    let full = short.fit_until(data(), 0, None).unwrap();
+    assert!(!full.timed_out);
+    assert_eq!(full.epochs, 20);
+}

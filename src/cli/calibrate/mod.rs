@@ -86,7 +86,7 @@ pub struct CalibrateArgs {
     #[arg(long = "grid-check", value_delimiter = ',')]
     grid_check: Option<Vec<f64>>,
     /// Skip the finer-grid runs of --grid-check.
-    #[arg(long = "no-grid-check")]
+    #[arg(long = "no-grid-check", conflicts_with = "grid_check")]
     no_grid_check: bool,
     /// Do not weigh the sensors by the grid check in the polish: by default the grids run
     /// before the polish too, and a sensor the grid moves by u counts s^2 / (s^2 + u^2)
@@ -103,7 +103,9 @@ pub struct CalibrateArgs {
     /// Stop before exceeding this many model runs (initial design included).
     #[arg(long = "max-runs")]
     max_runs: Option<usize>,
-    /// Stop after this much wall time (s).
+    /// Stop after this much wall time (s): checked before each step, and inside each
+    /// surrogate fit and search, which then end with their best so far and no model run
+    /// at the proposal (a model run under way finishes; see --of-timeout-s for OpenFOAM).
     #[arg(long = "max-wall-s")]
     max_wall_s: Option<f64>,
     /// Model runs at once (default: one per snapshot, up to the threads).

@@ -142,7 +142,7 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
 }
 
 /// The most surrogate training epochs per fit `--epochs` takes (the paper: 150): a bound
-/// on one fit's time, which `--max-wall-s` checks only between the loop's steps.
+/// on one fit's time without `--max-wall-s`.
 const MAX_EPOCHS: usize = 100_000;
 
 /// Refuses a `--grid-check` factor whose grid is the model's own in this room (a check
