@@ -240,13 +240,14 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report) {
         return;
     };
     eprintln!(
-        "kalibre: warning: {}: this calibration stopped ({:?}) before reaching {} journaled \
-         run(s); among them, line {} has MAE {:.3} C, better than its best, {:.3} C. A larger \
-         budget (--max-runs, --iterations, --max-wall-s) replays them without running the \
-         model again",
+        "kalibre: warning: {}: {} journaled run(s) of this model were not used by this \
+         calibration (it stopped: {:?}); among them, line {} has MAE {:.3} C, better than \
+         its best, {:.3} C. They are kept: the settings that made them (with a larger \
+         budget, --max-runs, --iterations or --max-wall-s, where it stopped early) replay \
+         them without running the model again",
         journal.display(),
-        report.stop_reason,
         u.runs,
+        report.stop_reason,
         best.line,
         best.mae_c,
         report.best.mae_c
