@@ -457,4 +457,14 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
         &o,
         "--write-hall /proc/kalibre/hall.json: cannot write in /proc",
     );
+    // An existing file that opens for writing but cannot be replaced (the hall is written
+    // beside it and renamed): refused before the solves too, not after them.
+    let o = run(kalibre()
+        .args(["diagnose", "--write-hall", "/proc/version", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--calibration")
+        .arg(&cal));
+    assert_input_error(&o, "--write-hall /proc/version: cannot write in /proc");
 }

@@ -553,14 +553,20 @@ fn check_writable_file(path: &std::path::Path) -> CliResult {
         Some(p) => p.to_path_buf(),
         None => std::path::PathBuf::from("."),
     };
-    // Permissions, a read-only or virtual file system: only writing tells, so write.
-    if path.exists() {
-        return std::fs::OpenOptions::new()
-            .append(true)
-            .open(path)
-            .map(drop)
-            .or_else(|e| bad(format!("cannot write it: {e}")));
-    }
+    // The hall is written as a temporary file beside the target (through a link, beside
+    // the link's target) and renamed over it, so that directory is the one to try.
+    let dir = match std::fs::metadata(path) {
+        Ok(meta) if !meta.is_file() => {
+            return bad("is not a regular file (a FIFO, socket or device)".into())
+        }
+        Ok(_) => match std::fs::canonicalize(path) {
+            Ok(real) => real.parent().map(|p| p.to_path_buf()).unwrap_or(dir),
+            Err(e) => return bad(format!("cannot resolve it: {e}")),
+        },
+        Err(_) => dir,
+    };
+    // Permissions, a read-only or virtual file system (/proc): only writing tells, so
+    // write.
     let file = dir.join(format!(".kalibre-write-check-{}", std::process::id()));
     let made = std::fs::OpenOptions::new()
         .write(true)
