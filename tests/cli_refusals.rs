@@ -396,6 +396,71 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
         .arg("--out")
         .arg(&cal));
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let report_path = cal.join("report.json");
+    let read_report = || -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap()
+    };
+    // One server's power edited under the same label, the readings as they were: the
+    // model would run at conditions it was never fitted at (this diagnosed a 4.97 C MAE
+    // and a significant effect, exit 0). The report's keys tell, and without them the
+    // journal's.
+    let snaps = data("of-dev-clean/snapshots.csv");
+    let text = std::fs::read_to_string(&snaps).unwrap();
+    let powered = text.replacen("t0,power_w,A1-01,2540", "t0,power_w,A1-01,5080", 1);
+    assert_ne!(powered, text);
+    let edited_snaps = dir.join("powered.csv");
+    std::fs::write(&edited_snaps, powered).unwrap();
+    let diagnose_at = |snapshots: &Path| {
+        run(kalibre()
+            .args(["diagnose", "--hall"])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(snapshots)
+            .arg("--calibration")
+            .arg(&cal))
+    };
+    let conditions = "powered.csv: snapshot `t0`: its setpoints, fan speeds or powers are not \
+                      those the calibration ran at";
+    let o = diagnose_at(&edited_snaps);
+    assert_input_error(&o, conditions);
+    assert!(stderr(&o).contains("report.json"), "{}", stderr(&o));
+    let mut report = read_report();
+    assert!(
+        report["model"]["scenario_keys"]["t0"].is_string(),
+        "{report}"
+    );
+    report["model"]
+        .as_object_mut()
+        .unwrap()
+        .remove("scenario_keys");
+    std::fs::write(&report_path, report.to_string()).unwrap();
+    let o = diagnose_at(&edited_snaps);
+    assert_input_error(&o, conditions);
+    assert!(stderr(&o).contains("runs.jsonl"), "{}", stderr(&o));
+    // The report's values are read by name (a tool that rewrites it may reorder them);
+    // one deleted is named, by diagnose and by simulate --params alike, never taken from
+    // the hall's initial values.
+    let kept = std::fs::read_to_string(&report_path).unwrap();
+    let mut report = read_report();
+    report["best"]["params"]
+        .as_object_mut()
+        .unwrap()
+        .remove("alpha/db");
+    std::fs::write(&report_path, report.to_string()).unwrap();
+    let missing = "report.json: /best/params: no value of `alpha/db`";
+    assert_input_error(&diagnose_at(&snaps), missing);
+    let o = run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--params")
+        .arg(&report_path)
+        .arg("--out")
+        .arg(dir.join("pred.csv")));
+    assert_input_error(&o, missing);
+    assert!(!dir.join("pred.csv").exists());
+    std::fs::write(&report_path, kept).unwrap();
     // Without the journal, the report's record of the model still names the hall it ran.
     std::fs::remove_file(cal.join("runs.jsonl")).unwrap();
     let text = std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap();
@@ -413,7 +478,6 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
             .arg("--calibration")
             .arg(calibration))
     };
-    let snaps = data("of-dev-clean/snapshots.csv");
     let o = diagnose(&edited, &snaps, &cal);
     assert_input_error(&o, "report.json: /model/fingerprint: runs of another model");
     // One reading moved by half a degree.
@@ -433,9 +497,7 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
         "snapshot `t0`, sensor `c-A1-hi` reads 18.333 C, the calibration's 17.833 C",
     );
     // A recorded grid too fine for the room is blamed on the record, not on a flag.
-    let report_path = cal.join("report.json");
-    let mut report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    let mut report = read_report();
     report["model"]["grid_m"] = 0.001.into();
     std::fs::write(&report_path, report.to_string()).unwrap();
     let o = diagnose(&hall, &snaps, &cal);

@@ -6,6 +6,7 @@ use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use kalibre_dc::hall::{AlphaMode, Hall};
+use kalibre_dc::operating_state_key;
 use kalibre_dc::snapshots::HallSnapshot;
 use serde::{Deserialize, Serialize};
 
@@ -33,6 +34,12 @@ pub struct CalibratedModel {
     /// gone. Missing in older reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fingerprint: Option<String>,
+    /// Each snapshot's label and the digest of its setpoints, fan speeds and powers
+    /// (`Model::scenario_key`), so that `diagnose` refuses a `snapshots.csv` whose
+    /// conditions were edited under the same labels (the readings alone would pass).
+    /// Missing in older reports and for a command model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario_keys: Option<std::collections::BTreeMap<String, String>>,
 }
 
 impl CalibratedModel {
@@ -168,6 +175,52 @@ pub fn check_same_measurements(
                     s.state.label, sensor.id
                 ));
             }
+        }
+    }
+    Ok(())
+}
+
+/// The conditions each snapshot of a hall calibration ran at, for
+/// [`CalibratedModel::scenario_keys`].
+pub fn scenario_keys(snaps: &[HallSnapshot]) -> std::collections::BTreeMap<String, String> {
+    snaps
+        .iter()
+        .map(|s| (s.state.label.clone(), operating_state_key(&s.state)))
+        .collect()
+}
+
+/// Refuses snapshots whose setpoints, fan speeds or powers differ from those the
+/// calibration ran under the same label: the calibrated model would be run at conditions
+/// it was never fitted at, and the diagnosis would blame an effect for the difference.
+/// The keys come from the report's model record, else from the journal's runs
+/// (`journal_keys`: each label's keys); a label neither knows is not checked.
+pub fn check_same_conditions(
+    report_path: &Path,
+    recorded: Option<&CalibratedModel>,
+    journal_keys: &HashMap<String, HashSet<String>>,
+    snapshots_path: &Path,
+    snaps: &[HallSnapshot],
+) -> CliResult {
+    for s in snaps {
+        let label = s.state.label.as_str();
+        let key = operating_state_key(&s.state);
+        let (known, source) = match recorded.and_then(|m| m.scenario_keys.as_ref()) {
+            Some(keys) => match keys.get(label) {
+                Some(k) => (*k == key, report_path.display().to_string()),
+                None => continue,
+            },
+            None => match journal_keys.get(label) {
+                Some(keys) => (keys.contains(&key), "its runs.jsonl".to_string()),
+                None => continue,
+            },
+        };
+        if !known {
+            return Err(CliError::Input(format!(
+                "{}: snapshot `{label}`: its setpoints, fan speeds or powers are not those the \
+                 calibration ran at (as {source} records them); diagnose with the \
+                 calibration's snapshots, or calibrate again",
+                snapshots_path.display()
+            )));
         }
     }
     Ok(())

@@ -193,6 +193,16 @@ pub(super) fn load_params(
         })?;
         values[i] = x;
     }
+    // A report names every parameter it calibrated: one missing is an edit, not a value
+    // to take from the hall (a hand-written object may leave some at their initial).
+    if !pointer.is_empty() {
+        if let Some(missing) = space.names().iter().find(|n| !map.contains_key(*n)) {
+            return Err(CliError::Input(format!(
+                "{file}: {pointer}: no value of `{missing}` (a calibration report has every \
+                 calibrated parameter; is it of another hall?)"
+            )));
+        }
+    }
     space
         .check_physical(&values)
         .map_err(|e| CliError::Input(format!("{file}: {e}")))?;

@@ -22,7 +22,7 @@ use kalibre_dc::openfoam::OpenFoamModel;
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::PenaltyReport;
 
-use super::calibrated_model::CalibratedModel;
+use super::calibrated_model::{scenario_keys, CalibratedModel};
 use super::diagnose::Likelihood;
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::{io_err, with_threads, CliError, CliResult};
@@ -340,6 +340,7 @@ fn model_record(
             of_iterations: None,
             np: None,
             fingerprint,
+            scenario_keys: None,
         },
         ModelArg::Openfoam => {
             let of = args
@@ -352,6 +353,7 @@ fn model_record(
                 of_iterations: Some(of.iterations),
                 np: Some(of.np),
                 fingerprint,
+                scenario_keys: None,
             }
         }
         ModelArg::Command => CalibratedModel {
@@ -361,6 +363,7 @@ fn model_record(
             of_iterations: None,
             np: None,
             fingerprint,
+            scenario_keys: None,
         },
     })
 }
@@ -418,7 +421,11 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     warn_skipped_journal_lines(&journal, &report);
     warn_unreached(&journal, &report);
     let mut report = report;
-    report.model = Some(model_record(&args, &hall, &settings, fingerprint)?.to_json());
+    let mut record = model_record(&args, &hall, &settings, fingerprint)?;
+    if args.model != ModelArg::Command {
+        record.scenario_keys = Some(scenario_keys(&snaps));
+    }
+    report.model = Some(record.to_json());
     let report_path = args.out.join("report.json");
     let json = serde_json::to_string_pretty(&report)
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;

@@ -1,10 +1,11 @@
 //! `kalibre diagnose`: where a calibrated hall model fails, and which physical effect is
 //! missing.
 
+use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 
 use clap::Args;
-use kalibre_core::calibrate::{Report, REPORT_SCHEMA};
+use kalibre_core::calibrate::{NamedValues, Report, REPORT_SCHEMA};
 use kalibre_core::diagnose::CLOSE_ALTERNATIVE_BIC;
 use kalibre_core::Model;
 use kalibre_dc::diagnosis::{
@@ -25,9 +26,11 @@ use print::{
 };
 pub(super) use print::{sensor_line, warming_racks, worst_sensors};
 
-use super::calibrated_model::{check_same_measurements, grid_or_recorded, CalibratedModel};
+use super::calibrated_model::{
+    check_same_conditions, check_same_measurements, grid_or_recorded, CalibratedModel,
+};
 use super::openfoam_args::{of_err, OpenFoamArgs};
-use super::simulate::sim_config;
+use super::simulate::{load_params, sim_config};
 use super::{with_threads, CliError, CliResult};
 
 /// Options of `kalibre diagnose`.
@@ -163,7 +166,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     let report_path = args.calibration.join("report.json");
     let text = std::fs::read_to_string(&report_path)
         .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
-    let report: Report = serde_json::from_str(&text).map_err(|e| {
+    let mut report: Report = serde_json::from_str(&text).map_err(|e| {
         CliError::Input(format!(
             "{}: not a kalibre report: {e}",
             report_path.display()
@@ -242,28 +245,31 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         }
     }
     let space = model.layout().space();
-    let names: Vec<&str> = report
-        .best
-        .params
-        .0
-        .iter()
-        .map(|(n, _)| n.as_str())
-        .collect();
-    if names != space.names().iter().map(String::as_str).collect::<Vec<_>>() {
-        return Err(CliError::Input(format!(
-            "{}: calibrated parameters ({}) do not match hall `{}` ({}): this calibration is of another hall",
-            report_path.display(),
-            names.join(", "),
-            hall.name,
-            space.names().join(", ")
-        )));
-    }
+    // By name, as JSON objects are unordered (a report rewritten by another tool keeps
+    // its values); every calibrated parameter must be there, within its bounds.
+    let report_json: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
+    let params = load_params(&report_path, &report_json, space)?;
+    report.best.params = NamedValues::new(&space.names(), &params);
     // The journal names the model it ran: refuse a calibration of another hall or grid.
     let journal = args.calibration.join("runs.jsonl");
+    // Each snapshot's conditions as its runs journaled them, for reports without keys.
+    let mut journal_keys: HashMap<String, HashSet<String>> = HashMap::new();
     if let Ok(lines) = std::fs::read_to_string(&journal) {
-        let other = lines
+        let runs: Vec<serde_json::Value> = lines
             .lines()
             .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .collect();
+        for v in &runs {
+            if let (Some(label), Some(key)) = (v["scenario"].as_str(), v["scenario_key"].as_str()) {
+                journal_keys
+                    .entry(label.to_string())
+                    .or_default()
+                    .insert(key.to_string());
+            }
+        }
+        let other = runs
+            .iter()
             .find(|v| v["fingerprint"].as_str().is_some_and(|f| f != fp));
         if other.is_some() {
             return Err(CliError::Input(format!(
@@ -277,7 +283,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             )));
         }
     }
-    let params = report.best.params.values();
+    check_same_conditions(
+        &report_path,
+        recorded.as_ref(),
+        &journal_keys,
+        &args.snapshots,
+        &snaps,
+    )?;
     let robust_nu = args.likelihood.robust_nu(args.nu)?;
     let mut settings = HallDiagnosisSettings {
         sim,
