@@ -116,3 +116,47 @@ fn a_design_that_fails_everywhere_says_why() {
         "{e}"
     );
 }
+
+/// Poly, except that every run at the second snapshot fails (as a hall snapshot with
+/// every fan off does).
+struct DeadSecondSnapshot(Poly);
+
+impl kalibre_core::Model for DeadSecondSnapshot {
+    type Scenario = Scen;
+    fn fingerprint(&self) -> String {
+        "poly-dead-t1".into()
+    }
+    fn evaluate(
+        &self,
+        scenario: &Scen,
+        params: &[f64],
+    ) -> Result<kalibre_core::Outputs, ModelError> {
+        if scenario.id == 1 {
+            return Err(ModelError::failed("no supply air (all fans off)"));
+        }
+        self.0.evaluate(scenario, params)
+    }
+}
+
+#[test]
+fn a_snapshot_that_fails_everywhere_is_named_with_its_reason() {
+    let model = DeadSecondSnapshot(Poly::failing(FailZone {
+        a_err: 10.0,
+        b_nan: 0.0,
+    }));
+    let e = Calibrator::new(&model, QuadSurface::default(), &observations(), &space())
+        .with_max_iterations(2)
+        .run()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no parameter point ran successfully at every snapshot"),
+        "{e}"
+    );
+    // Where and why, not only that nothing ran; the snapshot that ran is not blamed.
+    assert!(
+        e.contains("snapshot `t1` failed at every design point (the first: model run failed: no supply air (all fans off))"),
+        "{e}"
+    );
+    assert!(!e.contains("`t0`"), "{e}");
+}

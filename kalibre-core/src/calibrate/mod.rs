@@ -179,6 +179,8 @@ where
             .iter()
             .flatten()
             .find_map(|r| r.result.as_ref().err().cloned());
+        let labels: Vec<&str> = obs.snapshots().iter().map(|s| s.label.as_str()).collect();
+        let dead_snapshots = runner::snapshots_failed_throughout(&design_results, &labels);
         for (i, results) in design_results.into_iter().enumerate() {
             let eval = state.absorb(
                 &self.validator,
@@ -578,7 +580,10 @@ where
         };
         let passed_over = state.best.as_ref().and_then(|b| state.passed_over(b));
         let best = state.best.ok_or_else(|| {
-            Error::NoSuccessfulRun("no parameter point ran successfully at every snapshot".into())
+            let why = dead_snapshots.map_or_else(String::new, |d| format!(": {d}"));
+            Error::NoSuccessfulRun(format!(
+                "no parameter point ran successfully at every snapshot{why}"
+            ))
         })?;
         let prior = state.prior.map(|_| best.rank - best.score);
         let prior = prior.filter(|p| p.is_finite());

@@ -142,3 +142,30 @@ impl<M: Model> Runner<'_, M> {
         })
     }
 }
+
+/// The snapshots at which every point of `results` (one row per point, one run per
+/// snapshot) failed, each with its first failure: said when no point then runs at every
+/// snapshot, so that the error names where and why (all fans off in one snapshot), not
+/// only that nothing ran. `None` when every snapshot ran somewhere.
+pub(crate) fn snapshots_failed_throughout(
+    results: &[Vec<RunResult>],
+    labels: &[&str],
+) -> Option<String> {
+    let dead: Vec<String> = labels
+        .iter()
+        .enumerate()
+        .filter_map(|(j, label)| {
+            let mut runs = results.iter().filter_map(|point| point.get(j));
+            let first = runs.next()?.result.as_ref().err()?;
+            runs.all(|r| r.result.is_err()).then(|| {
+                let gist = first
+                    .log_gist()
+                    .map_or_else(String::new, |g| format!("; its log: {g}"));
+                format!(
+                    "snapshot `{label}` failed at every design point (the first: {first}{gist})"
+                )
+            })
+        })
+        .collect();
+    (!dead.is_empty()).then(|| dead.join("; "))
+}
