@@ -45,6 +45,26 @@ fn simulate_writes_predictions_and_vtk() {
         assert!(vtk.starts_with("# vtk DataFile"));
         assert!(vtk.contains("temperature_c") && vtk.contains("velocity_m_s"));
     }
+    // Labels that would share one file: refused before any solve, not one snapshot's
+    // fields silently replaced by another's.
+    let text = std::fs::read_to_string(&snaps).unwrap();
+    let relabelled = text.replace("\nt0,", "\na/b,").replace("\nt1,", "\na_b,");
+    let clash = dir.join("clash.csv");
+    std::fs::write(&clash, relabelled).unwrap();
+    let o = run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&clash)
+        .arg("--out")
+        .arg(dir.join("clash-pred.csv"))
+        .arg("--vtk")
+        .arg(dir.join("clash-vtk")));
+    assert_input_error(
+        &o,
+        "--vtk: snapshots `a/b` and `a_b` would both be written to a_b.vtk",
+    );
+    assert!(!dir.join("clash-vtk").exists());
 }
 
 #[test]

@@ -209,6 +209,24 @@ pub(super) fn load_params(
     Ok(values)
 }
 
+/// Refuses snapshots whose `--vtk` files would be one file (labels that differ only in
+/// characters a file name cannot hold, or only in case, which some file systems fold),
+/// before any solve: one snapshot's fields would silently replace another's.
+fn check_vtk_names(snaps: &[snapshots::HallSnapshot]) -> CliResult {
+    let mut taken = std::collections::HashMap::new();
+    for s in snaps {
+        let label = s.state.label.as_str();
+        let name = kalibre_dc::sim::vtk_file_name(label);
+        if let Some(other) = taken.insert(name.to_lowercase(), label) {
+            return Err(CliError::Input(format!(
+                "--vtk: snapshots `{other}` and `{label}` would both be written to {name}; give \
+                 them labels that differ in letters or digits",
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Every `--grid-check` factor a finer grid: checked before the predictions are written,
 /// so a bad factor never replaces a good `--out`.
 fn check_grid_factors(args: &SimulateArgs) -> CliResult {
@@ -312,6 +330,9 @@ pub fn run(args: SimulateArgs) -> CliResult {
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
     let mut snaps = snapshots::load_states(&hall, &args.snapshots)?;
+    if args.vtk.is_some() {
+        check_vtk_names(&snaps)?;
+    }
     args.what_if.apply(&hall, &mut snaps)?;
     if let Some(what) = args.what_if.describe() {
         println!("what if: {what} (in every snapshot)");

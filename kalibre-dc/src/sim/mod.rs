@@ -56,7 +56,7 @@ pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, 
 pub use solution::Solution;
 pub use supply::tile_flows_m3_s;
 pub use topology::{cells_beyond_cap, MAX_CELLS};
-pub use vtk::write_vtk;
+pub use vtk::{vtk_file_name, write_vtk};
 
 use crate::effects::Effect;
 use crate::hall::Hall;

@@ -6,13 +6,15 @@ use std::path::{Path, PathBuf};
 use super::{Simulator, Solution};
 use crate::{Error, Result};
 
-/// Writes `<dir>/<label>.vtk` with cell data `temperature_c` (solid cells as NaN),
-/// `pressure`, `solid` and the vector `velocity_m_s`; returns the path.
-pub fn write_vtk(dir: impl AsRef<Path>, sim: &Simulator, sol: &Solution) -> Result<PathBuf> {
-    let dir = dir.as_ref();
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let name: String = sol
-        .label
+/// The file [`write_vtk`] writes a snapshot's fields to: its label with every character
+/// but ASCII letters, digits, `-` and `_` replaced by `_` (no path can escape the
+/// directory), then `.vtk`. Two labels can map to one name (`a/b`, `a_b`).
+///
+/// ```
+/// assert_eq!(kalibre_dc::sim::vtk_file_name("../t 0"), "___t_0.vtk");
+/// ```
+pub fn vtk_file_name(label: &str) -> String {
+    let name: String = label
         .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
@@ -22,12 +24,19 @@ pub fn write_vtk(dir: impl AsRef<Path>, sim: &Simulator, sol: &Solution) -> Resu
             }
         })
         .collect();
-    let name = if name.is_empty() {
-        "solution".to_string()
+    if name.is_empty() {
+        "solution.vtk".to_string()
     } else {
-        name
-    };
-    let path = dir.join(format!("{name}.vtk"));
+        format!("{name}.vtk")
+    }
+}
+
+/// Writes `<dir>/<label>.vtk` ([`vtk_file_name`]) with cell data `temperature_c` (solid
+/// cells as NaN), `pressure`, `solid` and the vector `velocity_m_s`; returns the path.
+pub fn write_vtk(dir: impl AsRef<Path>, sim: &Simulator, sol: &Solution) -> Result<PathBuf> {
+    let dir = dir.as_ref();
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let path = dir.join(vtk_file_name(&sol.label));
     let g = sim.grid();
     let mut s = String::with_capacity(g.len() * 64);
     s.push_str("# vtk DataFile Version 3.0\n");
