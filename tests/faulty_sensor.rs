@@ -3,8 +3,12 @@
 //! sensor in a draught of exhaust or badly mounted does): the diagnosis still names the
 //! offset and lists the two sensors as ones no candidate explains; with the suggestion
 //! added, the calibration under the Student-t likelihood finds the offset's true size,
-//! where least squares lets the two sensors pull it.
+//! where least squares lets the two sensors pull it. And a reading colder than any
+//! supply air, which no state of the hall produces, is named by `calibrate` on stderr.
 
+mod cli_support;
+
+use cli_support::{data, kalibre, run, stderr, tmp, QUICK_CALIBRATION};
 use kalibre::dc::calibration::{calibrate_hall, HallCalibration, HallCalibrationSettings};
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosisSettings};
 use kalibre::dc::effects::EffectRegistry;
@@ -124,5 +128,47 @@ fn faulty_sensors_neither_hide_the_offset_nor_set_its_size_under_student_t() {
     assert!(
         (least_squares + 1.0).abs() > (student_t + 1.0).abs() + 0.1,
         "student-t {student_t}, least squares {least_squares}"
+    );
+}
+
+/// A slip of the sign (-17.8 for 17.8 C) is fitted as the user's measurement, but named:
+/// file, snapshot, sensor and the supply it is colder than. Readings within the margin
+/// below the supply (sensor error, a CRAC under its setpoint) are not.
+#[test]
+fn a_reading_colder_than_the_supply_is_named_by_calibrate() {
+    let dir = tmp("cold-reading");
+    let text = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
+    let calibrate = |name: &str, text: &str| {
+        let snaps = dir.join(name);
+        std::fs::write(&snaps, text).unwrap();
+        run(kalibre()
+            .args(["calibrate", "--hall"])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(&snaps)
+            .args(QUICK_CALIBRATION)
+            .arg("--out")
+            .arg(dir.join(name).with_extension("out")))
+    };
+    let slip = text.replacen(
+        "t0,sensor_c,c-A1-hi,17.833",
+        "t0,sensor_c,c-A1-hi,-17.833",
+        1,
+    );
+    assert_ne!(slip, text);
+    let o = calibrate("slip.csv", &slip);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("slip.csv: snapshot `t0`, sensor `c-A1-hi` reads -17.833 C, more than 5 C below the coldest running CRAC's setpoint"),
+        "{err}"
+    );
+    let near = text.replacen("t0,sensor_c,c-A1-hi,17.833", "t0,sensor_c,c-A1-hi,14.0", 1);
+    let o = calibrate("near.csv", &near);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        !stderr(&o).contains("coldest running CRAC"),
+        "{}",
+        stderr(&o)
     );
 }

@@ -2,6 +2,7 @@
 //! reading with every rule of `formats.md` section 2 enforced, writing measurements and
 //! predictions, and conversion into the core's [`kalibre_core::Observations`].
 
+mod plausible;
 mod read;
 mod write;
 
@@ -10,6 +11,7 @@ use kalibre_core::{Observations, OutputInfo, Snapshot};
 use crate::hall::Hall;
 use crate::{Error, Result};
 
+pub use plausible::{readings_below_supply, ColdReading, BELOW_SUPPLY_MARGIN_C};
 pub use read::{load_snapshots, load_states, parse_snapshots, parse_snapshots_bytes};
 pub(crate) use write::quote;
 pub use write::{write_predictions, write_snapshots};
