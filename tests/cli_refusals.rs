@@ -460,6 +460,14 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
         .arg(dir.join("pred.csv")));
     assert_input_error(&o, missing);
     assert!(!dir.join("pred.csv").exists());
+    // A residual row of a sensor the hall lacks is the report's, not the snapshots'.
+    let mut report = read_report();
+    report["residuals"][0]["sensor"] = "zz".into();
+    std::fs::write(&report_path, report.to_string()).unwrap();
+    assert_input_error(
+        &diagnose_at(&snaps),
+        "report.json: /residuals: sensor `zz` is not in hall",
+    );
     std::fs::write(&report_path, kept).unwrap();
     // Without the journal, the report's record of the model still names the hall it ran.
     std::fs::remove_file(cal.join("runs.jsonl")).unwrap();

@@ -355,6 +355,11 @@ fn snapshot_bytes_that_are_not_utf8_name_line_and_column() {
 #[test]
 fn a_byte_order_mark_and_crlf_line_ends_are_accepted() {
     let h = hall();
+    let hall_text = hall_value().to_string();
+    assert_eq!(
+        Hall::from_json_str(&format!("\u{feff}{hall_text}"), HALL_FILE).unwrap(),
+        Hall::from_json_str(&hall_text, HALL_FILE).unwrap()
+    );
     let text = format!("\u{feff}{}", csv_text(&csv_rows()).replace('\n', "\r\n"));
     let snaps = parse_snapshots(&h, &text, CSV_FILE).unwrap();
     assert_eq!(

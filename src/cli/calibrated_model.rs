@@ -146,9 +146,17 @@ pub fn check_same_measurements(
         let Some(snap) = snapshot_at.get(r.snapshot.as_str()) else {
             return differ(format!("snapshot `{}` is not there", r.snapshot));
         };
-        let reading = sensor_at
-            .get(r.sensor.as_str())
-            .and_then(|&i| snap.sensor_c[i]);
+        let Some(&i) = sensor_at.get(r.sensor.as_str()) else {
+            // Not a reading the snapshots lack: a sensor the hall does not have.
+            return Err(CliError::Input(format!(
+                "{}: /residuals: sensor `{}` is not in hall `{}`; this calibration is of \
+                 another hall",
+                report_path.display(),
+                r.sensor,
+                hall.name
+            )));
+        };
+        let reading = snap.sensor_c[i];
         match reading {
             None => {
                 return differ(format!(

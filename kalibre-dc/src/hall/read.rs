@@ -20,6 +20,8 @@ impl Hall {
     /// Parses `hall.json` text and checks every rule of the format; `file` names the source
     /// in errors.
     pub fn from_json_str(text: &str, file: &str) -> Result<Hall> {
+        // A byte-order mark some editors write on Windows: an encoding marker, not JSON.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         check_schema_tag(text, file)?;
         let mut de = serde_json::Deserializer::from_str(text);
         let hall: Hall = serde_path_to_error::deserialize(&mut de).map_err(|e| {
@@ -113,6 +115,10 @@ fn structural_error(
         {
             pointer.push('/');
             pointer.push_str(&escape_pointer_token(name));
+        }
+        // The whole document of the wrong type (`null`, `[]`) has the root's pointer.
+        if pointer.is_empty() {
+            pointer.push('/');
         }
         return Error::format(file, pointer, text);
     }

@@ -129,6 +129,10 @@ impl Hall {
     }
 
     fn check_cracs(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
+        if self.cracs.is_empty() {
+            // Servers would heat the room with nothing to take the heat away.
+            return Err(c.err("/cracs", "a hall needs at least one CRAC"));
+        }
         c.unique_ids(
             self.cracs
                 .iter()

@@ -374,6 +374,12 @@ pub fn hall_cases() -> Vec<HallCase> {
         hall_text_case("empty file", "line 1", "EOF while parsing", |_| {
             String::new()
         }),
+        hall_text_case("null document", "/", "invalid type: null", |_| {
+            "null".to_string()
+        }),
+        hall_case("no CRAC", "/cracs", "a hall needs at least one CRAC", |v| {
+            set(v, "/cracs", json!([]))
+        }),
         hall_case(
             "more units than racks have",
             "/racks/0/units",
