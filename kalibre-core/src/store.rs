@@ -10,7 +10,7 @@
 use std::collections::hash_map::Entry;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fs::{File, OpenOptions};
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
@@ -116,6 +116,11 @@ pub struct LoadReport {
     pub other_fingerprint: usize,
     /// Repeated keys (the first record is kept).
     pub duplicates: usize,
+    /// The repeats among them whose result differs from the kept one (other outputs, or
+    /// failed where it ran): one of the two is wrong, so each is named. Missing in older
+    /// reports: empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub conflicts: Vec<BadLine>,
     /// Complete lines that could not be parsed, skipped.
     pub bad_lines: Vec<BadLine>,
     /// A torn last line (no trailing newline and unparsable), cut off the file.
@@ -153,6 +158,19 @@ struct Inner {
     /// Runs asked for or recorded since the store was opened: the rest of the journal is
     /// what this session did not reach ([`RunStore::unreached`]).
     reached: HashSet<Key>,
+    /// What the file's end needs before the next line is appended (a torn tail cut, a
+    /// newline): done then, so that a command refused after opening the journal leaves
+    /// the file as it found it.
+    repair: Option<Repair>,
+}
+
+/// A journal end to mend before appending.
+#[derive(Debug, Clone, Copy)]
+enum Repair {
+    /// Cut the file to this many bytes (a torn last line).
+    CutTo(u64),
+    /// End the last line, which is whole but has no newline.
+    Newline,
 }
 
 /// The journal and cache of model runs of one model fingerprint.
@@ -186,6 +204,7 @@ impl RunStore {
                 lines: 0,
                 file: None,
                 reached: HashSet::new(),
+                repair: None,
             }),
             load: LoadReport::default(),
         }
@@ -193,7 +212,8 @@ impl RunStore {
 
     /// Opens (or creates) the journal at `path` for runs of the model with `fingerprint`.
     ///
-    /// A torn last line is cut off the file so that later lines start clean; bad lines
+    /// A torn last line is cut off the file before the next run is appended (nothing is
+    /// written until then), so that later lines start clean; bad lines
     /// and runs of other fingerprints are skipped. See [`Self::load_report`].
     pub fn open(path: impl AsRef<Path>, fingerprint: impl Into<String>) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
@@ -225,7 +245,19 @@ impl RunStore {
                 &rec.params,
             );
             match runs.entry(k) {
-                Entry::Occupied(_) => load.duplicates += 1,
+                Entry::Occupied(kept) => {
+                    load.duplicates += 1;
+                    let (first_line, first): &(usize, RunRecord) = kept.get();
+                    if first.status != rec.status || first.outputs != rec.outputs {
+                        load.conflicts.push(BadLine {
+                            line,
+                            reason: format!(
+                                "repeats the run of line {first_line} with another result; \
+                                 line {first_line}'s is used"
+                            ),
+                        });
+                    }
+                }
                 Entry::Vacant(v) => {
                     v.insert((line, rec));
                     load.loaded += 1;
@@ -251,7 +283,7 @@ impl RunStore {
             .filter(|&&b| b == b'\n')
             .count()
             + 1;
-        let mut fix_newline = false;
+        let mut repair = None;
         let mut lines = tail_line - 1;
         if !tail.is_empty() {
             match parse(tail) {
@@ -259,7 +291,18 @@ impl RunStore {
                 Ok(rec) => {
                     load.lines += 1;
                     take(tail_line, rec, &mut load);
-                    fix_newline = true;
+                    repair = Some(Repair::Newline);
+                    lines = tail_line;
+                }
+                // Whole JSON that is not a run record is a bad line like any other,
+                // kept in the file; only text cut off mid-write is torn.
+                Err(reason) if serde_json::from_slice::<serde_json::Value>(tail).is_ok() => {
+                    load.lines += 1;
+                    load.bad_lines.push(BadLine {
+                        line: tail_line,
+                        reason,
+                    });
+                    repair = Some(Repair::Newline);
                     lines = tail_line;
                 }
                 Err(reason) => {
@@ -267,27 +310,20 @@ impl RunStore {
                         line: tail_line,
                         reason: format!("torn last line ({} bytes): {reason}", tail.len()),
                     });
-                    file.set_len(complete_len as u64)
-                        .map_err(|e| Error::io(&path, e))?;
-                    file.sync_data().map_err(|e| Error::io(&path, e))?;
+                    repair = Some(Repair::CutTo(complete_len as u64));
                 }
             }
-        }
-        file.seek(SeekFrom::End(0))
-            .map_err(|e| Error::io(&path, e))?;
-        if fix_newline {
-            file.write_all(b"\n").map_err(|e| Error::io(&path, e))?;
-            file.sync_data().map_err(|e| Error::io(&path, e))?;
         }
         Ok(RunStore {
             fingerprint,
             path: Some(path),
             inner: Mutex::new(Inner {
                 runs,
-                next_seq: max_seq.map_or(0, |m| m + 1),
+                next_seq: max_seq.map_or(0, |m| m.saturating_add(1)),
                 lines,
                 file: Some(file),
                 reached: HashSet::new(),
+                repair,
             }),
             load,
         })
@@ -419,18 +455,28 @@ impl RunStore {
             error,
             wall_s,
         };
+        let repair = inner.repair;
         if let Some(file) = inner.file.as_mut() {
             let path = self.path.as_deref().unwrap_or(Path::new("runs.jsonl"));
             let journal = |reason: String| Error::Journal {
                 path: path.display().to_string(),
                 reason,
             };
-            let mut line = serde_json::to_vec(&rec).map_err(|e| journal(e.to_string()))?;
+            let mut line = Vec::new();
+            match repair {
+                Some(Repair::CutTo(len)) => {
+                    file.set_len(len).map_err(|e| Error::io(path, e))?;
+                }
+                Some(Repair::Newline) => line.push(b'\n'),
+                None => {}
+            }
+            serde_json::to_writer(&mut line, &rec).map_err(|e| journal(e.to_string()))?;
             line.push(b'\n');
             // One write per line keeps a crash to a torn tail, never an interleaving.
             file.write_all(&line).map_err(|e| Error::io(path, e))?;
             file.flush().map_err(|e| Error::io(path, e))?;
             file.sync_data().map_err(|e| Error::io(path, e))?;
+            inner.repair = None;
         }
         let line = if inner.file.is_some() {
             inner.lines += 1;
@@ -438,7 +484,7 @@ impl RunStore {
         } else {
             0
         };
-        inner.next_seq += 1;
+        inner.next_seq = inner.next_seq.saturating_add(1);
         let k = key(scenario, scenario_key, names, params);
         inner.reached.insert(k.clone());
         inner.runs.insert(k, (line, rec.clone()));

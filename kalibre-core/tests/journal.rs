@@ -128,16 +128,18 @@ fn a_torn_last_line_is_reported_cut_and_never_fatal() {
     assert!(load.bad_lines.is_empty());
     let torn = load.torn_tail.as_ref().expect("torn tail reported");
     assert_eq!(torn.line, 4);
-    assert_eq!(
-        fs::read(&path).unwrap().len(),
-        clean_len,
-        "torn bytes cut off"
-    );
-    // Appending after the cut gives clean lines, and the sequence goes on.
+    // Opening writes nothing (a command refused after it leaves the file as it was);
+    // the torn bytes are cut when the next run is appended.
+    assert!(fs::read(&path).unwrap().len() > clean_len);
     let rec = store
         .record("t0", &names(), &[9.0, 1.0], &ok(&[9.0]), 0.0)
         .unwrap();
     assert_eq!(rec.seq, 3);
+    assert_eq!(
+        fs::read(&path).unwrap()[..clean_len],
+        whole[..],
+        "torn bytes cut off, the whole lines kept"
+    );
     drop(store);
     let again = RunStore::open(&path, "m1").unwrap();
     assert!(again.load_report().is_clean());
@@ -246,4 +248,92 @@ fn parallel_appends_give_whole_lines() {
         .collect();
     seqs.sort();
     assert_eq!(seqs, (0..64).collect::<Vec<_>>());
+}
+
+#[test]
+fn a_whole_last_line_that_is_no_run_is_kept_as_a_bad_line() {
+    let dir = common::temp_dir("journal-bad-tail");
+    let path = dir.join("runs.jsonl");
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store
+            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
+            .unwrap();
+    }
+    // Complete JSON, not a record (say, a later version's), and no newline: not torn.
+    let mut f = fs::OpenOptions::new().append(true).open(&path).unwrap();
+    f.write_all(br#"{"seq":1,"note":"not a run"}"#).unwrap();
+    drop(f);
+    let before = fs::read(&path).unwrap();
+    let store = RunStore::open(&path, "m1").unwrap();
+    let load = store.load_report();
+    assert!(load.torn_tail.is_none());
+    assert_eq!(load.bad_lines.len(), 1);
+    assert_eq!(load.bad_lines[0].line, 2);
+    assert_eq!(fs::read(&path).unwrap(), before, "nothing written on open");
+    let rec = store
+        .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
+        .unwrap();
+    assert_eq!(rec.seq, 1);
+    assert_eq!(
+        store.get_with_line("t0", &names(), &[2.0, 1.0]).unwrap().0,
+        3
+    );
+    drop(store);
+    let text = fs::read_to_string(&path).unwrap();
+    assert!(text.starts_with(std::str::from_utf8(&before).unwrap()));
+    assert_eq!(text.lines().count(), 3);
+    let again = RunStore::open(&path, "m1").unwrap();
+    assert_eq!(again.len(), 2);
+    assert_eq!(again.load_report().bad_lines[0].line, 2);
+}
+
+#[test]
+fn the_sequence_never_wraps() {
+    let dir = common::temp_dir("journal-seq-max");
+    let path = dir.join("runs.jsonl");
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store
+            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
+            .unwrap();
+    }
+    let text = fs::read_to_string(&path)
+        .unwrap()
+        .replace("\"seq\":0", &format!("\"seq\":{}", u64::MAX));
+    fs::write(&path, text).unwrap();
+    let store = RunStore::open(&path, "m1").unwrap();
+    let rec = store
+        .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
+        .unwrap();
+    assert_eq!(rec.seq, u64::MAX);
+}
+
+#[test]
+fn a_repeated_run_with_another_result_is_named() {
+    let dir = common::temp_dir("journal-conflict");
+    let path = dir.join("runs.jsonl");
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store
+            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
+            .unwrap();
+        store
+            .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
+            .unwrap();
+    }
+    let text = fs::read_to_string(&path).unwrap();
+    let first = text.lines().next().unwrap().to_string();
+    // The same run twice more: once as it was, once with another output.
+    let other = first.replace("\"outputs\":[1.0]", "\"outputs\":[7.0]");
+    assert_ne!(other, first);
+    fs::write(&path, format!("{text}{first}\n{other}\n")).unwrap();
+    let store = RunStore::open(&path, "m1").unwrap();
+    let load = store.load_report();
+    assert_eq!(load.duplicates, 2);
+    assert_eq!(load.conflicts.len(), 1);
+    assert_eq!(load.conflicts[0].line, 4);
+    assert!(load.conflicts[0].reason.contains("line 1's is used"));
+    let kept = store.get("t0", &names(), &[1.0, 1.0]).unwrap();
+    assert_eq!(kept.outputs, Some(vec![1.0]));
 }

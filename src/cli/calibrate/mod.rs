@@ -485,4 +485,17 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
             if count > 1 { ", ..." } else { "" }
         );
     }
+    if let Some(first) = load.conflicts.first() {
+        eprintln!(
+            "kalibre: warning: {}: line {} {}{}; one of the two is wrong (an edited or merged \
+             journal?)",
+            journal.display(),
+            first.line,
+            first.reason,
+            match load.conflicts.len() {
+                1 => String::new(),
+                n => format!(" ({} more such lines)", n - 1),
+            }
+        );
+    }
 }
