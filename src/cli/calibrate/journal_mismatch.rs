@@ -26,8 +26,9 @@ pub(super) fn explain(
         differences.push(d);
     }
     let why = if differences.is_empty() {
-        "the same model settings and parameters, so hall.json (its geometry, servers, \
-         effects or their initial values) or the model's configuration changed since"
+        "the same model settings and parameters, so hall.json (any field of it: its \
+         geometry, servers, effects, initial values, and also its name or `extra` notes) or \
+         the model's configuration changed since"
             .to_string()
     } else {
         differences.join("; ")
