@@ -97,18 +97,22 @@ fn a_proposal_on_a_failed_point_is_moved_and_never_repeated() {
     assert_eq!(r.best.iteration, 0);
 }
 
-#[test]
-fn a_design_that_fails_everywhere_says_why() {
-    // Fails at every point: a > -1 always.
-    let model = Poly::failing(FailZone {
-        a_err: -1.0,
-        b_nan: 0.0,
-    });
-    let e = Calibrator::new(&model, QuadSurface::default(), &observations(), &space())
+/// The error of a two-iteration calibration of `model`, which must fail.
+fn failure_of<M: kalibre_core::Model<Scenario = Scen>>(model: &M) -> String {
+    Calibrator::new(model, QuadSurface::default(), &observations(), &space())
         .with_max_iterations(2)
         .run()
         .unwrap_err()
-        .to_string();
+        .to_string()
+}
+
+#[test]
+fn a_design_that_fails_everywhere_says_why() {
+    // Fails at every point: a > -1 always.
+    let e = failure_of(&Poly::failing(FailZone {
+        a_err: -1.0,
+        b_nan: 0.0,
+    }));
     assert!(e.contains("runs of the initial design failed"), "{e}");
     // The model's own reason, not only a count.
     assert!(
@@ -140,15 +144,10 @@ impl kalibre_core::Model for DeadSecondSnapshot {
 
 #[test]
 fn a_snapshot_that_fails_everywhere_is_named_with_its_reason() {
-    let model = DeadSecondSnapshot(Poly::failing(FailZone {
+    let e = failure_of(&DeadSecondSnapshot(Poly::failing(FailZone {
         a_err: 10.0,
         b_nan: 0.0,
-    }));
-    let e = Calibrator::new(&model, QuadSurface::default(), &observations(), &space())
-        .with_max_iterations(2)
-        .run()
-        .unwrap_err()
-        .to_string();
+    })));
     assert!(
         e.contains("no parameter point ran successfully at every snapshot"),
         "{e}"

@@ -17,6 +17,19 @@ fn ok(v: &[f64]) -> Result<Outputs, ModelError> {
     Ok(Outputs::from(v.to_vec()))
 }
 
+/// A journal in a fresh directory `name` holding one ok run at `t0` per value of `a`
+/// (b = 1, output a), its store closed.
+fn journal_of(name: &str, a_values: &[f64]) -> std::path::PathBuf {
+    let path = common::temp_dir(name).join("runs.jsonl");
+    let store = RunStore::open(&path, "m1").unwrap();
+    for &a in a_values {
+        store
+            .record("t0", &names(), &[a, 1.0], &ok(&[a]), 0.0)
+            .unwrap();
+    }
+    path
+}
+
 fn lines(path: &std::path::Path) -> Vec<String> {
     fs::read_to_string(path)
         .unwrap()
@@ -104,16 +117,7 @@ fn extras_are_journaled_with_the_run() {
 
 #[test]
 fn a_torn_last_line_is_reported_cut_and_never_fatal() {
-    let dir = common::temp_dir("journal-torn");
-    let path = dir.join("runs.jsonl");
-    {
-        let store = RunStore::open(&path, "m1").unwrap();
-        for i in 0..3 {
-            store
-                .record("t0", &names(), &[i as f64, 1.0], &ok(&[i as f64]), 0.0)
-                .unwrap();
-        }
-    }
+    let path = journal_of("journal-torn", &[0.0, 1.0, 2.0]);
     let whole = fs::read(&path).unwrap();
     let clean_len = whole.len();
     // A crash mid-write: half of a fourth line, no newline.
@@ -149,17 +153,7 @@ fn a_torn_last_line_is_reported_cut_and_never_fatal() {
 
 #[test]
 fn a_complete_last_line_without_newline_is_kept() {
-    let dir = common::temp_dir("journal-nonewline");
-    let path = dir.join("runs.jsonl");
-    {
-        let store = RunStore::open(&path, "m1").unwrap();
-        store
-            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
-            .unwrap();
-        store
-            .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
-            .unwrap();
-    }
+    let path = journal_of("journal-nonewline", &[1.0, 2.0]);
     let mut bytes = fs::read(&path).unwrap();
     assert_eq!(bytes.pop(), Some(b'\n'));
     fs::write(&path, &bytes).unwrap();
@@ -252,14 +246,7 @@ fn parallel_appends_give_whole_lines() {
 
 #[test]
 fn a_whole_last_line_that_is_no_run_is_kept_as_a_bad_line() {
-    let dir = common::temp_dir("journal-bad-tail");
-    let path = dir.join("runs.jsonl");
-    {
-        let store = RunStore::open(&path, "m1").unwrap();
-        store
-            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
-            .unwrap();
-    }
+    let path = journal_of("journal-bad-tail", &[1.0]);
     // Complete JSON, not a record (say, a later version's), and no newline: not torn.
     let mut f = fs::OpenOptions::new().append(true).open(&path).unwrap();
     f.write_all(br#"{"seq":1,"note":"not a run"}"#).unwrap();
@@ -290,14 +277,7 @@ fn a_whole_last_line_that_is_no_run_is_kept_as_a_bad_line() {
 
 #[test]
 fn the_sequence_never_wraps() {
-    let dir = common::temp_dir("journal-seq-max");
-    let path = dir.join("runs.jsonl");
-    {
-        let store = RunStore::open(&path, "m1").unwrap();
-        store
-            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
-            .unwrap();
-    }
+    let path = journal_of("journal-seq-max", &[1.0]);
     let text = fs::read_to_string(&path)
         .unwrap()
         .replace("\"seq\":0", &format!("\"seq\":{}", u64::MAX));
@@ -311,17 +291,7 @@ fn the_sequence_never_wraps() {
 
 #[test]
 fn a_repeated_run_with_another_result_is_named() {
-    let dir = common::temp_dir("journal-conflict");
-    let path = dir.join("runs.jsonl");
-    {
-        let store = RunStore::open(&path, "m1").unwrap();
-        store
-            .record("t0", &names(), &[1.0, 1.0], &ok(&[1.0]), 0.0)
-            .unwrap();
-        store
-            .record("t0", &names(), &[2.0, 1.0], &ok(&[2.0]), 0.0)
-            .unwrap();
-    }
+    let path = journal_of("journal-conflict", &[1.0, 2.0]);
     let text = fs::read_to_string(&path).unwrap();
     let first = text.lines().next().unwrap().to_string();
     // The same run twice more: once as it was, once with another output.
