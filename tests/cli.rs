@@ -469,6 +469,18 @@ fn diagnose_and_simulate_run_the_model_the_calibration_recorded() {
         serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
     let mut model = report["model"].clone();
     let fingerprint = model["fingerprint"].take();
+    // Each snapshot's conditions, so that diagnose can refuse edited ones.
+    let keys = model
+        .as_object_mut()
+        .unwrap()
+        .remove("scenario_keys")
+        .unwrap();
+    for label in ["t0", "t1", "t2"] {
+        assert!(
+            keys[label].as_str().is_some_and(|k| k.len() == 32),
+            "{keys}"
+        );
+    }
     assert!(
         fingerprint
             .as_str()
