@@ -410,15 +410,19 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
     assert_ne!(powered, text);
     let edited_snaps = dir.join("powered.csv");
     std::fs::write(&edited_snaps, powered).unwrap();
-    let diagnose_at = |snapshots: &Path| {
+    // `diagnose` of this calibration, with these inputs and flags.
+    let diagnose = |hall: &Path, snapshots: &Path, flags: &[&str]| {
         run(kalibre()
             .args(["diagnose", "--hall"])
-            .arg(data("of-dev-clean/hall.json"))
+            .arg(hall)
             .arg("--snapshots")
             .arg(snapshots)
             .arg("--calibration")
-            .arg(&cal))
+            .arg(&cal)
+            .args(flags))
     };
+    let hall = data("of-dev-clean/hall.json");
+    let diagnose_at = |snapshots: &Path| diagnose(&hall, snapshots, &[]);
     let conditions = "powered.csv: snapshot `t0`: its setpoints, fan speeds or powers are not \
                       those the calibration ran at";
     let o = diagnose_at(&edited_snaps);
@@ -451,7 +455,7 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
     assert_input_error(&diagnose_at(&snaps), missing);
     let o = run(kalibre()
         .args(["simulate", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
+        .arg(&hall)
         .arg("--snapshots")
         .arg(&snaps)
         .arg("--params")
@@ -471,22 +475,13 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
     std::fs::write(&report_path, kept).unwrap();
     // Without the journal, the report's record of the model still names the hall it ran.
     std::fs::remove_file(cal.join("runs.jsonl")).unwrap();
-    let text = std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap();
-    let mut hall: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let flow = hall["cracs"][0]["rated_flow_m3_s"].as_f64().unwrap();
-    hall["cracs"][0]["rated_flow_m3_s"] = (1.1 * flow).into();
+    let text = std::fs::read_to_string(&hall).unwrap();
+    let mut edited_hall: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let flow = edited_hall["cracs"][0]["rated_flow_m3_s"].as_f64().unwrap();
+    edited_hall["cracs"][0]["rated_flow_m3_s"] = (1.1 * flow).into();
     let edited = dir.join("hall.json");
-    std::fs::write(&edited, hall.to_string()).unwrap();
-    let diagnose = |hall: &Path, snapshots: &Path, calibration: &Path| {
-        run(kalibre()
-            .args(["diagnose", "--hall"])
-            .arg(hall)
-            .arg("--snapshots")
-            .arg(snapshots)
-            .arg("--calibration")
-            .arg(calibration))
-    };
-    let o = diagnose(&edited, &snaps, &cal);
+    std::fs::write(&edited, edited_hall.to_string()).unwrap();
+    let o = diagnose(&edited, &snaps, &[]);
     assert_input_error(&o, "report.json: /model/fingerprint: runs of another model");
     // One reading moved by half a degree.
     let text = std::fs::read_to_string(&snaps).unwrap();
@@ -498,8 +493,7 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
     assert_ne!(moved, text);
     let other = dir.join("snapshots.csv");
     std::fs::write(&other, moved).unwrap();
-    let hall = data("of-dev-clean/hall.json");
-    let o = diagnose(&hall, &other, &cal);
+    let o = diagnose(&hall, &other, &[]);
     assert_input_error(
         &o,
         "snapshot `t0`, sensor `c-A1-hi` reads 18.333 C, the calibration's 17.833 C",
@@ -508,33 +502,16 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
     let mut report = read_report();
     report["model"]["grid_m"] = 0.001.into();
     std::fs::write(&report_path, report.to_string()).unwrap();
-    let o = diagnose(&hall, &snaps, &cal);
+    let o = diagnose(&hall, &snaps, &[]);
     assert_input_error(&o, "report.json: /model/grid_m: cells of 0.001 m need");
     // A --write-hall nothing can be written in, before any solve.
-    let o = run(kalibre()
-        .args([
-            "diagnose",
-            "--write-hall",
-            "/proc/kalibre/hall.json",
-            "--hall",
-        ])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--calibration")
-        .arg(&cal));
+    let o = diagnose(&hall, &snaps, &["--write-hall", "/proc/kalibre/hall.json"]);
     assert_input_error(
         &o,
         "--write-hall /proc/kalibre/hall.json: cannot write in /proc",
     );
     // An existing file that opens for writing but cannot be replaced (the hall is written
     // beside it and renamed): refused before the solves too, not after them.
-    let o = run(kalibre()
-        .args(["diagnose", "--write-hall", "/proc/version", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--calibration")
-        .arg(&cal));
+    let o = diagnose(&hall, &snaps, &["--write-hall", "/proc/version"]);
     assert_input_error(&o, "--write-hall /proc/version: cannot write in /proc");
 }

@@ -17,18 +17,22 @@ fn simulate_writes_predictions_and_vtk() {
         r#"{ "alpha/web": 0.13, "alpha/db": 0.17, "alpha/gpu": 0.12 }"#,
     )
     .unwrap();
-    let out = dir.join("pred.csv");
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--params")
-        .arg(&params)
-        .arg("--out")
-        .arg(&out)
-        .arg("--vtk")
-        .arg(dir.join("vtk")));
+    // `simulate` of `snapshots` at `params`, predictions to `<name>.csv`, fields to `name`.
+    let simulate = |snapshots: &std::path::Path, name: &str| {
+        run(kalibre()
+            .args(["simulate", "--hall"])
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(snapshots)
+            .arg("--params")
+            .arg(&params)
+            .arg("--out")
+            .arg(dir.join(name).with_extension("csv"))
+            .arg("--vtk")
+            .arg(dir.join(name)))
+    };
+    let out = dir.join("vtk.csv");
+    let o = simulate(&snaps, "vtk");
     assert!(o.status.success(), "{}", stderr(&o));
     let csv = std::fs::read_to_string(&out).unwrap();
     let rows: Vec<&str> = csv.lines().collect();
@@ -51,15 +55,7 @@ fn simulate_writes_predictions_and_vtk() {
     let relabelled = text.replace("\nt0,", "\na/b,").replace("\nt1,", "\na_b,");
     let clash = dir.join("clash.csv");
     std::fs::write(&clash, relabelled).unwrap();
-    let o = run(kalibre()
-        .args(["simulate", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&clash)
-        .arg("--out")
-        .arg(dir.join("clash-pred.csv"))
-        .arg("--vtk")
-        .arg(dir.join("clash-vtk")));
+    let o = simulate(&clash, "clash-vtk");
     assert_input_error(
         &o,
         "--vtk: snapshots `a/b` and `a_b` would both be written to a_b.vtk",

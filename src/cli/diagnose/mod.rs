@@ -256,11 +256,12 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     // Each snapshot's conditions as its runs journaled them, for reports without keys.
     let mut journal_keys: HashMap<String, HashSet<String>> = HashMap::new();
     if let Ok(lines) = std::fs::read_to_string(&journal) {
-        let runs: Vec<serde_json::Value> = lines
+        let mut other = false;
+        for v in lines
             .lines()
             .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-            .collect();
-        for v in &runs {
+        {
+            other |= v["fingerprint"].as_str().is_some_and(|f| f != fp);
             if let (Some(label), Some(key)) = (v["scenario"].as_str(), v["scenario_key"].as_str()) {
                 journal_keys
                     .entry(label.to_string())
@@ -268,10 +269,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
                     .insert(key.to_string());
             }
         }
-        let other = runs
-            .iter()
-            .find(|v| v["fingerprint"].as_str().is_some_and(|f| f != fp));
-        if other.is_some() {
+        if other {
             return Err(CliError::Input(format!(
                 "{}: runs of another model (a different hall.json, effects, --grid-m, --model or OpenFOAM option) than `{}` with --model {}",
                 journal.display(),
