@@ -8,6 +8,7 @@ mod error;
 mod inlets;
 mod openfoam_args;
 mod out_dir;
+mod plausible;
 mod simulate;
 mod simulate_openfoam;
 mod synth;

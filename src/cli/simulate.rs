@@ -330,6 +330,9 @@ pub fn run(args: SimulateArgs) -> CliResult {
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
     let mut snaps = snapshots::load_states(&hall, &args.snapshots)?;
+    // Before any what-if: the warning is about the files.
+    let states = snaps.iter().map(|s| &s.state);
+    super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     if args.vtk.is_some() {
         check_vtk_names(&snaps)?;
     }

@@ -11,7 +11,10 @@ use kalibre_core::{Observations, OutputInfo, Snapshot};
 use crate::hall::Hall;
 use crate::{Error, Result};
 
-pub use plausible::{readings_below_supply, ColdReading, BELOW_SUPPLY_MARGIN_C};
+pub use plausible::{
+    implausible_rises, readings_below_supply, ColdReading, ImplausibleRise, BELOW_SUPPLY_MARGIN_C,
+    MAX_MEAN_RISE_K, MIN_MEAN_RISE_K,
+};
 pub use read::{load_snapshots, load_states, parse_snapshots, parse_snapshots_bytes};
 pub(crate) use write::quote;
 pub use write::{write_predictions, write_snapshots};

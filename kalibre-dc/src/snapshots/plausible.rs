@@ -3,7 +3,7 @@
 //! removes it but the CRACs), so such a reading is a faulty sensor or a typing slip, and
 //! a least-squares fit would bend every parameter toward it.
 
-use super::HallSnapshot;
+use super::{HallSnapshot, OperatingState};
 use crate::hall::Hall;
 
 /// How far below the coldest running CRAC's setpoint a reading may lie before it is
@@ -69,4 +69,82 @@ pub fn readings_below_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<Col
         }
     }
     cold
+}
+
+/// Air density times heat capacity (J/(m3 K)): rho 1.2 kg/m3, cp 1005 J/(kg K), as in
+/// the built-in simulator and the OpenFOAM adapter.
+const AIR_RHO_CP: f64 = 1.2 * 1005.0;
+
+/// The highest hall-wide mean rise (K) of the CRACs' return air over their supply that
+/// is named as implausible. A server's exhaust rises 5-20 K (the default prior) and the
+/// return air mixes it with cooler air, so a mean far above that is a CRAC flow or a
+/// power in the wrong unit (0.01 instead of 10 m3/s, W typed for kW), not a hall.
+pub const MAX_MEAN_RISE_K: f64 = 40.0;
+
+/// The lowest mean rise (K) not named: below it the servers' heat hardly reaches the
+/// sensors, as with powers typed in kW where W are meant, and alpha cannot be told.
+pub const MIN_MEAN_RISE_K: f64 = 0.2;
+
+/// A snapshot whose servers' heat and CRACs' air flow give an implausible rise.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImplausibleRise {
+    /// Snapshot label.
+    pub snapshot: String,
+    /// Total server power (W).
+    pub power_w: f64,
+    /// Total CRAC air flow at this snapshot's fan speeds (m3/s).
+    pub supply_m3_s: f64,
+    /// Mean rise of the return air over the supply that energy balance demands (K).
+    pub mean_rise_k: f64,
+}
+
+/// Every snapshot whose mean return-air rise, total power over (rho cp x total CRAC
+/// flow), lies outside [`MIN_MEAN_RISE_K`]..[`MAX_MEAN_RISE_K`]. In steady state the
+/// CRACs carry all the servers' heat away, so this rise holds whatever the air does in
+/// between; a snapshot with no CRAC running is skipped (the model refuses it).
+///
+/// ```
+/// use kalibre_dc::snapshots::{implausible_rises, OperatingState};
+/// let mut hall = kalibre_dc::synth::generate_hall(&Default::default()).unwrap();
+/// let state = OperatingState {
+///     label: "t0".into(),
+///     setpoint_c: vec![18.0; hall.cracs.len()],
+///     fan_speed: vec![1.0; hall.cracs.len()],
+///     power_w: vec![300.0; hall.server_count()],
+/// };
+/// assert!(implausible_rises(&hall, [&state]).is_empty());
+/// // Litres per second typed as m3/s: a thousandth of the flow.
+/// for c in &mut hall.cracs {
+///     c.rated_flow_m3_s /= 1000.0;
+/// }
+/// let slips = implausible_rises(&hall, [&state]);
+/// assert_eq!(slips.len(), 1);
+/// assert!(slips[0].mean_rise_k > 1000.0);
+/// ```
+pub fn implausible_rises<'a>(
+    hall: &Hall,
+    states: impl IntoIterator<Item = &'a OperatingState>,
+) -> Vec<ImplausibleRise> {
+    states
+        .into_iter()
+        .filter_map(|st| {
+            let supply_m3_s: f64 = hall
+                .cracs
+                .iter()
+                .zip(&st.fan_speed)
+                .map(|(c, &fan)| c.rated_flow_m3_s * fan)
+                .sum();
+            let power_w: f64 = st.power_w.iter().sum();
+            if !(supply_m3_s > 0.0) || !power_w.is_finite() {
+                return None;
+            }
+            let mean_rise_k = power_w / (AIR_RHO_CP * supply_m3_s);
+            (!(MIN_MEAN_RISE_K..=MAX_MEAN_RISE_K).contains(&mean_rise_k)).then(|| ImplausibleRise {
+                snapshot: st.label.clone(),
+                power_w,
+                supply_m3_s,
+                mean_rise_k,
+            })
+        })
+        .collect()
 }

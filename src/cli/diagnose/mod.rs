@@ -163,6 +163,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
+    let states = snaps.iter().map(|s| &s.state);
+    super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     let report_path = args.calibration.join("report.json");
     let text = std::fs::read_to_string(&report_path)
         .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;

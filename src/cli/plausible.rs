@@ -1,0 +1,72 @@
+//! Warnings about inputs that read well but no hall produces: a unit slip in a CRAC's
+//! air flow or in the servers' powers. They warn rather than refuse, as the user may
+//! mean it (a test rig, an idle hall), and name the file and snapshot to look at.
+
+use std::path::Path;
+
+use kalibre_dc::hall::Hall;
+use kalibre_dc::snapshots::{self, OperatingState};
+
+/// Warns of snapshots whose servers' heat and CRACs' air flow give a mean return-air
+/// rise outside the plausible band (a flow in l/s or cfm typed as m3/s, powers in kW
+/// typed as W), naming the two files and the first such snapshot.
+pub(crate) fn warn_implausible_rises<'a>(
+    hall_path: &Path,
+    snapshots_path: &Path,
+    hall: &Hall,
+    states: impl IntoIterator<Item = &'a OperatingState>,
+) {
+    let slips = snapshots::implausible_rises(hall, states);
+    let Some(first) = slips.first() else {
+        return;
+    };
+    let more = match slips.len() {
+        1 => String::new(),
+        n => format!(" ({} more such snapshots)", n - 1),
+    };
+    let hint = if first.mean_rise_k > snapshots::MAX_MEAN_RISE_K {
+        format!(
+            "no hall runs above {} K: is a CRAC's rated_flow_m3_s in another unit (l/s, \
+             cfm), or a power in W meant as something smaller?",
+            snapshots::MAX_MEAN_RISE_K
+        )
+    } else {
+        format!(
+            "below {} K the servers' heat hardly reaches the sensors and their air flow \
+             cannot be told: are the powers in kW where W are meant?",
+            snapshots::MIN_MEAN_RISE_K
+        )
+    };
+    eprintln!(
+        "kalibre: warning: {} and {}: snapshot `{}`: the servers' {} W over the CRACs' \
+         {} m3/s of air make the return air {:.1} K warmer than the supply on average; \
+         {hint}{more}",
+        hall_path.display(),
+        snapshots_path.display(),
+        first.snapshot,
+        significant(first.power_w),
+        significant(first.supply_m3_s),
+        first.mean_rise_k,
+    );
+}
+
+/// `v` to three significant figures, without an exponent (a flow of 0.00356 m3/s reads
+/// as such, not as 0.0035550000000000004).
+fn significant(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return v.to_string();
+    }
+    let decimals = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    format!("{v:.decimals$}")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn three_significant_figures() {
+        assert_eq!(super::significant(0.003555), "0.00356");
+        assert_eq!(super::significant(51730.0), "51730");
+        assert_eq!(super::significant(3.15), "3.15");
+        assert_eq!(super::significant(12.34), "12.3");
+    }
+}
