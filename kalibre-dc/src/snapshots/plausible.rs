@@ -135,7 +135,7 @@ pub fn implausible_rises<'a>(
                 .map(|(c, &fan)| c.rated_flow_m3_s * fan)
                 .sum();
             let power_w: f64 = st.power_w.iter().sum();
-            if !(supply_m3_s > 0.0) || !power_w.is_finite() {
+            if supply_m3_s.is_nan() || supply_m3_s <= 0.0 || !power_w.is_finite() {
                 return None;
             }
             let mean_rise_k = power_w / (AIR_RHO_CP * supply_m3_s);
