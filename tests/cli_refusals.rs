@@ -441,6 +441,19 @@ fn a_diagnosis_of_other_inputs_than_the_calibrations_is_refused() {
     let o = diagnose_at(&edited_snaps);
     assert_input_error(&o, conditions);
     assert!(stderr(&o).contains("runs.jsonl"), "{}", stderr(&o));
+    // A line of the journal that is not JSON is named, not passed over.
+    let journal = cal.join("runs.jsonl");
+    let runs = std::fs::read_to_string(&journal).unwrap();
+    std::fs::write(&journal, format!("{runs}not a record\n")).unwrap();
+    let o = diagnose_at(&edited_snaps);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let line = runs.lines().count() + 1;
+    assert!(
+        err.contains(&format!("1 line(s) are not JSON (first: line {line})")),
+        "{err}"
+    );
+    std::fs::write(&journal, runs).unwrap();
     // The report's values are read by name (a tool that rewrites it may reorder them);
     // one deleted is named, by diagnose and by simulate --params alike, never taken from
     // the hall's initial values.

@@ -257,12 +257,32 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     let journal = args.calibration.join("runs.jsonl");
     // Each snapshot's conditions as its runs journaled them, for reports without keys.
     let mut journal_keys: HashMap<String, HashSet<String>> = HashMap::new();
-    if let Ok(lines) = std::fs::read_to_string(&journal) {
+    let read = std::fs::read_to_string(&journal);
+    if let Some(e) = read
+        .as_ref()
+        .err()
+        .filter(|e| e.kind() != std::io::ErrorKind::NotFound)
+    {
+        eprintln!(
+            "kalibre: warning: {}: not read ({e}); the calibration's model is not checked \
+             against `{}`",
+            journal.display(),
+            args.hall.display()
+        );
+    }
+    if let Ok(lines) = read {
         let mut other = false;
-        for v in lines
-            .lines()
-            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        {
+        // Named, as the fingerprint check cannot see into them (a killed calibration
+        // leaves a torn last line, which its resume repairs).
+        let mut unread = Vec::new();
+        let records = lines.lines().enumerate().filter_map(|(i, l)| {
+            let v = serde_json::from_str::<serde_json::Value>(l).ok();
+            if v.is_none() && !l.trim().is_empty() {
+                unread.push(i + 1);
+            }
+            v
+        });
+        for v in records {
             other |= v["fingerprint"].as_str().is_some_and(|f| f != fp);
             if let (Some(label), Some(key)) = (v["scenario"].as_str(), v["scenario_key"].as_str()) {
                 journal_keys
@@ -270,6 +290,15 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
                     .or_default()
                     .insert(key.to_string());
             }
+        }
+        if let Some(first) = unread.first() {
+            eprintln!(
+                "kalibre: warning: {}: {} line(s) are not JSON (first: line {first}); \
+                 the runs on them are not checked against `{}`",
+                journal.display(),
+                unread.len(),
+                args.hall.display()
+            );
         }
         if other {
             return Err(CliError::Input(format!(
