@@ -329,6 +329,22 @@ fn base_files_are_valid() {
     check_accepted_snapshots(&hall, &snaps);
 }
 
+/// A quote opened and not closed reads the rest of the file into one field: named at its
+/// line and column as such, not as a row with too few fields.
+#[test]
+fn an_unclosed_quote_is_named_where_it_opens() {
+    let hall = base_hall();
+    let text = CSV.replacen("t0,power_w,R1,5000", "t0,power_w,\"R1,5000", 1);
+    assert_ne!(text, CSV);
+    let err = parse_snapshots(&hall, &text, "quote.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("quote.csv: line 6, column id: a quoted value runs on past its line"),
+        "{err}"
+    );
+}
+
 #[test]
 fn deeply_nested_json_is_an_error_not_a_stack_overflow() {
     let deep = "[".repeat(100_000);

@@ -61,6 +61,14 @@ fn parse(hall: &Hall, bytes: &[u8], file: &str, need_readings: bool) -> Result<V
         let byte = record.position().map_or(0, csv::Position::byte);
         let line = lines.line_at(bytes, byte);
         let row = Row::new(file, line, &record)?;
+        // Only a quote lets a field hold a line end: one opened and never closed reads the
+        // lines after it into this field, which no count of fields would explain.
+        if let Some(c) = row.fields.iter().position(|f| f.contains(['\n', '\r'])) {
+            return Err(row.err(
+                Some(c.min(COLUMNS.len() - 1)),
+                "a quoted value runs on past its line: is a closing `\"` missing?",
+            ));
+        }
         if !header_seen {
             if row.fields != HEADER {
                 return Err(Error::format(
