@@ -1,7 +1,6 @@
 //! `kalibre diagnose`: where a calibrated hall model fails, and which physical effect is
 //! missing.
 
-use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 
 use clap::Args;
@@ -19,6 +18,7 @@ use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
 
+mod journal;
 mod print;
 
 use print::{
@@ -253,65 +253,16 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
     let params = load_params(&report_path, &report_json, space)?;
     report.best.params = NamedValues::new(&space.names(), &params);
-    // The journal names the model it ran: refuse a calibration of another hall or grid.
-    let journal = args.calibration.join("runs.jsonl");
-    // Each snapshot's conditions as its runs journaled them, for reports without keys.
-    let mut journal_keys: HashMap<String, HashSet<String>> = HashMap::new();
-    let read = std::fs::read_to_string(&journal);
-    if let Some(e) = read
-        .as_ref()
-        .err()
-        .filter(|e| e.kind() != std::io::ErrorKind::NotFound)
-    {
-        eprintln!(
-            "kalibre: warning: {}: not read ({e}); the calibration's model is not checked \
-             against `{}`",
-            journal.display(),
-            args.hall.display()
-        );
-    }
-    if let Ok(lines) = read {
-        let mut other = false;
-        // Named, as the fingerprint check cannot see into them (a killed calibration
-        // leaves a torn last line, which its resume repairs).
-        let mut unread = Vec::new();
-        let records = lines.lines().enumerate().filter_map(|(i, l)| {
-            let v = serde_json::from_str::<serde_json::Value>(l).ok();
-            if v.is_none() && !l.trim().is_empty() {
-                unread.push(i + 1);
-            }
-            v
-        });
-        for v in records {
-            other |= v["fingerprint"].as_str().is_some_and(|f| f != fp);
-            if let (Some(label), Some(key)) = (v["scenario"].as_str(), v["scenario_key"].as_str()) {
-                journal_keys
-                    .entry(label.to_string())
-                    .or_default()
-                    .insert(key.to_string());
-            }
-        }
-        if let Some(first) = unread.first() {
-            eprintln!(
-                "kalibre: warning: {}: {} line(s) are not JSON (first: line {first}); \
-                 the runs on them are not checked against `{}`",
-                journal.display(),
-                unread.len(),
-                args.hall.display()
-            );
-        }
-        if other {
-            return Err(CliError::Input(format!(
-                "{}: runs of another model (a different hall.json, effects, --grid-m, --model or OpenFOAM option) than `{}` with --model {}",
-                journal.display(),
-                args.hall.display(),
-                match args.model {
-                    DiagnoseModel::Builtin => "builtin",
-                    DiagnoseModel::Openfoam => "openfoam",
-                }
-            )));
-        }
-    }
+    let model_name = match args.model {
+        DiagnoseModel::Builtin => "builtin",
+        DiagnoseModel::Openfoam => "openfoam",
+    };
+    let journal_keys = journal::scenario_keys(
+        &args.calibration.join("runs.jsonl"),
+        &fp,
+        &args.hall,
+        model_name,
+    )?;
     check_same_conditions(
         &report_path,
         recorded.as_ref(),

@@ -1,0 +1,68 @@
+//! The calibration's journal as `diagnose` reads it: whether its runs are of this model,
+//! and each snapshot's conditions as its runs recorded them.
+
+use std::collections::{HashMap, HashSet};
+use std::path::Path;
+
+use crate::cli::{CliError, CliResult};
+
+/// Each snapshot label's scenario keys in `journal` (for reports that carry none),
+/// after refusing a journal with runs of a model other than `fingerprint`'s. A missing
+/// journal gives none; one that cannot be read, or lines that are not JSON, are named
+/// in a warning, as the check cannot see into them.
+pub(super) fn scenario_keys(
+    journal: &Path,
+    fingerprint: &str,
+    hall: &Path,
+    model_name: &str,
+) -> CliResult<HashMap<String, HashSet<String>>> {
+    let mut keys: HashMap<String, HashSet<String>> = HashMap::new();
+    let text = match std::fs::read_to_string(journal) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(keys),
+        Err(e) => {
+            eprintln!(
+                "kalibre: warning: {}: not read ({e}); the calibration's model is not \
+                 checked against `{}`",
+                journal.display(),
+                hall.display()
+            );
+            return Ok(keys);
+        }
+    };
+    let mut other = false;
+    // A killed calibration leaves a torn last line (its resume repairs it).
+    let mut unread = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+            if !line.trim().is_empty() {
+                unread.push(i + 1);
+            }
+            continue;
+        };
+        other |= v["fingerprint"].as_str().is_some_and(|f| f != fingerprint);
+        if let (Some(label), Some(key)) = (v["scenario"].as_str(), v["scenario_key"].as_str()) {
+            keys.entry(label.to_string())
+                .or_default()
+                .insert(key.to_string());
+        }
+    }
+    if let Some(first) = unread.first() {
+        eprintln!(
+            "kalibre: warning: {}: {} line(s) are not JSON (first: line {first}); the runs \
+             on them are not checked against `{}`",
+            journal.display(),
+            unread.len(),
+            hall.display()
+        );
+    }
+    if other {
+        return Err(CliError::Input(format!(
+            "{}: runs of another model (a different hall.json, effects, --grid-m, --model or \
+             OpenFOAM option) than `{}` with --model {model_name}",
+            journal.display(),
+            hall.display(),
+        )));
+    }
+    Ok(keys)
+}
