@@ -6,7 +6,7 @@ use std::path::Path;
 /// Writes `bytes` to `path` whole or not at all: into a temporary file beside it, synced,
 /// then renamed over `path`. A process killed mid-write leaves the old file (or none) and
 /// a stray `.NAME.tmp-PID`, never a truncated `report.json` that the next command would
-/// have to refuse.
+/// have to refuse. A path that is a device or FIFO is written into directly.
 ///
 /// ```
 /// let dir = std::env::temp_dir().join(format!("kalibre-doc-atomic-{}", std::process::id()));
@@ -24,6 +24,12 @@ pub fn write_atomic(path: &Path, bytes: impl AsRef<[u8]>) -> std::io::Result<()>
     } else {
         path
     };
+    // A device or FIFO (`--out /dev/null`) is written into, never renamed over: as root
+    // that rename would replace /dev/null with a file for every process on the machine.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        let mut f = std::fs::OpenOptions::new().write(true).open(path)?;
+        return f.write_all(bytes.as_ref()).and_then(|()| f.flush());
+    }
     let name = path
         .file_name()
         .ok_or_else(|| std::io::Error::other("not a file path"))?
@@ -61,6 +67,22 @@ mod tests {
             write_atomic(&link, "through").unwrap();
             assert!(link.is_symlink());
             assert_eq!(std::fs::read_to_string(&path).unwrap(), "through");
+        }
+        // A FIFO (like a device) is written into and stays one: a file renamed over
+        // /dev/null would be what every later reader of it gets.
+        #[cfg(unix)]
+        {
+            let fifo = dir.join("fifo");
+            let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+            assert!(made.unwrap().success());
+            let reader = {
+                let fifo = fifo.clone();
+                std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+            };
+            write_atomic(&fifo, "through the pipe").unwrap();
+            // Before waiting on the reader, which a replaced FIFO would leave blocked.
+            assert!(!std::fs::metadata(&fifo).unwrap().is_file());
+            assert_eq!(reader.join().unwrap(), "through the pipe");
         }
         // A directory in the way: an error, the temporary file gone.
         std::fs::create_dir_all(dir.join("taken")).unwrap();

@@ -9,6 +9,7 @@ mod inlets;
 mod openfoam_args;
 mod out_dir;
 mod plausible;
+mod same_file;
 mod simulate;
 mod simulate_openfoam;
 mod synth;

@@ -294,32 +294,25 @@ pub fn sim_config(grid_m: Option<f64>) -> CliResult<SimConfig> {
 /// An output path that names an input file would replace the measurements (or the hall)
 /// with predictions: refused before anything runs.
 fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
-    let canonical = |p: Option<&PathBuf>| p.and_then(|p| std::fs::canonicalize(p).ok());
-    let inputs = [
-        ("--hall", canonical(Some(&args.hall))),
-        ("--snapshots", canonical(Some(&args.snapshots))),
-        ("--params", canonical(args.params.as_ref())),
-    ];
-    let outputs = [
-        ("--out", Some(&args.out)),
-        ("--servers", args.servers.as_ref()),
-        ("--heat-sources", args.heat_sources.as_ref()),
-    ];
-    for (out_flag, out) in outputs {
-        let Some(out) = canonical(out) else {
-            continue;
-        };
-        for (in_flag, input) in &inputs {
-            if input.as_ref() == Some(&out) {
-                return Err(CliError::Input(format!(
-                    "{out_flag} {} is the {in_flag} file: writing there would replace it; \
-                     expected another path",
-                    out.display()
-                )));
-            }
-        }
-    }
-    Ok(())
+    // A calibration's report as --params has its journal beside it.
+    let journal = args
+        .params
+        .as_ref()
+        .and_then(|p| p.parent())
+        .map(|d| d.join("runs.jsonl"));
+    super::same_file::refuse_same_files(
+        &[
+            ("--out", Some(args.out.as_path())),
+            ("--servers", args.servers.as_deref()),
+            ("--heat-sources", args.heat_sources.as_deref()),
+        ],
+        &[
+            ("the --hall file", Some(args.hall.as_path())),
+            ("the --snapshots file", Some(args.snapshots.as_path())),
+            ("the --params file", args.params.as_deref()),
+            ("the run journal beside --params", journal.as_deref()),
+        ],
+    )
 }
 
 /// Runs `kalibre simulate`.

@@ -52,6 +52,9 @@ pub fn run(args: SynthArgs) -> CliResult {
         .iter()
         .map(|e| synth::parse_effect_arg(e))
         .collect::<Result<Vec<_>, _>>()?;
+    for (arg, e) in args.effects.iter().zip(&effects) {
+        refuse_inert(arg, e)?;
+    }
     let mut options = SynthOptions::new(preset, args.seed)
         .with_noise_c(args.noise_c)
         .with_snapshots(args.snapshots);
@@ -70,6 +73,41 @@ pub fn run(args: SynthArgs) -> CliResult {
         out.hall.sensors.len(),
         out.snapshots.len()
     );
+    Ok(())
+}
+
+/// Each built-in kind's size and its value when not given (`None`: a non-zero default).
+const SIZES: [(&str, &str, Option<f64>); 4] = [
+    ("crac_supply_offset", "offset_c", Some(0.0)),
+    ("bypass", "fraction", None),
+    ("rack_recirculation", "fraction", None),
+    ("containment_leakage", "open_fraction", None),
+];
+
+/// Refuses a hidden effect of size 0: its measurements would be the clean hall's while
+/// truth.json lists it, and a diagnosis that finds nothing there would look wrong.
+fn refuse_inert(arg: &str, effect: &kalibre_dc::hall::EffectSpec) -> CliResult {
+    let Some((_, field, default)) = SIZES.iter().find(|(k, _, _)| *k == effect.kind) else {
+        return Ok(());
+    };
+    let size = effect
+        .fields
+        .get(*field)
+        .and_then(|v| v.as_f64())
+        .or(*default);
+    if size == Some(0.0) {
+        return Err(CliError::Input(format!(
+            "--effect `{arg}`: {field} is 0{}, which hides nothing (the measurements would \
+             be the clean hall's); give a size, e.g. `{}:{field}={}`",
+            if effect.fields.contains_key(*field) {
+                ""
+            } else {
+                " (its default)"
+            },
+            effect.kind,
+            if *field == "offset_c" { "-1.5" } else { "0.1" },
+        )));
+    }
     Ok(())
 }
 

@@ -158,6 +158,19 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         .refuse_unless(args.model == DiagnoseModel::Openfoam)?;
     if let Some(path) = &args.write_hall {
         check_writable_file(path)?;
+        let (report, journal) = (
+            args.calibration.join("report.json"),
+            args.calibration.join("runs.jsonl"),
+        );
+        super::same_file::refuse_same_files(
+            &[("--write-hall", Some(path.as_path()))],
+            &[
+                ("the --hall file", Some(args.hall.as_path())),
+                ("the --snapshots file", Some(args.snapshots.as_path())),
+                ("the calibration's report", Some(report.as_path())),
+                ("the calibration's run journal", Some(journal.as_path())),
+            ],
+        )?;
     }
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()

@@ -1,0 +1,172 @@
+//! Where results are written: never over an input, a report or a run journal, never one
+//! output over another, never a file renamed over a device or FIFO; output that cannot be
+//! written is an error with exit code 1, not a panic. And a synthetic hall never hides an
+//! effect of size 0.
+
+mod cli_support;
+
+use std::path::Path;
+use std::process::Stdio;
+
+use cli_support::{assert_input_error, data, kalibre, run, stderr, tmp};
+
+/// `kalibre simulate` of the development hall with `extra` flags.
+fn simulate(extra: &[&std::ffi::OsStr]) -> std::process::Output {
+    run(kalibre()
+        .args(["simulate", "--hall"])
+        .arg(data("of-dev-clean/hall.json"))
+        .arg("--snapshots")
+        .arg(data("of-dev-clean/snapshots.csv"))
+        .args(extra))
+}
+
+fn os(p: &Path) -> &std::ffi::OsStr {
+    p.as_os_str()
+}
+
+#[test]
+fn outputs_never_replace_inputs_journals_or_each_other() {
+    let dir = tmp("output-paths");
+    let (pred, servers) = (dir.join("pred.csv"), dir.join("servers.csv"));
+    let o = simulate(&["--out".as_ref(), os(&pred), "--servers".as_ref(), os(&pred)]);
+    assert_input_error(&o, "--servers");
+    assert!(
+        stderr(&o).contains("is also the --out file"),
+        "{}",
+        stderr(&o)
+    );
+    let o = simulate(&[
+        "--out".as_ref(),
+        os(&pred),
+        "--servers".as_ref(),
+        os(&servers),
+        "--heat-sources".as_ref(),
+        os(&dir.join(".").join("servers.csv")),
+    ]);
+    assert_input_error(&o, "is also the --servers file");
+    assert!(!pred.exists() && !servers.exists());
+
+    // A calibration's report as --params: its journal beside it is not an output.
+    let cal = dir.join("cal");
+    std::fs::create_dir_all(&cal).unwrap();
+    let journal = cal.join("runs.jsonl");
+    std::fs::write(&journal, "{}\n").unwrap();
+    let params = cal.join("report.json");
+    std::fs::write(&params, "{}").unwrap();
+    let o = simulate(&[
+        "--params".as_ref(),
+        os(&params),
+        "--out".as_ref(),
+        os(&pred),
+        "--servers".as_ref(),
+        os(&journal),
+    ]);
+    assert_input_error(&o, "is the run journal beside --params");
+    assert_eq!(std::fs::read_to_string(&journal).unwrap(), "{}\n");
+
+    // diagnose --write-hall onto any of its inputs, checked before anything is read.
+    let snaps = dir.join("snapshots.csv");
+    std::fs::copy(data("of-dev-clean/snapshots.csv"), &snaps).unwrap();
+    let hall = data("of-dev-clean/hall.json");
+    for (target, what) in [
+        (snaps.as_path(), "is the --snapshots file"),
+        (hall.as_path(), "is the --hall file"),
+        (params.as_path(), "is the calibration's report"),
+        (journal.as_path(), "is the calibration's run journal"),
+    ] {
+        let o = run(kalibre()
+            .args(["diagnose", "--hall"])
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(&snaps)
+            .arg("--calibration")
+            .arg(&cal)
+            .arg("--write-hall")
+            .arg(target));
+        assert_input_error(&o, what);
+    }
+    assert_eq!(std::fs::read_to_string(&journal).unwrap(), "{}\n");
+}
+
+/// `--out` a FIFO: the predictions go through it, and it stays a FIFO (renamed over, a
+/// device such as /dev/null would have become a file for every process).
+#[cfg(unix)]
+#[test]
+fn a_fifo_out_is_written_into_not_replaced() {
+    let dir = tmp("fifo-out");
+    let fifo = dir.join("pred.fifo");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    let o = simulate(&["--out".as_ref(), os(&fifo)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Checked before waiting on the reader, which a replaced FIFO would leave blocked.
+    assert!(!std::fs::metadata(&fifo).unwrap().is_file());
+    let text = reader.join().unwrap();
+    assert!(text.starts_with("snapshot,kind,id,value\n"), "{text}");
+    assert_eq!(text.lines().count(), 1 + 3 * 24);
+}
+
+/// Output to a full device: a one-line error and exit code 1, not a panic (101); an input
+/// error whose message cannot be written keeps its exit code 2.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_stdout_or_stderr_is_an_error_not_a_panic() {
+    let full = || {
+        Stdio::from(
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open("/dev/full")
+                .unwrap(),
+        )
+    };
+    let dir = tmp("full");
+    let o = kalibre()
+        .args(["synth", "--out"])
+        .arg(dir.join("s"))
+        .stdout(full())
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with("kalibre: error: failed printing to stdout"),
+        "{err}"
+    );
+    let o = kalibre()
+        .args(["simulate", "--hall"])
+        .arg(dir.join("missing.json"))
+        .args(["--snapshots", "s.csv", "--out", "p.csv"])
+        .stderr(full())
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+}
+
+#[test]
+fn a_hidden_effect_of_size_zero_is_refused() {
+    let dir = tmp("inert");
+    for (effect, needle) in [
+        (
+            "crac_supply_offset",
+            "offset_c is 0 (its default), which hides nothing",
+        ),
+        (
+            "bypass:behind_rack=A03,fraction=0",
+            "fraction is 0, which hides nothing",
+        ),
+    ] {
+        let o = run(kalibre()
+            .args(["synth", "--effect", effect, "--out"])
+            .arg(dir.join("s")));
+        assert_input_error(&o, needle);
+    }
+    assert!(!dir.join("s").exists());
+}
