@@ -128,7 +128,11 @@ fn search_settings_out_of_their_ranges_are_refused_by_flag() {
             "--trust-region: must be in [0.001, 1]",
         ),
         ("--focus", "1e-300", "--focus: must be finite and >= 0.01"),
-        ("--explore", "2", "--explore: must be in (0, 1]"),
+        (
+            "--explore",
+            "2",
+            "--explore: must be in [0, 1] (0 stops at a repeated point)",
+        ),
         (
             "--rise-weight",
             "1e308",

@@ -86,6 +86,26 @@ fn unit_slips_in_flow_or_power_are_named_and_real_halls_are_not() {
         "{err}"
     );
 
+    // A what-if far beyond any hall is said to be so; a modest one is not.
+    let what_if = |scale: &str| {
+        let o = run(kalibre()
+            .args(["simulate", "--hall"])
+            .arg(&hall)
+            .arg("--snapshots")
+            .arg(&snaps)
+            .args(["--power-scale", scale, "--out"])
+            .arg(dir.join("what-if.csv")));
+        assert!(o.status.success(), "{}", stderr(&o));
+        stderr(&o)
+    };
+    let err = what_if("100");
+    assert!(
+        err.contains("what if server powers x100: snapshot `t0`") && err.contains("no hall runs"),
+        "{err}"
+    );
+    let err = what_if("1.2");
+    assert!(!err.contains("warning"), "{err}");
+
     // calibrate warns the same before it runs anything; here a directory where its report
     // goes stops it right after.
     let out = dir.join("cal");

@@ -50,6 +50,31 @@ pub(crate) fn warn_implausible_rises<'a>(
     );
 }
 
+/// Warns when a what-if (`what`) takes a snapshot's mean return-air rise past
+/// [`snapshots::MAX_MEAN_RISE_K`]: the predictions and headroom are then the model's
+/// arithmetic far outside any hall, not advice.
+pub(crate) fn warn_what_if_beyond_halls<'a>(
+    what: &str,
+    hall: &Hall,
+    states: impl IntoIterator<Item = &'a OperatingState>,
+) {
+    let beyond: Vec<_> = snapshots::implausible_rises(hall, states)
+        .into_iter()
+        .filter(|r| r.mean_rise_k > snapshots::MAX_MEAN_RISE_K)
+        .collect();
+    if let Some(first) = beyond.first() {
+        eprintln!(
+            "kalibre: warning: what if {what}: snapshot `{}` would run its return air {:.0} K \
+             above its supply on average ({} snapshot(s) past {} K); no hall runs there, so \
+             its predictions and headroom are far outside what the model was made for",
+            first.snapshot,
+            first.mean_rise_k,
+            beyond.len(),
+            snapshots::MAX_MEAN_RISE_K
+        );
+    }
+}
+
 /// `v` to three significant figures, without an exponent (a flow of 0.00356 m3/s reads
 /// as such, not as 0.0035550000000000004).
 fn significant(v: f64) -> String {

@@ -332,6 +332,8 @@ pub fn run(args: SimulateArgs) -> CliResult {
     args.what_if.apply(&hall, &mut snaps)?;
     if let Some(what) = args.what_if.describe() {
         println!("what if: {what} (in every snapshot)");
+        let states = snaps.iter().map(|s| &s.state);
+        super::plausible::warn_what_if_beyond_halls(&what, &hall, states);
     }
     let file = args.params.as_deref().map(read_params_file).transpose()?;
     args.openfoam

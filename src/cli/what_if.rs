@@ -81,8 +81,13 @@ impl WhatIfArgs {
                 for (speed, crac) in state.fan_speed.iter_mut().zip(&hall.cracs) {
                     *speed *= f;
                     if *speed > 1.0 {
+                        // Three decimals, unless that rounds to the very limit exceeded.
+                        let speed = match format!("{speed:.3}") {
+                            r if r == "1.000" => speed.to_string(),
+                            r => r,
+                        };
                         return Err(CliError::Input(format!(
-                            "--fan-speed-scale {f}: CRAC `{}` in snapshot `{}` would run at {:.3} of its rated flow; a fan speed is at most 1",
+                            "--fan-speed-scale {f}: CRAC `{}` in snapshot `{}` would run at {} of its rated flow; a fan speed is at most 1",
                             crac.id, state.label, speed
                         )));
                     }

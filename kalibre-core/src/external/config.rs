@@ -116,7 +116,7 @@ impl Ctx<'_> {
             None => Ok(None),
             Some(Value::Integer(i)) => u32::try_from(*i)
                 .map(Some)
-                .map_err(|_| self.err(key, format!("{i} is not a count (0 or more)"))),
+                .map_err(|_| self.err(key, format!("{i} is not a count in [0, {}]", u32::MAX))),
             Some(v) => Err(self.err(key, format!("expected an integer, got {}", v.type_str()))),
         }
     }
@@ -262,13 +262,19 @@ impl CommandModelConfig {
         if timeout <= 0.0 || timeout > 1e9 {
             return Err(cx.err(
                 "timeout_s",
-                format!("{timeout} is not a positive number of seconds"),
+                format!(
+                    "{} is not a number of seconds in (0, 1e9]",
+                    readable(timeout)
+                ),
             ));
         }
         b = b.with_timeout(Duration::from_secs_f64(timeout));
         if let Some(g) = cx.num(&top, "", "kill_grace_s")? {
             if !(0.0..=1e6).contains(&g) {
-                return Err(cx.err("kill_grace_s", format!("{g} is not a number of seconds")));
+                return Err(cx.err(
+                    "kill_grace_s",
+                    format!("{} is not a number of seconds in [0, 1e6]", readable(g)),
+                ));
             }
             b = b.with_kill_grace(Duration::from_secs_f64(g));
         }
@@ -438,5 +444,14 @@ impl CommandModelConfig {
             space,
             scenarios,
         })
+    }
+}
+
+/// `v` as written, or with an exponent when that would take hundreds of digits.
+fn readable(v: f64) -> String {
+    if v != 0.0 && !(1e-4..1e9).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
     }
 }

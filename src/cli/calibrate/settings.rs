@@ -38,6 +38,14 @@ pub(super) fn flag_error(e: kalibre_dc::Error) -> CliError {
 
 /// Builds the hall calibration settings from the arguments.
 pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSettings> {
+    // 0 is a choice here (stop when a point repeats), so the loop's own (0, 1] does not
+    // say the flag's range.
+    if !(args.explore.is_finite() && (0.0..=1.0).contains(&args.explore)) {
+        return Err(CliError::Input(format!(
+            "--explore: must be in [0, 1] (0 stops at a repeated point), got {}",
+            args.explore
+        )));
+    }
     let (lo, hi) = args
         .rise_range
         .split_once(',')
