@@ -10,7 +10,8 @@ mod cli_support;
 use std::path::Path;
 
 use cli_support::{
-    assert_input_error, data, kalibre, on_dataset, run, stderr, tmp, QUICK_CALIBRATION,
+    assert_input_error, data, diagnose_cmd, kalibre, on_dataset, run, stderr, tmp,
+    QUICK_CALIBRATION,
 };
 
 #[test]
@@ -343,13 +344,7 @@ fn flags_that_cannot_apply_are_refused_before_any_output() {
     }
     assert!(!dir.join("cal").join("runs.jsonl").exists());
     // An unwritable --write-hall used to be found after the diagnosis's solves.
-    let o = run(kalibre()
-        .args(["diagnose", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--calibration")
-        .arg(dir.join("no-calibration"))
+    let o = run(diagnose_cmd(&hall, &snaps, &dir.join("no-calibration"))
         .arg("--write-hall")
         .arg(&dir));
     assert_input_error(&o, "--write-hall");

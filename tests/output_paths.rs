@@ -8,7 +8,7 @@ mod cli_support;
 use std::path::Path;
 use std::process::Stdio;
 
-use cli_support::{assert_input_error, data, kalibre, run, stderr, tmp};
+use cli_support::{assert_input_error, data, diagnose_cmd, kalibre, run, stderr, tmp};
 
 /// `kalibre simulate` of the development hall with `extra` flags.
 fn simulate(extra: &[&std::ffi::OsStr]) -> std::process::Output {
@@ -74,13 +74,7 @@ fn outputs_never_replace_inputs_journals_or_each_other() {
         (params.as_path(), "is the calibration's report"),
         (journal.as_path(), "is the calibration's run journal"),
     ] {
-        let o = run(kalibre()
-            .args(["diagnose", "--hall"])
-            .arg(&hall)
-            .arg("--snapshots")
-            .arg(&snaps)
-            .arg("--calibration")
-            .arg(&cal)
+        let o = run(diagnose_cmd(&hall, &snaps, &cal)
             .arg("--write-hall")
             .arg(target));
         assert_input_error(&o, what);

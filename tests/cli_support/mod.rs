@@ -53,6 +53,18 @@ pub fn on_dataset(command: &str, dataset: &str) -> Command {
     c
 }
 
+/// `kalibre diagnose --hall HALL --snapshots SNAPSHOTS --calibration CALIBRATION`.
+pub fn diagnose_cmd(hall: &Path, snapshots: &Path, calibration: &Path) -> Command {
+    let mut c = kalibre();
+    c.args(["diagnose", "--hall"])
+        .arg(hall)
+        .arg("--snapshots")
+        .arg(snapshots)
+        .arg("--calibration")
+        .arg(calibration);
+    c
+}
+
 /// A bad input gives exit code 2 and one readable error line naming what is wrong.
 pub fn assert_input_error(o: &Output, needle: &str) {
     let err = stderr(o);
