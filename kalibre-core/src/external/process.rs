@@ -201,7 +201,9 @@ pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
     Ok(ProcessOutcome { end, elapsed })
 }
 
-/// The last `n` lines of a file, reading at most its last 64 KiB; empty if unreadable.
+/// The last `n` lines of a file, reading at most its last 64 KiB; empty if unreadable. A
+/// carriage return ends a line too (a progress bar redraws one), and a line too long to
+/// show keeps its end, where solvers print what went wrong.
 fn tail_lines(path: &Path, n: usize) -> Vec<String> {
     const MAX_BYTES: u64 = 64 * 1024;
     const MAX_LINE: usize = 400;
@@ -218,20 +220,21 @@ fn tail_lines(path: &Path, n: usize) -> Vec<String> {
         return Vec::new();
     }
     let text = String::from_utf8_lossy(&buf);
-    let mut lines: Vec<&str> = text.lines().collect();
-    if skip > 0 && !lines.is_empty() {
-        lines.remove(0); // cut mid-line by the byte window
+    let mut lines: Vec<&str> = text.split(['\n', '\r']).collect();
+    // The window cut its first line; when that is the only one, its end is all there is.
+    if skip > 0 && lines.len() > 1 {
+        lines.remove(0);
     }
+    lines.retain(|l| !l.trim().is_empty());
     let from = lines.len().saturating_sub(n);
     lines[from..]
         .iter()
         .map(|l| {
             if l.len() > MAX_LINE {
-                let cut = (0..=MAX_LINE)
-                    .rev()
+                let cut = (l.len() - MAX_LINE..l.len())
                     .find(|&i| l.is_char_boundary(i))
-                    .unwrap_or(0);
-                format!("{}...", &l[..cut])
+                    .unwrap_or(l.len());
+                format!("...{}", &l[cut..])
             } else {
                 l.to_string()
             }
@@ -260,4 +263,35 @@ pub fn log_tail(dir: &Path, max_lines: usize) -> Option<String> {
         }
     }
     (!s.is_empty()).then_some(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A solver's error after a progress bar of carriage returns, or at the end of a line
+    /// longer than the window read, is what the tail shows.
+    #[test]
+    fn the_tail_keeps_the_end_of_progress_bars_and_long_lines() {
+        let dir = std::env::temp_dir().join(format!("kalibre-tail-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let progress: String = (0..20_000).map(|i| format!("\rstep {i}")).collect();
+        std::fs::write(
+            dir.join(STDERR_LOG),
+            format!("{progress}\rERROR: solver diverged"),
+        )
+        .unwrap();
+        std::fs::write(dir.join(STDOUT_LOG), "").unwrap();
+        let tail = log_tail(&dir, 4).unwrap();
+        assert!(
+            tail.ends_with("step 19999\nERROR: solver diverged\n"),
+            "{tail}"
+        );
+        let long = format!("{}ERROR: mesh not found", "Z".repeat(200_000));
+        std::fs::write(dir.join(STDERR_LOG), long).unwrap();
+        let tail = log_tail(&dir, 4).unwrap();
+        assert!(tail.ends_with("ZZZERROR: mesh not found\n"), "{tail}");
+        assert!(tail.len() < 500, "{} bytes", tail.len());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
