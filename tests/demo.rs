@@ -13,6 +13,12 @@ fn tmp(name: &str) -> PathBuf {
 #[test]
 fn demo_names_the_hidden_effect_and_the_error_falls() {
     let out = tmp("default");
+    // An earlier, longer story's files: none of them may sit beside the new story. A
+    // file of the user's stays.
+    std::fs::create_dir_all(out.join("step-7")).unwrap();
+    for stale in ["step-7/report.json", "diagnosis-5.json", "notes.txt"] {
+        std::fs::write(out.join(stale), "{}").unwrap();
+    }
     let o = Command::new(env!("CARGO_BIN_EXE_kalibre"))
         .args(["demo", "--out"])
         .arg(&out)
@@ -102,6 +108,8 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
     assert_eq!(hall["effects"][0]["kind"], "rack_recirculation");
     assert!(out.join("diagnosis-1.json").is_file());
     assert!(out.join("step-2/report.json").is_file());
+    assert!(!out.join("step-7").exists() && !out.join("diagnosis-5.json").exists());
+    assert!(out.join("notes.txt").is_file());
 
     // report.html: the plan, two thermal planes with their racks outlined, the error
     // chart across calibrations; nothing fetched from outside.

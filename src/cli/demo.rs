@@ -77,6 +77,43 @@ fn entry_json(e: &EffectSpec) -> String {
     serde_json::to_string(e).unwrap_or_default()
 }
 
+/// Removes what an earlier demo in `out` wrote that this one may not write again
+/// (`step-N/report.json`, `diagnosis-N.json`, `hall-with-effect.json`), so that no file
+/// beside the new story belongs to the old one. Only those names are touched.
+fn clear_previous_story(out: &std::path::Path) -> CliResult {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return Ok(()); // a new directory
+    };
+    let numbered = |name: &str, prefix: &str, suffix: &str| {
+        name.strip_prefix(prefix)
+            .and_then(|r| r.strip_suffix(suffix))
+            .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+    };
+    let remove = |path: &std::path::Path| {
+        std::fs::remove_file(path).map_err(|e| {
+            CliError::Input(format!(
+                "--out: {}: an earlier demo's file could not be removed: {e}",
+                path.display()
+            ))
+        })
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let path = entry.path();
+        if name == "hall-with-effect.json" || numbered(&name, "diagnosis-", ".json") {
+            remove(&path)?;
+        } else if numbered(&name, "step-", "") && path.is_dir() {
+            let report = path.join("report.json");
+            if report.exists() {
+                remove(&report)?;
+            }
+            // Left in place when it holds anything else (not the demo's).
+            let _ = std::fs::remove_dir(&path);
+        }
+    }
+    Ok(())
+}
+
 /// Runs `kalibre demo`.
 pub fn run(args: DemoArgs) -> CliResult {
     let hidden = hidden_effect(&args.effect)?;
@@ -91,6 +128,7 @@ pub fn run(args: DemoArgs) -> CliResult {
     let synth = with_threads(args.threads, || synth::generate(&opts))??;
     // Taken once the effect is known to build: bad input leaves no directory behind.
     let _lock = super::out_dir::lock(&args.out, "demo")?;
+    clear_previous_story(&args.out)?;
     synth::write_dir(&args.out, &synth)?;
     let hall = &synth.hall;
     let reference = synth.truth.reference.clone();
