@@ -1,11 +1,43 @@
-//! Warnings about inputs that read well but no hall produces: a unit slip in a CRAC's
-//! air flow or in the servers' powers. They warn rather than refuse, as the user may
-//! mean it (a test rig, an idle hall), and name the file and snapshot to look at.
+//! Warnings about inputs that read well but no hall produces: a reading colder than the
+//! supply, a unit slip in a CRAC's air flow or in the servers' powers. They warn rather
+//! than refuse, as the user may mean it (a test rig, an idle hall), and name the file and
+//! snapshot to look at.
 
 use std::path::Path;
 
 use kalibre_dc::hall::Hall;
-use kalibre_dc::snapshots::{self, OperatingState};
+use kalibre_dc::snapshots::{self, HallSnapshot, OperatingState};
+
+/// ` (N more such WHAT)` after the first of `count` findings; empty for one.
+fn more_such(count: usize, what: &str) -> String {
+    match count {
+        0 | 1 => String::new(),
+        n => format!(" ({} more such {what})", n - 1),
+    }
+}
+
+/// Warns of readings colder than every running CRAC's supply (a faulty sensor or a slip,
+/// which least squares would fit as data), naming the file, snapshot and sensor; the
+/// calibration goes on with them, as they are the user's measurements.
+pub(crate) fn warn_cold_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+    let cold = snapshots::readings_below_supply(hall, snaps);
+    let Some(first) = cold.first() else {
+        return;
+    };
+    let more = more_such(cold.len(), "readings");
+    eprintln!(
+        "kalibre: warning: {}: snapshot `{}`, sensor `{}` reads {} C, more than {} C below \
+         the coldest running CRAC's setpoint ({} C){more}; air in the hall is never colder \
+         than its supply, so it is fitted as it is but is likely a faulty sensor or a slip \
+         (leave its row out to calibrate without it)",
+        path.display(),
+        first.snapshot,
+        first.sensor,
+        snapshots::number(first.reading_c),
+        snapshots::BELOW_SUPPLY_MARGIN_C,
+        snapshots::number(first.coldest_supply_c),
+    );
+}
 
 /// Warns of snapshots whose servers' heat and CRACs' air flow give a mean return-air
 /// rise outside the plausible band (a flow in l/s or cfm typed as m3/s, powers in kW
@@ -20,10 +52,7 @@ pub(crate) fn warn_implausible_rises<'a>(
     let Some(first) = slips.first() else {
         return;
     };
-    let more = match slips.len() {
-        1 => String::new(),
-        n => format!(" ({} more such snapshots)", n - 1),
-    };
+    let more = more_such(slips.len(), "snapshots");
     let hint = if first.mean_rise_k > snapshots::MAX_MEAN_RISE_K {
         format!(
             "no hall runs above {} K: is a CRAC's rated_flow_m3_s in another unit (l/s, \

@@ -376,7 +376,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
-    summary::warn_cold_readings(&args.snapshots, &hall, &snaps);
+    super::plausible::warn_cold_readings(&args.snapshots, &hall, &snaps);
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;

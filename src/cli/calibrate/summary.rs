@@ -1,11 +1,7 @@
 //! The end-of-run summary of `kalibre calibrate`: errors, runs, stop reason, which
 //! parameters the data identify, and the best parameters.
 
-use std::path::Path;
-
 use kalibre_core::calibrate::Report;
-use kalibre_dc::hall::Hall;
-use kalibre_dc::snapshots::{self, HallSnapshot};
 
 fn fmt_c(v: Option<f64>) -> String {
     v.filter(|v| v.is_finite())
@@ -255,31 +251,5 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report) {
         best.line,
         best.mae_c,
         report.best.mae_c
-    );
-}
-
-/// Warns of readings colder than every running CRAC's supply (a faulty sensor or a slip,
-/// which least squares would fit as data), naming the file, snapshot and sensor; the
-/// calibration goes on with them, as they are the user's measurements.
-pub(super) fn warn_cold_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
-    let cold = snapshots::readings_below_supply(hall, snaps);
-    let Some(first) = cold.first() else {
-        return;
-    };
-    let more = match cold.len() {
-        1 => String::new(),
-        n => format!(" ({} more such readings)", n - 1),
-    };
-    eprintln!(
-        "kalibre: warning: {}: snapshot `{}`, sensor `{}` reads {} C, more than {} C below \
-         the coldest running CRAC's setpoint ({} C){more}; air in the hall is never colder \
-         than its supply, so it is fitted as it is but is likely a faulty sensor or a slip \
-         (leave its row out to calibrate without it)",
-        path.display(),
-        first.snapshot,
-        first.sensor,
-        snapshots::number(first.reading_c),
-        snapshots::BELOW_SUPPLY_MARGIN_C,
-        snapshots::number(first.coldest_supply_c),
     );
 }
