@@ -161,3 +161,53 @@ fn a_command_running_the_builtin_simulator_calibrates_as_the_builtin_model() {
     );
     assert_input_error(&o, "--grid-check runs the built-in simulator");
 }
+
+/// A `model.toml` that does not fit the hall is refused for what is wrong with it: a
+/// `[[scenarios]]` list (even one whose variables the templates cannot render), two
+/// sensors swapped in `output.names` (named where they part), and per-type `[[params]]`
+/// with `--alpha per-server` (refused without first warning of per-type bounds).
+#[test]
+fn a_config_that_does_not_fit_the_hall_is_refused_for_its_real_fault() {
+    let dir = tmp("command-misfit");
+    let hall: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
+            .unwrap();
+    write_command_model(&dir, &hall, 0.3);
+    let good = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+    let calibrate = |toml: &str, extra: &[&str]| {
+        let config = dir.join("misfit.toml");
+        std::fs::write(&config, toml).unwrap();
+        run(on_dataset("calibrate", "of-dev-clean")
+            .args(["--model", "command", "--config"])
+            .arg(&config)
+            .args(extra)
+            .arg("--out")
+            .arg(dir.join("out")))
+    };
+    // The templates use `setpoint_c/crac-1`, which this scenario lacks.
+    let scenarios = format!("{good}[[scenarios]]\nlabel = \"t0\"\nvariables = {{ x = 1.0 }}\n");
+    let o = calibrate(&scenarios, &[]);
+    assert_input_error(
+        &o,
+        "misfit.toml: `scenarios`: [[scenarios]] are not used with a hall",
+    );
+
+    let swapped = good.replacen(
+        "names = [\"c-A1-hi\", \"c-A1-lo\"",
+        "names = [\"c-A1-lo\", \"c-A1-hi\"",
+        1,
+    );
+    assert_ne!(swapped, good);
+    let o = calibrate(&swapped, &[]);
+    assert_input_error(
+        &o,
+        "output.names[0] is `c-A1-lo` where the hall has `c-A1-hi`, which comes at index 1",
+    );
+
+    let o = calibrate(&good, &["--alpha", "per-server"]);
+    assert_input_error(
+        &o,
+        "params must be the hall's calibrated parameters in order",
+    );
+    assert!(!dir.join("out/runs.jsonl").exists());
+}

@@ -21,6 +21,9 @@ use kalibre_dc::ParamLayout;
 mod openfoam_common;
 use openfoam_common::*;
 
+/// The development datasets' snapshots.
+const ALL: [&str; 3] = ["t0", "t1", "t2"];
+
 /// Four-step iterations of the calibration test.
 const CAL_ITERATIONS: usize = 6;
 /// Polish steps of the calibration test: one takes the polish's path with OpenFOAM (a
@@ -29,11 +32,13 @@ const CAL_ITERATIONS: usize = 6;
 const CAL_POLISH_ITERATIONS: usize = 1;
 
 /// Runs `hall` (with its own effects, at their initial values) at the true alphas on the
-/// three snapshots in parallel and returns the MAE (C) against `dataset`'s noise-free
+/// snapshots `labels` in parallel and returns the MAE (C) against `dataset`'s noise-free
 /// OpenFOAM readings, checking each run's energy balance on the way.
-fn mae_against_openfoam_data(dataset: &str, hall: &Hall, tag: &str) -> f64 {
-    let snaps =
+fn mae_against_openfoam_data(dataset: &str, hall: &Hall, labels: &[&str], tag: &str) -> f64 {
+    let mut snaps =
         snapshots::load_snapshots(hall, &data(&format!("{dataset}/snapshots.csv"))).unwrap();
+    snaps.retain(|s| labels.contains(&s.state.label.as_str()));
+    assert_eq!(snaps.len(), labels.len(), "{dataset}: snapshots {labels:?}");
     let truth = truth(dataset);
     let dir = tmp(tag);
     let model =
@@ -99,12 +104,15 @@ fn footprint_c(hall: &Hall, dataset: &str) -> f64 {
 }
 
 /// At the true alphas the adapter reproduces the development hall's noise-free OpenFOAM
-/// readings (made with the same solver by another route), with a closed energy balance.
+/// readings (made with the same solver by another route), with a closed energy balance:
+/// at t1 and t2 here, at t0 through the command line in `tests/simulate_openfoam.rs`
+/// (0.083-0.087 C each when all three ran here; a development-hall solve is about 36 s
+/// of CPU).
 #[test]
 fn dev_hall_at_true_alpha_matches_the_openfoam_data() {
     require_openfoam();
     let hall = Hall::load(&data("of-dev-clean/hall.json")).unwrap();
-    let m = mae_against_openfoam_data("of-dev-clean", &hall, "realism");
+    let m = mae_against_openfoam_data("of-dev-clean", &hall, &["t1", "t2"], "realism");
     // The datasets' own noise is 0.15 C; the model at the hall's initial alpha is 4.9 C off.
     assert!(m < 0.15, "MAE {m:.3} C against the OpenFOAM data");
 }
@@ -127,7 +135,7 @@ fn bypass_effect_reproduces_the_openfoam_cutout_data() {
     });
     hall.effects
         .push(serde_json::from_value(entry).expect("an effect entry"));
-    let m = mae_against_openfoam_data("of-dev-bypass", &hall, "bypass");
+    let m = mae_against_openfoam_data("of-dev-bypass", &hall, &ALL, "bypass");
     let footprint = footprint_c(&hall, "of-dev-bypass");
     eprintln!("the cutout's footprint: {footprint:.3} C; the bypass effect's run: {m:.3} C");
     assert!(m < 0.15, "MAE {m:.3} C against the OpenFOAM cutout data");
@@ -181,7 +189,7 @@ fn rack_recirculation_effect_reproduces_the_openfoam_blanking_data() {
         }))
         .expect("an effect entry"),
     );
-    let m = mae_against_openfoam_data("of-dev-blanking", &hall, "blanking");
+    let m = mae_against_openfoam_data("of-dev-blanking", &hall, &ALL, "blanking");
     let footprint = footprint_c(&hall, "of-dev-blanking");
     eprintln!("the slot's footprint: {footprint:.3} C; the recirculation effect's run: {m:.3} C");
     assert!(m < 0.15, "MAE {m:.3} C against the OpenFOAM blanking data");

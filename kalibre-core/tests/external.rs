@@ -570,3 +570,30 @@ fn config_errors_name_the_key() {
         e => panic!("{e}"),
     }
 }
+
+/// Where the scenarios come from elsewhere, a `[[scenarios]]` list is refused as such
+/// (not for a variable its entries lack), and a file without one loads as with `load`.
+#[test]
+fn a_file_whose_scenarios_come_from_elsewhere_refuses_a_scenarios_list() {
+    let (dir, text) = example_config("config_no_scenarios");
+    let file = dir.join("model.toml");
+    match CommandModelConfig::load_without_scenarios(&file, "the snapshots are the scenarios")
+        .unwrap_err()
+    {
+        ExternalError::Config { key, reason, .. } => {
+            assert_eq!(key, "scenarios");
+            assert_eq!(reason, "the snapshots are the scenarios");
+        }
+        e => panic!("{e}"),
+    }
+    let without = &text[..text
+        .find("[[scenarios]]")
+        .expect("the example lists scenarios")];
+    std::fs::write(&file, without).unwrap();
+    let cfg = CommandModelConfig::load_without_scenarios(&file, "unused").unwrap();
+    assert!(cfg.scenarios.is_empty());
+    assert_eq!(
+        cfg.space.names(),
+        CommandModelConfig::load(&file).unwrap().space.names()
+    );
+}

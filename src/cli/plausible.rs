@@ -68,14 +68,14 @@ pub(crate) fn warn_implausible_rises<'a>(
     };
     eprintln!(
         "kalibre: warning: {} and {}: snapshot `{}`: the servers' {} W over the CRACs' \
-         {} m3/s of air make the return air {:.1} K warmer than the supply on average; \
+         {} m3/s of air make the return air {} K warmer than the supply on average; \
          {hint}{more}",
         hall_path.display(),
         snapshots_path.display(),
         first.snapshot,
         significant(first.power_w),
         significant(first.supply_m3_s),
-        first.mean_rise_k,
+        significant(first.mean_rise_k),
     );
 }
 
@@ -93,11 +93,11 @@ pub(crate) fn warn_what_if_beyond_halls<'a>(
         .collect();
     if let Some(first) = beyond.first() {
         eprintln!(
-            "kalibre: warning: what if {what}: snapshot `{}` would run its return air {:.0} K \
+            "kalibre: warning: what if {what}: snapshot `{}` would run its return air {} K \
              above its supply on average ({} snapshot(s) past {} K); no hall runs there, so \
              its predictions and headroom are far outside what the model was made for",
             first.snapshot,
-            first.mean_rise_k,
+            significant(first.mean_rise_k),
             beyond.len(),
             snapshots::MAX_MEAN_RISE_K
         );
@@ -105,10 +105,13 @@ pub(crate) fn warn_what_if_beyond_halls<'a>(
 }
 
 /// `v` to three significant figures, without an exponent (a flow of 0.00356 m3/s reads
-/// as such, not as 0.0035550000000000004).
+/// as such, not as 0.0035550000000000004) unless it would take many digits.
 fn significant(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return v.to_string();
+    }
+    if !(1e-4..1e6).contains(&v.abs()) {
+        return format!("{v:.2e}");
     }
     let decimals = (2 - v.abs().log10().floor() as i32).max(0) as usize;
     format!("{v:.decimals$}")

@@ -8,7 +8,7 @@ use kalibre_core::calibrate::REPORT_SCHEMA;
 use kalibre_core::ParamSpace;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::sim::{coldest_under_read, setpoint_headroom_c, SimConfig};
-use kalibre_dc::snapshots;
+use kalibre_dc::snapshots::{self, number, AIR_C_RANGE};
 use kalibre_dc::HallModel;
 
 use super::calibrated_model::{grid_or_recorded, CalibratedModel};
@@ -59,7 +59,7 @@ pub struct SimulateArgs {
     pub(super) heat_sources: Option<PathBuf>,
     /// Server intake temperature above which a server is counted as too warm (C); default
     /// 27, ASHRAE TC 9.9's recommended upper bound for classes A1-A4.
-    #[arg(long = "inlet-limit-c")]
+    #[arg(long = "inlet-limit-c", allow_hyphen_values = true)]
     pub(super) inlet_limit_c: Option<f64>,
     /// Also solve on grids these factors of the cell size finer (e.g. `0.75,0.5`), and
     /// take each snapshot's least setpoint headroom over the grids: the model's own grid
@@ -120,9 +120,12 @@ pub(super) fn print_under_read_note(
 pub(super) fn inlet_limit_c(args: &SimulateArgs) -> CliResult<f64> {
     match args.inlet_limit_c {
         None => Ok(kalibre_dc::sim::RECOMMENDED_MAX_INLET_C),
-        Some(t) if t.is_finite() => Ok(t),
+        Some(t) if AIR_C_RANGE.contains(&t) => Ok(t),
         Some(t) => Err(CliError::Input(format!(
-            "--inlet-limit-c: expected a finite temperature in C, got {t}"
+            "--inlet-limit-c: {} C is not an air temperature; expected a limit in [{}, {}] C",
+            number(t),
+            AIR_C_RANGE.start(),
+            AIR_C_RANGE.end()
         ))),
     }
 }
@@ -236,7 +239,8 @@ fn check_grid_factors(args: &SimulateArgs) -> CliResult {
         .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
     {
         Some(f) => Err(CliError::Input(format!(
-            "--grid-check: {f} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)"
+            "--grid-check: {} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)",
+            number(*f)
         ))),
         None => Ok(()),
     }
@@ -291,6 +295,21 @@ pub fn sim_config(grid_m: Option<f64>) -> CliResult<SimConfig> {
     Ok(config)
 }
 
+/// The built-in model's cells for `hall` at `cell_m` (from `--grid-m`, a calibration's
+/// record or the default): a room too fine to build is refused as the flag's error before
+/// anything runs, rather than failing as the model's (exit 1) when it is built.
+pub(super) fn check_model_cells(hall: &Hall, cell_m: f64) -> CliResult {
+    match kalibre_dc::sim::cells_beyond_cap(hall.room.size_m, cell_m) {
+        Some(cells) => Err(CliError::Input(format!(
+            "--grid-m: cells of {} m give {cells:.3e} cells in this room, above the built-in \
+             simulator's {}: use coarser cells",
+            number(cell_m),
+            kalibre_dc::sim::MAX_CELLS
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// An output path that names an input file would replace the measurements (or the hall)
 /// with predictions: refused before anything runs.
 fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
@@ -319,6 +338,7 @@ fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
 pub fn run(args: SimulateArgs) -> CliResult {
     refuse_overwriting_inputs(&args)?;
     check_grid_factors(&args)?;
+    inlet_limit_c(&args)?;
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
@@ -373,7 +393,12 @@ pub fn run(args: SimulateArgs) -> CliResult {
         }
         None => args.grid_m,
     };
-    let model = HallModel::new(&hall, sim_config(grid_m)?)?;
+    let config = sim_config(grid_m)?;
+    check_model_cells(&hall, config.cell_m)?;
+    // Before any solve: a factor whose grid is the model's own in this room, or too
+    // fine to build, would otherwise fail (or check nothing) after the predictions.
+    super::calibrate::check_finer_grids(&hall, config.cell_m, &args.grid_check)?;
+    let model = HallModel::new(&hall, config)?;
     let space = model.layout().space();
     let params = match (&args.params, &file) {
         (Some(p), Some((json, _))) => load_params(p, json, space)?,

@@ -28,13 +28,17 @@ impl WhatIfArgs {
     pub fn describe(&self) -> Option<String> {
         let mut parts = Vec::new();
         if let Some(d) = self.setpoint_offset_c {
-            parts.push(format!("setpoints {d:+} C"));
+            parts.push(format!(
+                "setpoints {}{} C",
+                if d >= 0.0 { "+" } else { "" },
+                number(d)
+            ));
         }
         if let Some(f) = self.fan_speed_scale {
-            parts.push(format!("fan speeds x{f}"));
+            parts.push(format!("fan speeds x{}", number(f)));
         }
         if let Some(f) = self.power_scale {
-            parts.push(format!("server powers x{f}"));
+            parts.push(format!("server powers x{}", number(f)));
         }
         (!parts.is_empty()).then(|| parts.join(", "))
     }
@@ -53,14 +57,16 @@ impl WhatIfArgs {
         if let Some(f) = self.fan_speed_scale {
             if !(f.is_finite() && f > 0.0) {
                 return Err(CliError::Input(format!(
-                    "--fan-speed-scale: expected a factor > 0, got {f}"
+                    "--fan-speed-scale: expected a factor > 0, got {}",
+                    number(f)
                 )));
             }
         }
         if let Some(f) = self.power_scale {
             if !(f.is_finite() && f >= 0.0) {
                 return Err(CliError::Input(format!(
-                    "--power-scale: expected a factor >= 0, got {f}"
+                    "--power-scale: expected a factor >= 0, got {}",
+                    number(f)
                 )));
             }
         }
@@ -84,11 +90,12 @@ impl WhatIfArgs {
                         // Three decimals, unless that rounds to the very limit exceeded.
                         let speed = match format!("{speed:.3}") {
                             r if r == "1.000" => speed.to_string(),
+                            _ if *speed >= 1e6 => number(*speed),
                             r => r,
                         };
                         return Err(CliError::Input(format!(
-                            "--fan-speed-scale {f}: CRAC `{}` in snapshot `{}` would run at {} of its rated flow; a fan speed is at most 1",
-                            crac.id, state.label, speed
+                            "--fan-speed-scale {}: CRAC `{}` in snapshot `{}` would run at {} of its rated flow; a fan speed is at most 1",
+                            number(f), crac.id, state.label, speed
                         )));
                     }
                 }

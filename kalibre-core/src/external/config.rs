@@ -218,6 +218,29 @@ impl CommandModelConfig {
         Self::from_toml_str(&text, path)
     }
 
+    /// Reads and checks a `model.toml` whose scenarios come from elsewhere (a hall's
+    /// snapshots, say): a `[[scenarios]]` list is refused with `why`, before its entries
+    /// are checked against the templates (where a variable they lack would be the error
+    /// reported, not the list itself).
+    pub fn load_without_scenarios(
+        path: impl AsRef<Path>,
+        why: &str,
+    ) -> Result<Self, ExternalError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| ExternalError::io(path, e))?;
+        let lists_scenarios = text
+            .parse::<Table>()
+            .is_ok_and(|top| top.contains_key("scenarios"));
+        if lists_scenarios {
+            return Err(ExternalError::Config {
+                file: path.display().to_string(),
+                key: "scenarios".into(),
+                reason: why.into(),
+            });
+        }
+        Self::from_toml_str(&text, path)
+    }
+
     /// Parses the text of a `model.toml`; `file` names it in errors and its directory
     /// anchors relative paths.
     pub fn from_toml_str(text: &str, file: &Path) -> Result<Self, ExternalError> {

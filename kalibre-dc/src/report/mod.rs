@@ -373,7 +373,10 @@ pub fn passed_over_text(report: &Report) -> Option<String> {
 pub fn likelihood_text(report: &Report) -> String {
     match report.settings.robust_nu {
         None => "least squares (the paper's mean squared error)".to_string(),
-        Some(nu) => format!("Student-t, nu {nu} (in the polish and the uncertainty)"),
+        Some(nu) => format!(
+            "Student-t, nu {} (in the polish and the uncertainty)",
+            crate::snapshots::number(nu)
+        ),
     }
 }
 

@@ -11,6 +11,17 @@ use kalibre_dc::ParamLayout;
 
 use crate::cli::{CliError, CliResult};
 
+/// Why a `model.toml` used with a hall must not list `[[scenarios]]`.
+const NO_SCENARIOS_WITH_A_HALL: &str =
+    "[[scenarios]] are not used with a hall: the snapshots come from --snapshots";
+
+/// Loads `model.toml` for a hall, whose snapshots are the scenarios: a `[[scenarios]]`
+/// list is refused as such, not for a variable its entries lack.
+pub(super) fn load_config(path: &Path) -> CliResult<CommandModelConfig> {
+    CommandModelConfig::load_without_scenarios(path, NO_SCENARIOS_WITH_A_HALL)
+        .map_err(|e| CliError::Input(e.to_string()))
+}
+
 /// An external command as a hall's model: each snapshot becomes the template variables
 /// `setpoint_c/<crac>`, `fan_speed/<crac>` and `power_w/<server>`.
 pub(super) struct HallCommand {
@@ -38,18 +49,17 @@ impl HallCommand {
             )));
         }
         let sensors: Vec<String> = hall.sensors.iter().map(|s| s.id.clone()).collect();
-        if config.command.output_names() != sensors.as_slice() {
+        let given = config.command.output_names();
+        if given != sensors.as_slice() {
             return Err(bad(format!(
-                "output.names must be the hall's sensors in order: [{}]",
+                "output.names must be the hall's sensors in order: {}; expected [{}]",
+                first_difference(given, &sensors),
                 sensors.join(", ")
             )));
         }
         let unused_param_settings = differing_params(layout.space(), &config.space);
         if !config.scenarios.is_empty() {
-            return Err(bad(
-                "[[scenarios]] are not used with a hall: the snapshots come from --snapshots"
-                    .into(),
-            ));
+            return Err(bad(NO_SCENARIOS_WITH_A_HALL.into()));
         }
         let model = HallCommand {
             command: config.command,
@@ -72,6 +82,38 @@ impl HallCommand {
             s = s.with(format!("power_w/{id}"), *p);
         }
         s
+    }
+}
+
+/// Where `given` names first part from the hall's `sensors`, in words: with the 60-70
+/// sensors of a large hall, the whole lists alone hide a swapped pair.
+fn first_difference(given: &[String], sensors: &[String]) -> String {
+    match given.iter().zip(sensors).position(|(g, s)| g != s) {
+        Some(i) => {
+            let where_ = match sensors[i..].iter().position(|s| *s == given[i]) {
+                Some(k) => format!(", which comes at index {} in the hall's order", i + k),
+                None if sensors.contains(&given[i]) => {
+                    ", which the hall has earlier (given twice?)".into()
+                }
+                None => ", which is not one of the hall's sensors".into(),
+            };
+            format!(
+                "output.names[{i}] is `{}` where the hall has `{}`{where_}",
+                given[i], sensors[i]
+            )
+        }
+        None if given.len() < sensors.len() => format!(
+            "{} names given, the hall has {} sensors (the first missing: `{}`)",
+            given.len(),
+            sensors.len(),
+            sensors[given.len()]
+        ),
+        None => format!(
+            "{} names given, the hall has {} sensors (the first extra: `{}`)",
+            given.len(),
+            sensors.len(),
+            given[sensors.len()]
+        ),
     }
 }
 

@@ -13,7 +13,6 @@ use std::time::Instant;
 
 use clap::{Args, ValueEnum};
 use kalibre_core::calibrate::Report;
-use kalibre_core::external::CommandModelConfig;
 use kalibre_core::{Model, Observe};
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
@@ -29,7 +28,8 @@ use super::{io_err, with_threads, CliError, CliResult};
 use findings::{builtin_findings, openfoam_intakes};
 use hall_command::HallCommand;
 use progress::Progress;
-use settings::{check_finer_grids, flag_error, settings};
+pub(super) use settings::check_finer_grids;
+use settings::{flag_error, settings};
 use summary::{print_summary, warn_unreached, Intakes};
 
 /// How alpha is calibrated (overrides `calibrate.alpha` in hall.json).
@@ -296,9 +296,7 @@ fn calibrate_with_model<'o>(
                 .config
                 .as_deref()
                 .expect("checked by check_model_flags");
-            let config =
-                CommandModelConfig::load(path).map_err(|e| CliError::Input(e.to_string()))?;
-            let model = HallCommand::new(&hall, config, path)?;
+            let model = HallCommand::new(&hall, hall_command::load_config(path)?, path)?;
             let c = calibrate_hall_model(
                 &hall,
                 snaps,
@@ -379,6 +377,12 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     super::plausible::warn_cold_readings(&args.snapshots, &hall, &snaps);
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
+    if args.model == ModelArg::Builtin {
+        super::simulate::check_model_cells(
+            &calibrated_hall(&hall, &settings),
+            settings.sim.cell_m,
+        )?;
+    }
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.
     let _lock = super::out_dir::lock(&args.out, "calibrate")?;
@@ -389,8 +393,9 @@ pub fn run(args: CalibrateArgs) -> CliResult {
             .config
             .as_deref()
             .expect("checked by check_model_flags");
-        let config = CommandModelConfig::load(path).map_err(|e| CliError::Input(e.to_string()))?;
-        let model = HallCommand::new(&hall, config, path)?;
+        // The hall as the loop will run it: `--alpha` decides the parameters' names.
+        let calibrated = calibrated_hall(&hall, &settings);
+        let model = HallCommand::new(&calibrated, hall_command::load_config(path)?, path)?;
         for s in &snaps {
             model
                 .command

@@ -138,7 +138,8 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
     {
         return Err(CliError::Input(format!(
-            "--grid-check: {f} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)"
+            "--grid-check: {} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)",
+            kalibre_dc::snapshots::number(*f)
         )));
     }
     s.grid_check = if args.no_grid_check {
@@ -156,7 +157,7 @@ const MAX_EPOCHS: usize = 100_000;
 /// Refuses a `--grid-check` factor whose grid is the model's own in this room (a check
 /// that would report no numerical uncertainty at all) or too fine to build, before the
 /// calibration rather than in its report.
-pub(super) fn check_finer_grids(hall: &Hall, cell_m: f64, factors: &[f64]) -> CliResult {
+pub(in crate::cli) fn check_finer_grids(hall: &Hall, cell_m: f64, factors: &[f64]) -> CliResult {
     use kalibre_dc::sim::{cells_beyond_cap, Grid, MAX_CELLS};
     let size = hall.room.size_m;
     for &f in factors {
@@ -169,7 +170,8 @@ pub(super) fn check_finer_grids(hall: &Hall, cell_m: f64, factors: &[f64]) -> Cl
             continue;
         };
         return Err(CliError::Input(format!(
-            "--grid-check: {f} gives cells of {} m: {why}",
+            "--grid-check: {} gives cells of {} m: {why}",
+            kalibre_dc::snapshots::number(f),
             if fine_m < 1e-3 {
                 format!("{fine_m:.1e}")
             } else {

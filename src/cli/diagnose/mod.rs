@@ -30,7 +30,7 @@ use super::calibrated_model::{
     check_same_conditions, check_same_measurements, grid_or_recorded, CalibratedModel,
 };
 use super::openfoam_args::{of_err, OpenFoamArgs};
-use super::simulate::{load_params, sim_config};
+use super::simulate::{check_model_cells, load_params, sim_config};
 use super::{with_threads, CliError, CliResult};
 
 /// Options of `kalibre diagnose`.
@@ -137,7 +137,8 @@ impl Likelihood {
     pub fn robust_nu(self, nu: f64) -> CliResult<Option<f64>> {
         if !(nu.is_finite() && nu > 0.0) {
             return Err(CliError::Input(format!(
-                "--nu: must be finite and > 0, got {nu}"
+                "--nu: must be finite and > 0, got {}",
+                kalibre_dc::snapshots::number(nu)
             )));
         }
         Ok(match self {
@@ -157,7 +158,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     args.openfoam
         .refuse_unless(args.model == DiagnoseModel::Openfoam)?;
     if let Some(path) = &args.write_hall {
-        check_writable_file(path)?;
+        // The refusal first: the writability check writes a probe file in the target's
+        // directory, which is no business of an input's directory.
         let (report, journal) = (
             args.calibration.join("report.json"),
             args.calibration.join("runs.jsonl"),
@@ -171,6 +173,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
                 ("the calibration's run journal", Some(journal.as_path())),
             ],
         )?;
+        check_writable_file(path)?;
     }
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()
@@ -234,6 +237,9 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         of_args.np = of_args.np.or(m.np);
     }
     let sim = sim_config(grid_m)?;
+    if args.model == DiagnoseModel::Builtin {
+        check_model_cells(&hall, sim.cell_m)?;
+    }
     let model = HallModel::new(&hall, sim.clone())?;
     // The solver, and the fingerprint of the model the calibration must have run.
     let (solver, fp): (Box<dyn EffectSolver>, String) = match args.model {

@@ -1,0 +1,76 @@
+//! Flag values far outside what they mean (a cell size of 1e-300 m, an inlet limit of
+//! 1e300 C, a grid check that checks nothing) are refused as input errors (exit 2) that
+//! name the flag at fault and print the value readably, not as hundreds of digits.
+
+mod cli_support;
+use cli_support::*;
+
+/// No run of more than 20 digits: a value such as 1e-300 is printed with an exponent.
+fn assert_readable(o: &std::process::Output) {
+    let err = stderr(o);
+    let longest = err
+        .split(|c: char| !c.is_ascii_digit())
+        .map(str::len)
+        .max()
+        .unwrap_or(0);
+    assert!(longest <= 20, "a {longest}-digit number in: {err}");
+}
+
+fn simulate(dir: &std::path::Path, extra: &[&str]) -> std::process::Output {
+    run(on_dataset("simulate", "of-dev-clean")
+        .arg("--out")
+        .arg(dir.join("pred.csv"))
+        .args(extra))
+}
+
+#[test]
+fn simulate_refuses_grids_and_limits_that_mean_nothing() {
+    let dir = tmp("flag-values");
+    for (extra, needle) in [
+        (
+            &["--grid-check", "1e-300"][..],
+            "--grid-check: 1e-300 gives cells of",
+        ),
+        (
+            &["--grid-check", "0.9999"][..],
+            "--grid-check: 0.9999 gives cells of 0.2000 m: the model's own cells",
+        ),
+        (
+            &["--grid-m", "1e-300"][..],
+            "--grid-m: cells of 1e-300 m give",
+        ),
+        (
+            &["--inlet-limit-c", "1e300"][..],
+            "--inlet-limit-c: 1e300 C is not an air temperature",
+        ),
+        (
+            &["--inlet-limit-c", "-1e300"][..],
+            "--inlet-limit-c: -1e300 C is not an air temperature",
+        ),
+        (
+            &["--fan-speed-scale", "1e300"][..],
+            "--fan-speed-scale 1e300: CRAC `crac-1` in snapshot `t0` would run at 9e299",
+        ),
+    ] {
+        let o = simulate(&dir, extra);
+        assert_input_error(&o, needle);
+        assert_readable(&o);
+    }
+    assert!(!dir.join("pred.csv").exists());
+}
+
+#[test]
+fn calibrate_refuses_a_cell_size_too_fine_to_build_by_its_flag() {
+    let dir = tmp("flag-values-grid");
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args(["--grid-m", "1e-300", "--out"])
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "--grid-m: cells of 1e-300 m give");
+    assert_readable(&o);
+    assert!(!dir.join("cal/runs.jsonl").exists());
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args(["--nu=-1e-300", "--out"])
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "--nu: must be finite and > 0, got -1e-300");
+    assert_readable(&o);
+}
