@@ -105,6 +105,7 @@ mod error;
 pub mod external;
 mod fsio;
 mod model;
+mod number;
 pub mod observe;
 mod param;
 pub mod search;
@@ -118,6 +119,7 @@ pub use data::{Observations, OutputInfo, Snapshot};
 pub use error::{Error, Result};
 pub use fsio::write_atomic;
 pub use model::{check_outputs, scenario_digest, Model, ModelError, Outputs};
+pub use number::number;
 pub use observe::{Event, Observe};
 pub use param::{Param, ParamSpace, Scale};
 pub use search::{

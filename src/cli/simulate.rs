@@ -230,22 +230,6 @@ fn check_vtk_names(snaps: &[snapshots::HallSnapshot]) -> CliResult {
     Ok(())
 }
 
-/// Every `--grid-check` factor a finer grid: checked before the predictions are written,
-/// so a bad factor never replaces a good `--out`.
-fn check_grid_factors(args: &SimulateArgs) -> CliResult {
-    match args
-        .grid_check
-        .iter()
-        .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
-    {
-        Some(f) => Err(CliError::Input(format!(
-            "--grid-check: {} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)",
-            number(*f)
-        ))),
-        None => Ok(()),
-    }
-}
-
 /// Each `--grid-check` factor's cell size and, per snapshot, the setpoint headroom there.
 fn finer_headrooms(
     hall: &Hall,
@@ -337,7 +321,8 @@ fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
     refuse_overwriting_inputs(&args)?;
-    check_grid_factors(&args)?;
+    // Before anything is written, so a bad factor never replaces a good `--out`.
+    super::calibrate::check_grid_factors(&args.grid_check)?;
     inlet_limit_c(&args)?;
     let hall = Hall::load(&args.hall)?;
     kalibre_dc::effects::EffectRegistry::builtin()

@@ -287,7 +287,7 @@ impl CommandModelConfig {
                 "timeout_s",
                 format!(
                     "{} is not a number of seconds in (0, 1e9]",
-                    readable(timeout)
+                    crate::number(timeout)
                 ),
             ));
         }
@@ -296,7 +296,10 @@ impl CommandModelConfig {
             if !(0.0..=1e6).contains(&g) {
                 return Err(cx.err(
                     "kill_grace_s",
-                    format!("{} is not a number of seconds in [0, 1e6]", readable(g)),
+                    format!(
+                        "{} is not a number of seconds in [0, 1e6]",
+                        crate::number(g)
+                    ),
                 ));
             }
             b = b.with_kill_grace(Duration::from_secs_f64(g));
@@ -467,14 +470,5 @@ impl CommandModelConfig {
             space,
             scenarios,
         })
-    }
-}
-
-/// `v` as written, or with an exponent when that would take hundreds of digits.
-fn readable(v: f64) -> String {
-    if v != 0.0 && !(1e-4..1e9).contains(&v.abs()) {
-        format!("{v:e}")
-    } else {
-        v.to_string()
     }
 }

@@ -28,7 +28,7 @@ use super::{io_err, with_threads, CliError, CliResult};
 use findings::{builtin_findings, openfoam_intakes};
 use hall_command::HallCommand;
 use progress::Progress;
-pub(super) use settings::check_finer_grids;
+pub(super) use settings::{check_finer_grids, check_grid_factors};
 use settings::{flag_error, settings};
 use summary::{print_summary, warn_unreached, Intakes};
 
@@ -378,10 +378,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     if args.model == ModelArg::Builtin {
-        super::simulate::check_model_cells(
-            &calibrated_hall(&hall, &settings),
-            settings.sim.cell_m,
-        )?;
+        super::simulate::check_model_cells(&hall, settings.sim.cell_m)?;
     }
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.

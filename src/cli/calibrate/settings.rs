@@ -133,15 +133,7 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         .grid_check
         .clone()
         .unwrap_or_else(|| std::mem::take(&mut s.grid_check));
-    if let Some(f) = grid_check
-        .iter()
-        .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
-    {
-        return Err(CliError::Input(format!(
-            "--grid-check: {} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)",
-            kalibre_dc::snapshots::number(*f)
-        )));
-    }
+    check_grid_factors(&grid_check)?;
     s.grid_check = if args.no_grid_check {
         Vec::new()
     } else {
@@ -153,6 +145,20 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
 /// The most surrogate training epochs per fit `--epochs` takes (the paper: 150): a bound
 /// on one fit's time without `--max-wall-s`.
 const MAX_EPOCHS: usize = 100_000;
+
+/// Every `--grid-check` factor a finer grid: a cell size factor in (0, 1).
+pub(in crate::cli) fn check_grid_factors(factors: &[f64]) -> CliResult {
+    match factors
+        .iter()
+        .find(|f| !(f.is_finite() && **f > 0.0 && **f < 1.0))
+    {
+        Some(f) => Err(CliError::Input(format!(
+            "--grid-check: {} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)",
+            kalibre_dc::snapshots::number(*f)
+        ))),
+        None => Ok(()),
+    }
+}
 
 /// Refuses a `--grid-check` factor whose grid is the model's own in this room (a check
 /// that would report no numerical uncertainty at all) or too fine to build, before the
