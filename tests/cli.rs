@@ -8,18 +8,13 @@ use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use cli_support::{
-    assert_each_run_once, assert_input_error, data, kalibre, on_dataset, run, stderr, tmp,
+    assert_each_run_once, assert_input_error, data, kalibre, on_dataset, on_files, run, stderr, tmp,
 };
 
 /// `kalibre simulate` on a hall and snapshots, with optional parameters.
 fn simulate(hall: &Path, snaps: &Path, params: Option<&Path>, out: &Path) -> Output {
-    let mut c = kalibre();
-    c.args(["simulate", "--hall"])
-        .arg(hall)
-        .arg("--snapshots")
-        .arg(snaps)
-        .arg("--out")
-        .arg(out);
+    let mut c = on_files("simulate", hall, snaps);
+    c.arg("--out").arg(out);
     if let Some(p) = params {
         c.arg("--params").arg(p);
     }

@@ -1,6 +1,7 @@
 //! Flag values far outside what they mean (a cell size of 1e-300 m, an inlet limit of
-//! 1e300 C, a grid check that checks nothing) are refused as input errors (exit 2) that
-//! name the flag at fault and print the value readably, not as hundreds of digits.
+//! 1e300 C, a grid check that checks nothing, fans slowed past any prediction) are
+//! refused as input errors (exit 2) that name the flag at fault and print the value
+//! readably, not as hundreds of digits.
 
 mod cli_support;
 use cli_support::*;
@@ -56,6 +57,17 @@ fn simulate_refuses_grids_and_limits_that_mean_nothing() {
         assert_input_error(&o, needle);
         assert_readable(&o);
     }
+    // Fans nearly stopped: air past anything the model can predict is the what-if's
+    // fault, not a failed model (exit 1). The what-if warning comes first.
+    let o = simulate(&dir, &["--fan-speed-scale", "1e-5"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    let last = err.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("kalibre: error: what if fan speeds x1e-5: snapshot `t0`: model output 0 (`c-A1-hi`) is implausible"),
+        "{err}"
+    );
+    assert_readable(&o);
     assert!(!dir.join("pred.csv").exists());
 }
 

@@ -14,7 +14,7 @@ mod cli_support;
 
 use std::path::{Path, PathBuf};
 
-use cli_support::{kalibre, run, stderr, tmp};
+use cli_support::{on_files, run, stderr, tmp};
 
 use kalibre::dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre::dc::diagnosis::{diagnose_hall, HallDiagnosis, HallDiagnosisSettings};
@@ -200,15 +200,7 @@ fn the_cli_says_which_sensor_a_hypothesis_rests_on() {
         data("ol2-slot-A05/hall.json"),
         data("ol2-slot-A05/snapshots.csv"),
     );
-    let on_slot = |command: &str| {
-        let mut c = kalibre();
-        c.arg(command)
-            .arg("--hall")
-            .arg(&hall)
-            .arg("--snapshots")
-            .arg(&snaps);
-        c
-    };
+    let on_slot = |command: &str| on_files(command, &hall, &snaps);
     let cal = run(on_slot("calibrate").arg("--out").arg(dir.join("cal")));
     assert!(cal.status.success(), "{}", stderr(&cal));
     let out = run(on_slot("diagnose")

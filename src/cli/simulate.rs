@@ -335,10 +335,11 @@ pub fn run(args: SimulateArgs) -> CliResult {
         check_vtk_names(&snaps)?;
     }
     args.what_if.apply(&hall, &mut snaps)?;
-    if let Some(what) = args.what_if.describe() {
+    let what_if = args.what_if.describe();
+    if let Some(what) = &what_if {
         println!("what if: {what} (in every snapshot)");
         let states = snaps.iter().map(|s| &s.state);
-        super::plausible::warn_what_if_beyond_halls(&what, &hall, states);
+        super::plausible::warn_what_if_beyond_halls(what, &hall, states);
     }
     let file = args.params.as_deref().map(read_params_file).transpose()?;
     args.openfoam
@@ -411,8 +412,19 @@ pub fn run(args: SimulateArgs) -> CliResult {
             }
             None => model.solve(state, &params).map_err(|e| failed(&e))?,
         };
+        // Past what any air can be, a what-if's answer is the question's fault: the
+        // change is refused by name (exit 2), not reported as a failed model.
+        let unpredictable = |e: &dyn std::fmt::Display| {
+            match what_if.as_deref() {
+            Some(what) => CliError::Input(format!(
+                "what if {what}: snapshot `{}`: {e}; the change takes the hall past anything the model can predict: ask a smaller one",
+                state.label
+            )),
+            None => failed(e),
+        }
+        };
         if let Some(k) = solution.sensor_c().iter().position(|v| !v.is_finite()) {
-            return Err(failed(&format!(
+            return Err(unpredictable(&format!(
                 "sensor `{}` came out as {}",
                 hall.sensors[k].id,
                 solution.sensor_c()[k]
@@ -420,7 +432,8 @@ pub fn run(args: SimulateArgs) -> CliResult {
         }
         // What calibration refuses as a run (e.g. air at 1e9 C, from a fan speed near 0)
         // is no prediction either.
-        kalibre_dc::check_sensor_c(solution.sensor_c(), &sensor_names).map_err(|e| failed(&e))?;
+        kalibre_dc::check_sensor_c(solution.sensor_c(), &sensor_names)
+            .map_err(|e| unpredictable(&e))?;
         if let Some(dir) = &args.vtk {
             kalibre_dc::sim::write_vtk(dir, model.simulator(), &solution)?;
         }

@@ -44,24 +44,28 @@ pub fn stderr(o: &Output) -> String {
 /// `kalibre COMMAND --hall DATASET/hall.json --snapshots DATASET/snapshots.csv`, on an
 /// OpenFOAM development dataset.
 pub fn on_dataset(command: &str, dataset: &str) -> Command {
+    on_files(
+        command,
+        &data(&format!("{dataset}/hall.json")),
+        &data(&format!("{dataset}/snapshots.csv")),
+    )
+}
+
+/// `kalibre COMMAND --hall HALL --snapshots SNAPSHOTS`.
+pub fn on_files(command: &str, hall: &Path, snapshots: &Path) -> Command {
     let mut c = kalibre();
     c.arg(command)
         .arg("--hall")
-        .arg(data(&format!("{dataset}/hall.json")))
+        .arg(hall)
         .arg("--snapshots")
-        .arg(data(&format!("{dataset}/snapshots.csv")));
+        .arg(snapshots);
     c
 }
 
 /// `kalibre diagnose --hall HALL --snapshots SNAPSHOTS --calibration CALIBRATION`.
 pub fn diagnose_cmd(hall: &Path, snapshots: &Path, calibration: &Path) -> Command {
-    let mut c = kalibre();
-    c.args(["diagnose", "--hall"])
-        .arg(hall)
-        .arg("--snapshots")
-        .arg(snapshots)
-        .arg("--calibration")
-        .arg(calibration);
+    let mut c = on_files("diagnose", hall, snapshots);
+    c.arg("--calibration").arg(calibration);
     c
 }
 
