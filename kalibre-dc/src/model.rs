@@ -46,15 +46,14 @@ impl HallModel {
         effects: Vec<Box<dyn Effect>>,
     ) -> Result<Self> {
         let layout = ParamLayout::new(hall, &effects)?;
-        let hall_json =
-            serde_json::to_string(hall).map_err(|e| Error::Mismatch(format!("hall: {e}")))?;
+        let hall_json = hall.physics_json();
         let config_json =
             serde_json::to_string(&config).map_err(|e| Error::Mismatch(format!("config: {e}")))?;
         let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
         let effects_json =
             serde_json::to_string(&specs).map_err(|e| Error::Mismatch(format!("effects: {e}")))?;
         let fingerprint = format!(
-            "kalibre-dc-sim/2:{:016x}",
+            "kalibre-dc-sim/3:{:016x}",
             fnv1a(&[
                 hall_json.as_bytes(),
                 config_json.as_bytes(),

@@ -134,7 +134,7 @@ impl OpenFoamModel {
         }
         let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras)?;
         let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
-        let hall_json = json(hall)?;
+        let hall_json = hall.physics_json();
         let settings_json = json(&settings)?;
         let effects_json = json(&specs)?;
         let extras_key = format!("{extras:?}");
