@@ -59,17 +59,56 @@ fn values_round_trip_bit_exactly_and_keys_are_exact() {
     }
     let store = RunStore::open(&path, "m1").unwrap();
     assert!(store.load_report().is_clean());
-    assert_eq!(store.len(), 2);
+    // 0.1 + 0.2 != 0.3: a different key, which holds the failed run. A failure is not
+    // replayed by a later opening: it runs again when asked for.
+    assert_eq!(store.len(), 1);
+    assert_eq!(store.load_report().failed_to_retry, 1);
     let rec = store.get("t0", &names(), &p).unwrap();
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(rec.outputs.as_ref().unwrap()), bits(&out));
     assert_eq!(bits(&rec.params), bits(&p));
-    // 0.1 + 0.2 != 0.3: a different key, which holds the failed run.
-    let failed = store.get("t0", &names(), &[0.3, 1.0 / 3.0]).unwrap();
-    assert_eq!(failed.status, RunStatus::Failed);
-    assert_eq!(failed.result().unwrap_err(), ModelError::failed("boom"));
+    assert!(store.get("t0", &names(), &[0.3, 1.0 / 3.0]).is_none());
     assert!(store.get("t1", &names(), &p).is_none());
     assert!(store.get("t0", &["a".into(), "c".into()], &p).is_none());
+}
+
+/// A failed run is replayed within the opening that recorded it, and run again by a
+/// later one (its cause may have passed); the retry's result is the one kept, and a
+/// point that failed again stays to retry.
+#[test]
+fn failed_runs_run_again_after_reopening() {
+    let dir = common::temp_dir("journal-retry");
+    let path = dir.join("runs.jsonl");
+    let (a, b) = ([1.0, 2.0], [3.0, 4.0]);
+    let timeout = || {
+        Err(ModelError::Timeout {
+            seconds: 0.5,
+            log_tail: None,
+        })
+    };
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store.record("t0", &names(), &a, &timeout(), 0.5).unwrap();
+        store.record("t0", &names(), &b, &timeout(), 0.5).unwrap();
+        let again = store.get("t0", &names(), &a).unwrap();
+        assert_eq!(again.status, RunStatus::Failed);
+    }
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        assert_eq!(store.load_report().failed_to_retry, 2);
+        assert!(store.get("t0", &names(), &a).is_none());
+        store.record("t0", &names(), &a, &ok(&[20.0]), 3.0).unwrap();
+        store.record("t0", &names(), &b, &timeout(), 0.5).unwrap();
+    }
+    let store = RunStore::open(&path, "m1").unwrap();
+    let load = store.load_report();
+    assert!(load.is_clean() && load.conflicts.is_empty(), "{load:?}");
+    assert_eq!((store.len(), load.failed_to_retry), (1, 1));
+    assert_eq!(
+        store.get("t0", &names(), &a).unwrap().outputs,
+        Some(vec![20.0])
+    );
+    assert!(store.get("t0", &names(), &b).is_none());
 }
 
 /// What else a run computed (`Outputs::extras`) is journaled with it, bit for bit, and a

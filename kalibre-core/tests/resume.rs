@@ -156,3 +156,67 @@ fn implausible_runs_are_failed_runs_and_an_implausible_journal_line_is_named() {
         "{err}"
     );
 }
+
+/// [`Poly`] behind a license server that can be down: every run fails while it is.
+struct Licensed {
+    poly: Poly,
+    down: std::sync::atomic::AtomicBool,
+}
+
+impl kalibre_core::Model for Licensed {
+    type Scenario = Scen;
+    fn fingerprint(&self) -> String {
+        self.poly.fingerprint()
+    }
+    fn evaluate(
+        &self,
+        scenario: &Scen,
+        params: &[f64],
+    ) -> Result<kalibre_core::Outputs, kalibre_core::ModelError> {
+        if self.down.load(std::sync::atomic::Ordering::SeqCst) {
+            return Err(kalibre_core::ModelError::failed(
+                "license server unreachable",
+            ));
+        }
+        self.poly.evaluate(scenario, params)
+    }
+}
+
+/// Runs that failed for a cause that has passed do not stick in the journal: the next
+/// calibration runs them again, and ends as one that never saw the outage.
+#[test]
+fn runs_failed_in_an_outage_run_again_when_the_calibration_is_started_again() {
+    let dir = temp_dir("outage");
+    let path = dir.join("runs.jsonl");
+    let model = Licensed {
+        poly: Poly::new(),
+        down: true.into(),
+    };
+    let run = |model: &Licensed| {
+        Calibrator::new(model, QuadSurface::default(), &observations(), &space())
+            .with_seed(11)
+            .with_max_iterations(6)
+            .with_max_parallel_runs(2)
+            .with_store(RunStore::open(&path, "poly-v1").unwrap())
+            .run()
+    };
+    let err = run(&model).unwrap_err().to_string();
+    assert!(err.contains("license server unreachable"), "{err}");
+    let failed_lines = fs::read_to_string(&path).unwrap().lines().count();
+    assert!(failed_lines >= 4, "{failed_lines} failed runs journaled");
+
+    model.down.store(false, std::sync::atomic::Ordering::SeqCst);
+    let report = run(&model).unwrap();
+    let journal = report.journal.as_ref().unwrap();
+    assert_eq!(journal.failed_to_retry, failed_lines);
+    assert_eq!(report.runs.failed, 0, "{:?}", report.runs);
+    assert_eq!(report.runs.new, model.poly.calls());
+    // The same as a calibration that never met the outage, journal aside.
+    let clean = calibrate(&dir.join("clean.jsonl"), &Poly::new());
+    let strip = |r: &Report| {
+        let mut r = without_timings(r);
+        r.journal = None;
+        r
+    };
+    assert_eq!(strip(&report), strip(&clean));
+}

@@ -472,8 +472,8 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     Ok(())
 }
 
-/// Journal lines the calibration could not read (and whose runs, if any, it did again):
-/// said on stderr, not only in `report.json`'s `journal`.
+/// Journal lines the calibration could not read or did not replay (and whose runs, if
+/// any, it did again): said on stderr, not only in `report.json`'s `journal`.
 fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::Report) {
     let Some(load) = &report.journal else {
         return;
@@ -487,6 +487,14 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
             first.line,
             first.reason,
             if count > 1 { ", ..." } else { "" }
+        );
+    }
+    if load.failed_to_retry > 0 {
+        eprintln!(
+            "note: {}: {} run(s) journaled only as failed were not replayed (a failure's \
+             cause may have passed); each ran again where the calibration asked for it",
+            journal.display(),
+            load.failed_to_retry
         );
     }
     if let Some(first) = load.conflicts.first() {
