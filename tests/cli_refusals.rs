@@ -50,6 +50,22 @@ fn an_output_over_an_input_file_is_refused_and_the_input_kept() {
     std::fs::copy(&hall, mine.join("hall.json")).unwrap();
     let o = run(kalibre().args(["synth", "--out"]).arg(&mine));
     assert_input_error(&o, "holds hall.json with no truth.json beside it");
+    // Nor another tool's dataset with a truth of its own: the OpenFOAM development
+    // hall's files.
+    let theirs = dir.join("theirs");
+    std::fs::create_dir_all(&theirs).unwrap();
+    for name in ["hall.json", "snapshots.csv", "truth.json"] {
+        std::fs::copy(data(&format!("of-dev-clean/{name}")), theirs.join(name)).unwrap();
+    }
+    let o = run(kalibre().args(["synth", "--out"]).arg(&theirs));
+    assert_input_error(
+        &o,
+        "holds hall.json with a truth.json that is not kalibre's (no `schema` kalibre.truth/1) beside it",
+    );
+    assert_eq!(
+        std::fs::read(theirs.join("truth.json")).unwrap(),
+        std::fs::read(data("of-dev-clean/truth.json")).unwrap()
+    );
     let cal = dir.join("cal");
     std::fs::create_dir_all(&cal).unwrap();
     std::fs::write(cal.join("runs.jsonl"), "").unwrap();

@@ -145,7 +145,7 @@ fn a_full_stdout_or_stderr_is_an_error_not_a_panic() {
 }
 
 #[test]
-fn a_hidden_effect_of_size_zero_is_refused() {
+fn a_hidden_effect_of_size_zero_or_not_a_number_is_refused() {
     let dir = tmp("inert");
     for (effect, needle) in [
         (
@@ -155,6 +155,11 @@ fn a_hidden_effect_of_size_zero_is_refused() {
         (
             "bypass:behind_rack=A03,fraction=0",
             "fraction is 0, which hides nothing",
+        ),
+        // Not a number: refused as such, not taken for the default 0.
+        (
+            "crac_supply_offset:offset_c=abc",
+            "field `offset_c`: expected a finite number, got \"abc\"",
         ),
     ] {
         let o = run(kalibre()

@@ -90,11 +90,11 @@ fn refuse_inert(arg: &str, effect: &kalibre_dc::hall::EffectSpec) -> CliResult {
     let Some((_, field, default)) = SIZES.iter().find(|(k, _, _)| *k == effect.kind) else {
         return Ok(());
     };
-    let size = effect
-        .fields
-        .get(*field)
-        .and_then(|v| v.as_f64())
-        .or(*default);
+    // A value that is not a number is the effect's own check to refuse, by type.
+    let size = match effect.fields.get(*field) {
+        Some(v) => v.as_f64(),
+        None => *default,
+    };
     if size == Some(0.0) {
         return Err(CliError::Input(format!(
             "--effect `{arg}`: {field} is 0{}, which hides nothing (the measurements would \
@@ -112,23 +112,36 @@ fn refuse_inert(arg: &str, effect: &kalibre_dc::hall::EffectSpec) -> CliResult {
 }
 
 /// Refuses an `--out` that holds a hall or measurements `synth` did not write (no
-/// `truth.json` beside them: a user's own files), or any of `also`, rather than replace
-/// them; an earlier synthetic hall is replaced, as asked.
+/// `truth.json` of kalibre's beside them: a user's own files, or another tool's dataset
+/// with a truth of its own), or any of `also`, rather than replace them; an earlier
+/// synthetic hall is replaced, as asked.
 pub(super) fn check_out_dir(out: &std::path::Path, also: &[&str]) -> CliResult {
     super::out_dir::check_is_dir(out)?;
-    if out.join("truth.json").exists() {
+    let truth = out.join("truth.json");
+    let ours = std::fs::read(&truth)
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
+        .is_some_and(|v| v["schema"] == kalibre_dc::synth::TRUTH_SCHEMA);
+    if ours {
         return Ok(());
     }
-    let theirs = ["hall.json", "snapshots.csv"]
+    let theirs = ["hall.json", "snapshots.csv", "truth.json"]
         .iter()
         .chain(also)
         .find(|name| out.join(name).exists());
-    match theirs {
-        Some(name) => Err(CliError::Input(format!(
-            "--out {}: holds {name} with no truth.json beside it, so not a synthetic hall's; \
-             kalibre does not replace it: give another --out",
-            out.display()
-        ))),
-        None => Ok(()),
-    }
+    let not_ours = format!(
+        "a truth.json that is not kalibre's (no `schema` {})",
+        kalibre_dc::synth::TRUTH_SCHEMA
+    );
+    let what = match theirs {
+        None => return Ok(()),
+        Some(&"truth.json") => not_ours,
+        Some(name) if truth.exists() => format!("{name} with {not_ours} beside it"),
+        Some(name) => format!("{name} with no truth.json beside it"),
+    };
+    Err(CliError::Input(format!(
+        "--out {}: holds {what}, so not a synthetic hall kalibre wrote; kalibre does not \
+         replace it: give another --out",
+        out.display(),
+    )))
 }
