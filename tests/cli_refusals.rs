@@ -179,22 +179,25 @@ fn search_settings_out_of_their_ranges_are_refused_by_flag() {
 
 /// An `--out` that cannot take a calibration's files is refused before any run: a
 /// `report.html` that is a directory used to fail after the whole calibration, and a FIFO
-/// named `runs.jsonl` blocked it for good.
+/// named `runs.jsonl` (or the lock file) blocked it for good.
 #[test]
 fn an_out_that_cannot_take_the_files_is_refused_first() {
     let dir = tmp("out-kinds");
     std::fs::create_dir_all(dir.join("html").join("report.html")).unwrap();
     std::fs::write(dir.join("plain"), "not a directory").unwrap();
-    std::fs::create_dir_all(dir.join("fifo")).unwrap();
-    let made = std::process::Command::new("mkfifo")
-        .arg(dir.join("fifo").join("runs.jsonl"))
-        .status()
-        .unwrap();
-    assert!(made.success());
+    for (sub, name) in [("fifo", "runs.jsonl"), ("lock", ".kalibre.lock")] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+        let made = std::process::Command::new("mkfifo")
+            .arg(dir.join(sub).join(name))
+            .status()
+            .unwrap();
+        assert!(made.success());
+    }
     for (out, why) in [
         ("html", "report.html is a directory"),
         ("plain", "is a file, not a directory"),
         ("fifo", "runs.jsonl is not a regular file"),
+        ("lock", ".kalibre.lock is not a regular file"),
     ] {
         let o = run(kalibre()
             .args(["calibrate", "--hall"])
@@ -207,6 +210,13 @@ fn an_out_that_cannot_take_the_files_is_refused_first() {
     }
     let o = run(kalibre().args(["synth", "--out"]).arg(dir.join("plain")));
     assert_input_error(&o, "is a file, not a directory");
+    // Nor does `diagnose` wait on a FIFO where the calibration's journal should be.
+    let o = run(&mut diagnose_cmd(
+        &data("of-dev-clean/hall.json"),
+        &data("of-dev-clean/snapshots.csv"),
+        &dir.join("fifo"),
+    ));
+    assert_input_error(&o, "runs.jsonl: not a regular file");
 }
 
 #[test]

@@ -70,6 +70,8 @@ pub fn check_files(out: &Path, names: &[&str]) -> CliResult {
 /// holds it.
 pub fn lock(out: &Path, command: &str) -> CliResult<OutLock> {
     check_is_dir(out)?;
+    // Opening a FIFO for writing would wait for a reader.
+    check_files(out, &[LOCK_FILE])?;
     std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
     let path = out.join(LOCK_FILE);
     let file = OpenOptions::new()

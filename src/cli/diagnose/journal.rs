@@ -66,3 +66,19 @@ pub(super) fn scenario_keys(
     }
     Ok(keys)
 }
+
+/// Refuses a `report.json` or `runs.jsonl` in the calibration directory that is not a
+/// regular file: `calibrate` wrote files there, and a FIFO would block the read.
+pub(super) fn check_regular_files(calibration: &Path) -> CliResult {
+    for name in ["report.json", "runs.jsonl"] {
+        let path = calibration.join(name);
+        if std::fs::metadata(&path).is_ok_and(|m| !m.is_file()) {
+            return Err(CliError::Input(format!(
+                "{}: not a regular file (a directory, FIFO, socket or device); --calibration \
+                 is the directory `kalibre calibrate --out` wrote",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}

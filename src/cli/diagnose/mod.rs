@@ -182,6 +182,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     let report_path = args.calibration.join("report.json");
+    journal::check_regular_files(&args.calibration)?;
     let text = std::fs::read_to_string(&report_path)
         .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
     let mut report: Report = serde_json::from_str(&text).map_err(|e| {
