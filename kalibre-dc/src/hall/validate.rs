@@ -166,6 +166,19 @@ impl Hall {
                 ));
             }
         }
+        // The converse: tiles fed by no CRAC deliver nothing, and a `front` typed for
+        // `floor` would silently make another hall.
+        if !self.tiles.is_empty() && self.cracs.iter().all(|k| k.supply != SupplyKind::Floor) {
+            return Err(c.err(
+                "/tiles",
+                format!(
+                    "the hall has {} tile(s), but no CRAC has supply `floor` to feed them; \
+                     set the supply of the CRACs under the raised floor to `floor`, or remove \
+                     the tiles",
+                    self.tiles.len()
+                ),
+            ));
+        }
         Ok(())
     }
 

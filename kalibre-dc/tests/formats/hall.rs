@@ -199,6 +199,12 @@ pub fn hall_cases() -> Vec<HallCase> {
             |v| set(v, "/tiles", json!([])),
         ),
         hall_case(
+            "tiles with no floor supply",
+            "/tiles",
+            "no CRAC has supply `floor` to feed them",
+            |v| set(v, "/cracs/0/supply", json!("front")),
+        ),
+        hall_case(
             "unknown supply kind",
             "/cracs/0/supply",
             "unknown variant `ceiling`",
