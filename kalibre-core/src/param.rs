@@ -77,9 +77,14 @@ impl Param {
         })
     }
 
+    /// Equal bounds: the value is given, not calibrated.
+    pub fn is_fixed(&self) -> bool {
+        self.upper == self.lower
+    }
+
     /// Physical value to unit coordinate (clamped into `[0, 1]`).
     pub fn to_unit(&self, x: f64) -> f64 {
-        if self.upper == self.lower {
+        if self.is_fixed() {
             return 0.5;
         }
         let u = match self.scale {

@@ -372,11 +372,14 @@ fn the_first_fit_learns_the_whole_design_and_later_fits_are_focused() {
 
 #[test]
 fn the_report_says_which_parameters_the_measurements_pin_down() {
-    // A third parameter that neither the model nor the surrogate reads.
+    // A third parameter that neither the model nor the surrogate reads, and a fourth
+    // that equal bounds fix: given, so not listed with a spread (it used to be "free").
     let model = Poly::new();
     let obs = observations();
     let space = space()
         .with("unused", 0.0, 1.0, 0.5, kalibre_core::Scale::Linear)
+        .unwrap()
+        .with("given", 0.7, 0.7, 0.7, kalibre_core::Scale::Linear)
         .unwrap();
     let report = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
         .with_seed(2)
@@ -392,6 +395,7 @@ fn the_report_says_which_parameters_the_measurements_pin_down() {
     assert!(u[0].identified && u[1].identified, "{u:?}");
     assert!(u[0].rel_std.unwrap() < 0.01 && u[1].rel_std.unwrap() < 0.01);
     assert!(!u[2].identified && u[2].std.is_none(), "{:?}", u[2]);
+    assert_eq!(report.best.params.get("given"), Some(0.7));
     // The field round-trips, and reports without it still load.
     let text = serde_json::to_string(&report).unwrap();
     let back: Report = serde_json::from_str(&text).unwrap();

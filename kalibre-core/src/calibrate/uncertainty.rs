@@ -112,7 +112,7 @@ impl ParamUncertainty {
     }
 }
 
-/// The uncertainty of every parameter at `best` from the Jacobian's columns `jac` (one
+/// The uncertainty of every parameter (but those fixed by equal bounds) at `best` from the Jacobian's columns `jac` (one
 /// per parameter, rows as the residuals, unit box; [`super::slopes`]), the residual
 /// variance scaled by `design_effect` ([`Repetition::design_effect`]), with the moves
 /// that the numerical variants' outputs `variant_outputs` (each per snapshot, as
@@ -230,7 +230,9 @@ pub(crate) fn estimate<S>(
     }
     let dphys = space.dphys_dunit(&best.unit);
     let names = space.names();
+    // A parameter fixed by equal bounds is given, not estimated: no spread to claim.
     (0..d)
+        .filter(|&i| !space.params()[i].is_fixed())
         .map(|i| {
             let mut e = vec![0.0; d];
             e[i] = 1.0;

@@ -219,6 +219,8 @@ pub fn calibration_html(
     for (name, v) in &report.best.params.0 {
         let init = report.initial.params.get(name);
         let spread = match report.uncertainty.iter().find(|u| u.name == *name) {
+            // Only equal bounds leave a parameter out of an estimated uncertainty.
+            None if !report.uncertainty.is_empty() => "fixed (equal bounds)".to_string(),
             None => "-".to_string(),
             Some(u) => match (u.std, u.rel_std) {
                 (None, _) => "not determined by the measurements".to_string(),

@@ -50,6 +50,18 @@ fn print_uncertainty(report: &Report) {
         100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD,
         kalibre_core::calibrate::CONVERGED_SHIFT_STDS
     );
+    // The uncertainty leaves out what equal bounds fix; said, so none seems forgotten.
+    let fixed: Vec<&str> = (report.best.params.0.iter())
+        .map(|(name, _)| name.as_str())
+        .filter(|name| u.iter().all(|p| p.name != *name))
+        .collect();
+    if !fixed.is_empty() {
+        println!(
+            "  {:<28} {} (equal bounds: given, not calibrated)",
+            "fixed",
+            fixed.join(", ")
+        );
+    }
     print_numerical_checks(report);
     if let Some(src) = report.uncertainty_slopes {
         println!("  {:<28} {}", "slopes of the spreads", src.describe());
