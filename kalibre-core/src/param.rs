@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{Error, Result};
+use crate::{number, Error, Result};
 
 /// How a parameter maps onto `[0, 1]`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -50,22 +50,31 @@ impl Param {
         };
         if !(lower.is_finite() && upper.is_finite() && initial.is_finite()) {
             return Err(bad(format!(
-                "bounds and initial value must be finite (lower {lower}, upper {upper}, initial {initial})"
+                "bounds and initial value must be finite (lower {}, upper {}, initial {})",
+                number(lower),
+                number(upper),
+                number(initial)
             )));
         }
         if lower > upper {
             return Err(bad(format!(
-                "inverted bounds: lower {lower} > upper {upper}"
+                "inverted bounds: lower {} > upper {}",
+                number(lower),
+                number(upper)
             )));
         }
         if initial < lower || initial > upper {
             return Err(bad(format!(
-                "initial value {initial} outside bounds [{lower}, {upper}]"
+                "initial value {} outside bounds [{}, {}]",
+                number(initial),
+                number(lower),
+                number(upper)
             )));
         }
         if scale == Scale::Log && lower <= 0.0 {
             return Err(bad(format!(
-                "log scale needs a positive lower bound, got {lower}"
+                "log scale needs a positive lower bound, got {}",
+                number(lower)
             )));
         }
         Ok(Param {
@@ -329,7 +338,12 @@ impl ParamSpace {
             if !x.is_finite() || x < p.lower || x > p.upper {
                 return Err(Error::InvalidParam {
                     name: p.name.clone(),
-                    reason: format!("value {x} outside bounds [{}, {}]", p.lower, p.upper),
+                    reason: format!(
+                        "value {} outside bounds [{}, {}]",
+                        number(x),
+                        number(p.lower),
+                        number(p.upper)
+                    ),
                 });
             }
         }

@@ -144,14 +144,17 @@ impl<'a> Fields<'a> {
                 &bounds_field,
                 format!(
                     "[{}, {}] must be ordered and within [{lower}, {upper}]",
-                    short(lo),
-                    short(hi)
+                    crate::snapshots::number(lo),
+                    crate::snapshots::number(hi)
                 ),
             ));
         }
         let x = self.opt_f64(name)?.unwrap_or(initial.clamp(lo, hi));
         if x < lo || x > hi {
-            return Err(self.error(name, format!("{} is outside [{lo}, {hi}]", short(x))));
+            return Err(self.error(
+                name,
+                format!("{} is outside [{lo}, {hi}]", crate::snapshots::number(x)),
+            ));
         }
         Param::new(name, lo, hi, x, Scale::Linear).map_err(|e| self.error(name, e))
     }
@@ -171,15 +174,6 @@ impl<'a> Fields<'a> {
                 ),
             }),
         }
-    }
-}
-
-/// A number as a reader expects it: plain, or in exponent form when very large or small.
-fn short(x: f64) -> String {
-    if x != 0.0 && !(1e-4..1e6).contains(&x.abs()) {
-        format!("{x:e}")
-    } else {
-        format!("{x}")
     }
 }
 

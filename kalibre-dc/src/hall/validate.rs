@@ -8,7 +8,13 @@ use std::collections::{HashMap, HashSet};
 
 use super::geometry::Aabb;
 use super::types::{Hall, SupplyKind, HALL_SCHEMA};
+use crate::snapshots::number;
 use crate::{Error, Result};
+
+/// A point as `[x, y, z]`, each coordinate readable however large.
+fn point(p: &[f64; 3]) -> String {
+    format!("[{}, {}, {}]", number(p[0]), number(p[1]), number(p[2]))
+}
 
 /// The largest alpha bound taken (cfm/W): a server's air would then warm by 0.02 K, and
 /// larger values are a unit error (alpha is about 0.1 for real servers).
@@ -51,7 +57,7 @@ impl Hall {
             if !(f > 0.0 && f <= 1.0) {
                 return Err(c.err(
                     format!("{p}/open_fraction"),
-                    format!("expected a fraction in (0, 1], found {f}"),
+                    format!("expected a fraction in (0, 1], found {}", number(f)),
                 ));
             }
         }
@@ -94,7 +100,10 @@ impl Hall {
             if a.min <= 0.0 {
                 return Err(c.err(
                     format!("{p}/min"),
-                    format!("expected 0 < min <= initial <= max, found min {}", a.min),
+                    format!(
+                        "expected 0 < min <= initial <= max, found min {}",
+                        number(a.min)
+                    ),
                 ));
             }
             if a.min > a.max {
@@ -102,7 +111,8 @@ impl Hall {
                     p,
                     format!(
                         "expected 0 < min <= initial <= max, found min {} > max {} (inverted bounds)",
-                        a.min, a.max
+                        number(a.min),
+                        number(a.max)
                     ),
                 ));
             }
@@ -111,7 +121,7 @@ impl Hall {
                     format!("{p}/max"),
                     format!(
                         "expected max <= {MAX_ALPHA_CFM_PER_W} cfm/W (a server air rise of 0.02 K), found {}",
-                        crate::snapshots::number(a.max)
+                        number(a.max)
                     ),
                 ));
             }
@@ -120,7 +130,9 @@ impl Hall {
                     format!("{p}/initial"),
                     format!(
                         "expected 0 < min <= initial <= max, found initial {} outside [{}, {}]",
-                        a.initial, a.min, a.max
+                        number(a.initial),
+                        number(a.min),
+                        number(a.max)
                     ),
                 ));
             }
@@ -152,7 +164,7 @@ impl Hall {
                     format!("{p}/rated_flow_m3_s"),
                     format!(
                         "expected a rated flow of at most {MAX_CRAC_FLOW_M3_S} m3/s, found {}",
-                        crate::snapshots::number(k.rated_flow_m3_s)
+                        number(k.rated_flow_m3_s)
                     ),
                 ));
             }
@@ -343,14 +355,19 @@ impl Hall {
                         format!("{p}/max_m/{a}"),
                         format!(
                             "expected max_m > min_m along {} (positive size), found {} <= {}",
-                            AXES[a], b.max_m[a], b.min_m[a]
+                            AXES[a],
+                            number(b.max_m[a]),
+                            number(b.min_m[a])
                         ),
                     ));
                 }
                 if b.min_m[a] < -GEOMETRY_TOL_M {
                     return Err(c.err(
                         format!("{p}/min_m/{a}"),
-                        format!("expected >= 0 (inside the room), found {}", b.min_m[a]),
+                        format!(
+                            "expected >= 0 (inside the room), found {}",
+                            number(b.min_m[a])
+                        ),
                     ));
                 }
                 if b.max_m[a] > room[a] + GEOMETRY_TOL_M {
@@ -358,7 +375,9 @@ impl Hall {
                         format!("{p}/max_m/{a}"),
                         format!(
                             "expected <= {} (inside the room along {}), found {}",
-                            room[a], AXES[a], b.max_m[a]
+                            number(room[a]),
+                            AXES[a],
+                            number(b.max_m[a])
                         ),
                     ));
                 }
@@ -385,7 +404,11 @@ impl Hall {
                     p,
                     format!(
                         "sensor `{}` at {:?} is outside the room; expected a point within [0, {}] x [0, {}] x [0, {}] m",
-                        s.id, s.position_m, room.max[0], room.max[1], room.max[2]
+                        s.id,
+                        point(&s.position_m),
+                        number(room.max[0]),
+                        number(room.max[1]),
+                        number(room.max[2])
                     ),
                 ));
             }
@@ -395,7 +418,8 @@ impl Hall {
                         p,
                         format!(
                             "sensor `{}` at {:?} is inside {what} `{id}`; expected a point in the air, not inside a solid",
-                            s.id, s.position_m
+                            s.id,
+                            point(&s.position_m)
                         ),
                     ));
                 }
@@ -512,7 +536,10 @@ impl Checker<'_> {
         if v.is_finite() {
             Ok(())
         } else {
-            Err(self.err(pointer, format!("expected a finite number, found {v}")))
+            Err(self.err(
+                pointer,
+                format!("expected a finite number, found {}", number(v)),
+            ))
         }
     }
 
@@ -521,7 +548,10 @@ impl Checker<'_> {
         if v > 0.0 {
             Ok(())
         } else {
-            Err(self.err(pointer, format!("expected a positive {what}, found {v}")))
+            Err(self.err(
+                pointer,
+                format!("expected a positive {what}, found {}", number(v)),
+            ))
         }
     }
 
@@ -537,8 +567,9 @@ impl Checker<'_> {
                 return Err(self.err(
                     format!("{pointer}/position_m/{a}"),
                     format!(
-                        "box starts at {} = {p} m, outside the room; expected >= 0",
-                        AXES[a]
+                        "box starts at {} = {} m, outside the room; expected >= 0",
+                        AXES[a],
+                        number(p)
                     ),
                 ));
             }
@@ -546,9 +577,10 @@ impl Checker<'_> {
                 return Err(self.err(
                     format!("{pointer}/position_m/{a}"),
                     format!(
-                        "box reaches {} = {} m, outside the room; expected position + size <= {r} m",
+                        "box reaches {} = {} m, outside the room; expected position + size <= {} m",
                         AXES[a],
-                        p + s
+                        number(p + s),
+                        number(r)
                     ),
                 ));
             }

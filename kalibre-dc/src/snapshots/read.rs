@@ -297,7 +297,10 @@ impl Acc {
                 if kind == "fan_speed" && !(0.0..=1.0).contains(&v) {
                     return Err(row.err(
                         Some(3),
-                        format!("fan_speed of CRAC `{id}` is {v}; expected a ratio in [0, 1]"),
+                        format!(
+                            "fan_speed of CRAC `{id}` is {}; expected a ratio in [0, 1]",
+                            number(v)
+                        ),
                     ));
                 }
                 let slot = if kind == "setpoint_c" {
