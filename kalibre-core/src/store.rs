@@ -140,6 +140,26 @@ impl LoadReport {
     }
 }
 
+/// How every journal line begins (`RunRecord`'s first field).
+const RECORD_START: &str = r#"{"seq":"#;
+
+/// Whether a line cut off mid-write could be this: a run record's beginning.
+fn could_start_a_record(tail: &[u8]) -> bool {
+    let start = RECORD_START.as_bytes();
+    tail.starts_with(start) || start.starts_with(tail)
+}
+
+/// A file at the journal's path that is not one: refused, never cut or appended to.
+fn not_a_journal(path: &Path, why: String) -> Error {
+    Error::Journal {
+        path: path.display().to_string(),
+        reason: format!(
+            "not a kalibre run journal: {why}; kalibre neither cuts nor appends to it: move \
+             it, or write the calibration elsewhere"
+        ),
+    }
+}
+
 fn is_zero(n: &usize) -> bool {
     *n == 0
 }
@@ -243,7 +263,9 @@ impl RunStore {
         let mut failed = HashSet::new();
         let mut max_seq: Option<u64> = None;
         let complete_len = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        let mut records = 0usize;
         let mut take = |line: usize, rec: RunRecord, load: &mut LoadReport| {
+            records += 1;
             max_seq = Some(max_seq.map_or(rec.seq, |m: u64| m.max(rec.seq)));
             if rec.fingerprint != fingerprint {
                 load.other_fingerprint += 1;
@@ -326,6 +348,18 @@ impl RunStore {
                     repair = Some(Repair::Newline);
                     lines = tail_line;
                 }
+                // Text that cannot be the start of a record is another file's, not a
+                // crash's: cutting it would destroy it.
+                Err(_) if !could_start_a_record(tail) => {
+                    return Err(not_a_journal(
+                        &path,
+                        format!(
+                            "its last line ({} bytes, no newline) is not a run record cut off \
+                             mid-write (those start with {RECORD_START})",
+                            tail.len()
+                        ),
+                    ));
+                }
                 Err(reason) => {
                     load.torn_tail = Some(BadLine {
                         line: tail_line,
@@ -333,6 +367,17 @@ impl RunStore {
                     });
                     repair = Some(Repair::CutTo(complete_len as u64));
                 }
+            }
+        }
+        if records == 0 {
+            if let Some(first) = load.bad_lines.first() {
+                return Err(not_a_journal(
+                    &path,
+                    format!(
+                        "none of its {} line(s) is a run record (line {}: {})",
+                        load.lines, first.line, first.reason
+                    ),
+                ));
             }
         }
         load.failed_to_retry = failed.iter().filter(|k| !runs.contains_key(*k)).count();

@@ -346,3 +346,25 @@ fn a_repeated_run_with_another_result_is_named() {
     let kept = store.get("t0", &names(), &[1.0, 1.0]).unwrap();
     assert_eq!(kept.outputs, Some(vec![1.0]));
 }
+
+/// A file at the journal's path that is not a journal (text with no newline, an HTML
+/// page) is refused and left as it was: it used to be cut as a "torn tail", or written
+/// into.
+#[test]
+fn a_file_that_is_not_a_journal_is_refused_and_left_alone() {
+    let dir = common::temp_dir("journal-foreign");
+    for (name, text) in [
+        ("flat", "x".repeat(3000)),
+        ("page", "<html>\n<body>notes</body>\n</html>\n".to_string()),
+        (
+            "page-no-newline",
+            "<html>\n<body>notes</body>\n</html>".to_string(),
+        ),
+    ] {
+        let path = dir.join(format!("{name}.jsonl"));
+        std::fs::write(&path, &text).unwrap();
+        let err = RunStore::open(&path, "m1").unwrap_err().to_string();
+        assert!(err.contains("not a kalibre run journal"), "{name}: {err}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), text, "{name}");
+    }
+}
