@@ -73,7 +73,17 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
         .arg(&snaps)
         .arg("--out")
         .arg(dir.join("cal")));
-    assert_input_error(&o, "--nu: must be finite and > 0, got 0");
+    assert_input_error(&o, "--nu: expected a finite number >= 1 (1 is the Cauchy");
+    // Degrees of freedom without the Student-t likelihood (calibrate's default is least
+    // squares) would be ignored: refused.
+    let o = run(kalibre()
+        .args(["calibrate", "--nu", "2", "--hall"])
+        .arg(&hall)
+        .arg("--snapshots")
+        .arg(&snaps)
+        .arg("--out")
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "--nu is the Student-t likelihood's degrees of freedom");
     // Edges from the built-in simulator's flow asked of another model.
     let o = run(kalibre()
         .args([
@@ -415,26 +425,39 @@ fn diagnose_prints_json_and_refuses_another_halls_calibration() {
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "--refit-iterations: must be at least 1 with --refit");
-    // The same geometry under another name is another hall: refused.
+    // The same hall under another name is the same model (the fingerprint leaves the
+    // name out): it passes the model check and reaches the next one, here a bad --nu,
+    // which comes after it.
     let o = run(kalibre()
-        .args(["diagnose", "--hall"])
+        .args(["diagnose", "--nu", "0", "--hall"])
         .arg(data("of-dev-crac-offset/hall.json"))
         .arg("--snapshots")
         .arg(data("of-dev-clean/snapshots.csv"))
         .arg("--calibration")
         .arg(&cal));
-    assert_input_error(&o, "runs of another model");
+    assert_input_error(&o, "--nu: expected a finite number >= 1");
     // And other measurements are not the calibration's.
     let o = run(on_dataset("diagnose", "of-dev-crac-offset")
         .arg("--calibration")
         .arg(&cal));
     assert_input_error(&o, "not the measurements");
-    // A Student-t with no degrees of freedom is no likelihood.
-    let o = run(on_dataset("diagnose", "of-dev-clean")
-        .args(["--nu", "0"])
-        .arg("--calibration")
-        .arg(&cal));
-    assert_input_error(&o, "--nu: must be finite and > 0, got 0");
+    // A Student-t with no degrees of freedom is no likelihood, and with too few (0.05)
+    // every hypothesis "explains" everything: both refused, as is --nu with the
+    // Gaussian likelihood, which would ignore it.
+    for (args, needle) in [
+        (&["--nu", "0"][..], "--nu: expected a finite number >= 1"),
+        (&["--nu", "0.05"][..], "got 0.05"),
+        (
+            &["--likelihood", "gaussian", "--nu", "2"][..],
+            "--nu is the Student-t likelihood's",
+        ),
+    ] {
+        let o = run(on_dataset("diagnose", "of-dev-clean")
+            .args(args)
+            .arg("--calibration")
+            .arg(&cal));
+        assert_input_error(&o, needle);
+    }
     let o = run(on_dataset("diagnose", "of-dev-clean")
         .args(["--sensor-bias-rival", "nan"])
         .arg("--calibration")

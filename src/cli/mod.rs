@@ -6,6 +6,7 @@ mod demo;
 mod diagnose;
 mod error;
 mod inlets;
+mod likelihood;
 mod openfoam_args;
 mod out_dir;
 mod plausible;

@@ -24,7 +24,7 @@ pub use report::{
     Best, Errors, Initial, IterationRecord, NamedValues, PassedOver, Report, Residual, RunCounts,
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
 };
-pub use settings::{Settings, MIN_FOCUS, MIN_TRUST_REGION};
+pub use settings::{Settings, MIN_FOCUS, MIN_ROBUST_NU, MIN_TRUST_REGION};
 pub use slopes::UncertaintySlopes;
 pub use uncertainty::{
     ParamUncertainty, CONVERGED_SHIFT_STDS, IDENTIFIED_REL_STD, REPEATED_RESIDUAL_ICC,

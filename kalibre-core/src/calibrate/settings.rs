@@ -25,7 +25,7 @@ use crate::{Error, Result};
 /// | `stall_step` | none | with `linear_correction`: when the search's proposal promises less than 10% below the best run's loss (or repeats a run), run instead at the best point moved by this much (max norm, unit box) along the direction the runs near it covered least, so the next correction learns the model's slope there | finite, (0, 1] |
 /// | `trust_region` | none | search the surrogate only within this max-norm distance (unit box) of the best point; doubled after a step that improved the model, halved after one that did not (down to 0.001); none: the whole box | [0.001, 1] |
 /// | `polish_iterations` | 0 | after the loop, this many Levenberg-Marquardt steps on the model itself (finite-difference Jacobians: `dim + 1` runs per snapshot after each accepted step, one after a rejected one); for models cheap enough to afford it | any |
-/// | `robust_nu` | none | the data term's likelihood: none is the paper's mean squared error; `nu` a Student-t with `nu` degrees of freedom (4 is the usual robust choice), its scale fitted to the residuals, in the polish (reweighted Levenberg-Marquardt) and the uncertainty, so that a few outputs the model cannot match do not set the parameters; the iterations' search keeps the squared error (it finds the basin) | finite, > 0 |
+/// | `robust_nu` | none | the data term's likelihood: none is the paper's mean squared error; `nu` a Student-t with `nu` degrees of freedom (4 is the usual robust choice), its scale fitted to the residuals, in the polish (reweighted Levenberg-Marquardt) and the uncertainty, so that a few outputs the model cannot match do not set the parameters; the iterations' search keeps the squared error (it finds the basin) | finite, >= 1 |
 /// | `numerical_weighting` | false | with numerical variants ([`crate::Calibrator::with_numerical_variant`]) and a polish: the variants run at the loop's best before the polish, and the polish weighs each measured output by `s^2 / (s^2 + u^2)`, `u` its largest change over the variants and `s^2` the noise variance that leaves the weighted residuals their degrees of freedom (generalised least squares with the numerics as a per-output error); the uncertainty uses the same weights | bool |
 /// | `prior_in_best` | false | with a regulariser: judge which run is the best by its score plus the weighted regulariser at its parameters (the run's own value of what the search minimises, with the score for the misfit), so that a run whose lower error comes from parameters the prior rules out does not become the search's centre | bool |
 /// | `focus` | none | fit the surrogate where the model meets the data: a run whose MAE is `m` times the best run's on its snapshot weighs `exp(-((m - 1) / focus)^2 / 2)`; none: every run weighs 1. The first fit (the design) is never focused | finite, >= 0.01 |
@@ -137,6 +137,11 @@ fn non_negative(name: &str, v: f64) -> Result<()> {
 /// region smaller than this cannot move the search off its start.
 pub const MIN_TRUST_REGION: f64 = 1e-3;
 
+/// The fewest degrees of freedom a Student-t likelihood (`robust_nu`) takes here: 1, the
+/// Cauchy distribution. Below it the fit weighs every residual as an outlier, so any
+/// change "explains" the data.
+pub const MIN_ROBUST_NU: f64 = 1.0;
+
 /// The narrowest [`Settings::focus`]: below it a run 5 % worse than the best weighs
 /// under 1e-5, so the surrogate learns from the best run alone.
 pub const MIN_FOCUS: f64 = 0.01;
@@ -228,10 +233,10 @@ impl Settings {
             }
         }
         if let Some(nu) = self.robust_nu {
-            if !(nu.is_finite() && nu > 0.0) {
+            if !(nu.is_finite() && nu >= MIN_ROBUST_NU) {
                 return Err(bad(
                     "robust_nu",
-                    format!("must be finite and > 0, got {nu}"),
+                    format!("must be finite and >= {MIN_ROBUST_NU}, got {nu}"),
                 ));
             }
         }

@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::calibrate::MIN_ROBUST_NU;
 use crate::{Error, Result};
 
 /// Settings of [`crate::diagnose::diagnose`].
@@ -14,7 +15,7 @@ use crate::{Error, Result};
 /// | `inert_snr` | 1 | inert when no parameter, moved from 0 to the far end of its range, changes the outputs by this many noise sigmas (2-norm over all rows) | finite, >= 0 |
 /// | `min_independence` | 0.05 | identifiable when the hypothesis's unit columns, with the current parameters' span removed, keep a smallest singular value of at least this (1: orthogonal, 0: dependent), and no other hypothesis spans the same residual directions | (0, 1) |
 /// | `prior_weight` | 0 | ridge on the hypothesis's parameters: adds `prior_weight * (dq_j / s_j)^2` in noise-sigma units, `s_j` the larger magnitude of its bounds (a Gaussian prior of that scale); 0: plain least squares | finite, >= 0 |
-/// | `robust_nu` | 4 | degrees of freedom of the Student-t likelihood every fit, BIC and held-out check uses, so that a few outputs the model misses for reasons no hypothesis names (its own physics, a faulty sensor) do not decide the ranking; none: Gaussian (least squares) | finite, > 0 |
+/// | `robust_nu` | 4 | degrees of freedom of the Student-t likelihood every fit, BIC and held-out check uses, so that a few outputs the model misses for reasons no hypothesis names (its own physics, a faulty sensor) do not decide the ranking; none: Gaussian (least squares) | finite, >= 1 |
 /// | `single_output_check` | true | a significant hypothesis must still be preferred (BIC change below 0) with any one output (all its snapshots) left out, so that a model error at one sensor (or a faulty sensor) cannot carry it alone | |
 /// | `sensor_bias_rival_bic` | none | with a value `t`: a hypothesis the single-output check would stop stays significant when its BIC is at least `t` below that of a constant bias at the output it rests on (a faulty sensor, or the model's own error there), both refit with the current parameters; none: the check stops it | finite, >= 0 |
 /// | `ambiguity_check` | true | when another significant hypothesis of another footprint (not collinear with the best, and its fit changing other readings: cosine of the explained changes below 0.9) has a BIC within 6 of the best's, none is significant: each lists the others in `ambiguous_with` (the data say something is missing, not which) | |
@@ -196,10 +197,10 @@ impl DiagnoseSettings {
             non_negative("sensor_bias_rival_bic", t)?;
         }
         if let Some(nu) = self.robust_nu {
-            if !(nu.is_finite() && nu > 0.0) {
+            if !(nu.is_finite() && nu >= MIN_ROBUST_NU) {
                 return Err(bad(
                     "robust_nu",
-                    format!("must be finite and > 0, got {nu}"),
+                    format!("must be finite and >= {MIN_ROBUST_NU}, got {nu}"),
                 ));
             }
         }

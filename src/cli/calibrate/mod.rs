@@ -22,7 +22,7 @@ use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::PenaltyReport;
 
 use super::calibrated_model::{scenario_keys, CalibratedModel};
-use super::diagnose::Likelihood;
+use super::likelihood::Likelihood;
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::{io_err, with_threads, CliError, CliResult};
 use findings::{builtin_findings, openfoam_intakes};
@@ -178,9 +178,10 @@ pub struct CalibrateArgs {
     /// the residuals. `kalibre diagnose` weighs residuals this way by default.
     #[arg(long, value_enum, default_value_t = Likelihood::Gaussian)]
     likelihood: Likelihood,
-    /// Degrees of freedom of the Student-t likelihood (smaller: more robust).
-    #[arg(long, default_value_t = 4.0)]
-    nu: f64,
+    /// Degrees of freedom of the Student-t likelihood (smaller: more robust; at least 1;
+    /// default 4).
+    #[arg(long)]
+    nu: Option<f64>,
     /// Leave out the surrogate's mass-balance terms (recirculation and bypass), as in the paper.
     #[arg(long = "paper-surrogate")]
     paper_surrogate: bool,

@@ -14,6 +14,8 @@ use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::openfoam::{OpenFoamEffectSolver, OpenFoamModel};
 use kalibre_dc::sim::Simulator;
+
+use super::likelihood::Likelihood;
 use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
@@ -68,9 +70,10 @@ pub struct DiagnoseArgs {
     /// less) or `gaussian` (least squares: every residual counts by its square).
     #[arg(long, value_enum, default_value_t = Likelihood::StudentT)]
     likelihood: Likelihood,
-    /// Degrees of freedom of the Student-t likelihood (smaller: more robust).
-    #[arg(long, default_value_t = 4.0)]
-    nu: f64,
+    /// Degrees of freedom of the Student-t likelihood (smaller: more robust; at least 1;
+    /// default 4).
+    #[arg(long)]
+    nu: Option<f64>,
     /// Skip the single-output check (by default a hypothesis must stay significant with
     /// any one sensor left out, so that one sensor the model misses cannot carry it).
     #[arg(long)]
@@ -120,32 +123,6 @@ pub enum DiagnoseModel {
     Builtin,
     /// OpenFOAM, as `kalibre calibrate --model openfoam` runs it.
     Openfoam,
-}
-
-/// The likelihood of `kalibre diagnose`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Likelihood {
-    /// Student-t with `--nu` degrees of freedom.
-    StudentT,
-    /// Gaussian.
-    Gaussian,
-}
-
-impl Likelihood {
-    /// The settings' `robust_nu` for this likelihood and `--nu`, which is checked whatever
-    /// the likelihood (a bad value is refused, not ignored).
-    pub fn robust_nu(self, nu: f64) -> CliResult<Option<f64>> {
-        if !(nu.is_finite() && nu > 0.0) {
-            return Err(CliError::Input(format!(
-                "--nu: must be finite and > 0, got {}",
-                kalibre_dc::snapshots::number(nu)
-            )));
-        }
-        Ok(match self {
-            Likelihood::StudentT => Some(nu),
-            Likelihood::Gaussian => None,
-        })
-    }
 }
 
 /// `--model openfoam`: finite-difference step of the calibrated parameters (unit box).
