@@ -204,10 +204,13 @@ fn a_config_that_does_not_fit_the_hall_is_refused_for_its_real_fault() {
         "output.names[0] is `c-A1-lo` where the hall has `c-A1-hi`, which comes at index 1",
     );
 
+    // Per-server alpha: the hall's list is long, so the message says where the lists
+    // part and shows a few names, not all.
     let o = calibrate(&good, &["--alpha", "per-server"]);
     assert_input_error(
         &o,
-        "params must be the hall's calibrated parameters in order",
+        "params must be the hall's calibrated parameters in order: params[0] is `alpha/",
     );
+    assert!(stderr(&o).contains(" in all)]"), "{}", stderr(&o));
     assert!(!dir.join("out/runs.jsonl").exists());
 }

@@ -186,7 +186,7 @@ pub(super) fn load_params(
         let i = space.index_of(name).ok_or_else(|| {
             CliError::Input(format!(
                 "{file}: {pointer}/{name}: unknown parameter (known: {})",
-                space.names().join(", ")
+                super::some_names(&space.names())
             ))
         })?;
         let x = v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {

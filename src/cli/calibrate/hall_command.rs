@@ -43,9 +43,9 @@ impl HallCommand {
         let got = config.space.names();
         if want != got {
             return Err(bad(format!(
-                "params must be the hall's calibrated parameters in order: [{}], got [{}]",
-                want.join(", "),
-                got.join(", ")
+                "params must be the hall's calibrated parameters in order: {}; expected [{}]",
+                first_difference(("params", "parameters"), &got, &want),
+                crate::cli::some_names(&want)
             )));
         }
         let sensors: Vec<String> = hall.sensors.iter().map(|s| s.id.clone()).collect();
@@ -53,8 +53,8 @@ impl HallCommand {
         if given != sensors.as_slice() {
             return Err(bad(format!(
                 "output.names must be the hall's sensors in order: {}; expected [{}]",
-                first_difference(given, &sensors),
-                sensors.join(", ")
+                first_difference(("output.names", "sensors"), given, &sensors),
+                crate::cli::some_names(&sensors)
             )));
         }
         let unused_param_settings = differing_params(layout.space(), &config.space);
@@ -85,34 +85,35 @@ impl HallCommand {
     }
 }
 
-/// Where `given` names first part from the hall's `sensors`, in words: with the 60-70
-/// sensors of a large hall, the whole lists alone hide a swapped pair.
-fn first_difference(given: &[String], sensors: &[String]) -> String {
-    match given.iter().zip(sensors).position(|(g, s)| g != s) {
+/// Where the `given` list (`list`: its key and what it names) first parts from the
+/// hall's `want`, in words: with the 60-70 sensors of a large hall, or thousands of
+/// per-server parameters, the whole lists alone hide a swapped pair.
+fn first_difference((list, what): (&str, &str), given: &[String], want: &[String]) -> String {
+    match given.iter().zip(want).position(|(g, s)| g != s) {
         Some(i) => {
-            let where_ = match sensors[i..].iter().position(|s| *s == given[i]) {
+            let where_ = match want[i..].iter().position(|s| *s == given[i]) {
                 Some(k) => format!(", which comes at index {} in the hall's order", i + k),
-                None if sensors.contains(&given[i]) => {
+                None if want.contains(&given[i]) => {
                     ", which the hall has earlier (given twice?)".into()
                 }
-                None => ", which is not one of the hall's sensors".into(),
+                None => format!(", which is not one of the hall's {what}"),
             };
             format!(
-                "output.names[{i}] is `{}` where the hall has `{}`{where_}",
-                given[i], sensors[i]
+                "{list}[{i}] is `{}` where the hall has `{}`{where_}",
+                given[i], want[i]
             )
         }
-        None if given.len() < sensors.len() => format!(
-            "{} names given, the hall has {} sensors (the first missing: `{}`)",
+        None if given.len() < want.len() => format!(
+            "{} names given, the hall has {} {what} (the first missing: `{}`)",
             given.len(),
-            sensors.len(),
-            sensors[given.len()]
+            want.len(),
+            want[given.len()]
         ),
         None => format!(
-            "{} names given, the hall has {} sensors (the first extra: `{}`)",
+            "{} names given, the hall has {} {what} (the first extra: `{}`)",
             given.len(),
-            sensors.len(),
-            given[sensors.len()]
+            want.len(),
+            given[want.len()]
         ),
     }
 }

@@ -101,8 +101,7 @@ fn parameters(journal: &Path, hall: &Hall) -> Option<String> {
     };
     let list = |names: Vec<String>| match names.len() {
         0 => "none".to_string(),
-        n if n > 4 => format!("{}, ... ({n})", names[..4].join(", ")),
-        _ => names.join(", "),
+        _ => crate::cli::some_names(&names),
     };
     let (gone, new) = (only(&theirs, &ours), only(&ours, &theirs));
     Some(if gone.is_empty() && new.is_empty() {
