@@ -78,8 +78,9 @@ fn entry_json(e: &EffectSpec) -> String {
 }
 
 /// Removes what an earlier demo in `out` wrote that this one may not write again
-/// (`step-N/report.json`, `diagnosis-N.json`, `hall-with-effect.json`), so that no file
-/// beside the new story belongs to the old one. Only those names are touched.
+/// (`step-N/report.json`, `diagnosis-N.json`, `hall-with-effect.json`) or writes only at
+/// its end (`story.json`, `report.html`), so that no file beside the new story belongs
+/// to the old one, even when this one is interrupted. Only those names are touched.
 fn clear_previous_story(out: &std::path::Path) -> CliResult {
     let Ok(entries) = std::fs::read_dir(out) else {
         return Ok(()); // a new directory
@@ -100,7 +101,8 @@ fn clear_previous_story(out: &std::path::Path) -> CliResult {
     for entry in entries.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
         let path = entry.path();
-        if name == "hall-with-effect.json" || numbered(&name, "diagnosis-", ".json") {
+        let whole_story = ["hall-with-effect.json", "story.json", "report.html"];
+        if whole_story.contains(&name.as_str()) || numbered(&name, "diagnosis-", ".json") {
             remove(&path)?;
         } else if numbered(&name, "step-", "") && path.is_dir() {
             let report = path.join("report.json");
