@@ -37,6 +37,10 @@ fn simulate_refuses_grids_and_limits_that_mean_nothing() {
             "--grid-check: 0.9999 gives cells of 0.2000 m: the model's own cells",
         ),
         (
+            &["--grid-check", "0.5,0.5"][..],
+            "--grid-check: 0.5 is given twice",
+        ),
+        (
             &["--grid-m", "1e-300"][..],
             "--grid-m: cells of 1e-300 m give",
         ),

@@ -156,7 +156,14 @@ pub(in crate::cli) fn check_grid_factors(factors: &[f64]) -> CliResult {
             "--grid-check: {} is not a finer grid (give cell size factors in (0, 1), e.g. 0.75,0.5)",
             kalibre_dc::snapshots::number(*f)
         ))),
-        None => Ok(()),
+        // The same grid twice would solve it twice and report it twice.
+        None => match (1..factors.len()).find(|&i| factors[..i].contains(&factors[i])) {
+            Some(i) => Err(CliError::Input(format!(
+                "--grid-check: {} is given twice; give each finer grid once",
+                kalibre_dc::snapshots::number(factors[i])
+            ))),
+            None => Ok(()),
+        },
     }
 }
 

@@ -500,8 +500,14 @@ fn write_next_hall(
         .zip(&d.suggestions)
         .find(|(h, _)| h.significant);
     let Some((h, entry)) = top else {
+        // A file there from before is not this diagnosis's hall: said, so that a script
+        // reading it next knows.
+        let older = match path.exists() {
+            true => " (the file there is older, left as it was)",
+            false => "",
+        };
         return Ok(Some(format!(
-            "nothing significant: {} not written",
+            "nothing significant: {} not written{older}",
             path.display()
         )));
     };
