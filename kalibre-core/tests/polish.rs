@@ -6,7 +6,7 @@ mod common;
 
 use common::*;
 use kalibre_core::calibrate::{UncertaintySlopes, REPEATED_RESIDUAL_ICC};
-use kalibre_core::{Calibrator, Report, RunStore, Settings};
+use kalibre_core::{Calibrator, Report, RunStore, Settings, StopReason};
 
 fn run(polish: usize, budget: Option<usize>, store: Option<RunStore>) -> (Report, usize) {
     let (model, obs, space) = (Poly::new(), observations(), space());
@@ -84,6 +84,12 @@ fn polish_stays_within_the_run_budget() {
     }
     let (r, _) = run(10, Some(15), None);
     assert_eq!(r.history.len(), 1, "no room for a Jacobian: no polish step");
+    // The loop stopped at its iteration limit, but the budget is why the calibration
+    // stopped where it did: the report says so (it said MaxIterations).
+    assert_eq!(r.stop_reason, StopReason::ModelRunBudget);
+    // With room for every step the loop's own reason stands.
+    let (r, _) = run(3, None, None);
+    assert_eq!(r.stop_reason, StopReason::MaxIterations);
 }
 
 #[test]

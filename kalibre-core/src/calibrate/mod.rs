@@ -244,7 +244,7 @@ where
             .and_then(|w| std::time::Duration::try_from_secs_f64(w).ok())
             .and_then(|w| t_start.checked_add(w));
         let mut iteration = 0;
-        let stop = loop {
+        let mut stop = loop {
             let best_score = state.best.as_ref().map(|b| b.score);
             if let (Some(t), Some(b)) = (st.target_score, best_score) {
                 if b <= t {
@@ -508,13 +508,18 @@ where
                 numerical_changes: numerical_changes.as_deref(),
             };
             let observers = &self.observers;
-            let (records, jacobian) = polish.run(&mut state, iteration, |record| {
+            let outcome = polish.run(&mut state, iteration, |record| {
                 for o in observers {
                     o.observe(&Event::IterationDone { record });
                 }
             })?;
-            history.extend(records);
-            model_jacobian = jacobian;
+            history.extend(outcome.records);
+            model_jacobian = outcome.jacobian;
+            // A budget that cut the polish short is why the calibration stopped where it
+            // did, not the loop's own reason.
+            if let Some(cut) = outcome.cut {
+                stop = cut;
+            }
         }
         self.emit(Event::Stopped { reason: stop });
 

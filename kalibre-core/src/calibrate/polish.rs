@@ -15,7 +15,7 @@ use super::robust::{residuals, RobustFit};
 use super::runner::{RunResult, Runner};
 use super::slopes::ModelJacobian;
 use super::state::{PointEval, State};
-use super::Settings;
+use super::{Settings, StopReason};
 use crate::diagnose::linalg::lstsq;
 use crate::{Model, Observations, ParamSpace, Result, Validator};
 
@@ -106,6 +106,15 @@ fn weighted_mae(residuals: &[f64], weights: &[f64]) -> f64 {
         / total.max(f64::MIN_POSITIVE)
 }
 
+/// What the polish did: its history records, the model's last finite-difference
+/// Jacobian, and the budget that cut its steps short (none when it ran its steps or
+/// stopped on its own).
+pub(crate) struct PolishOutcome {
+    pub records: Vec<IterationRecord>,
+    pub jacobian: Option<ModelJacobian>,
+    pub cut: Option<StopReason>,
+}
+
 /// The polish stage's context: what it runs and scores with.
 pub(crate) struct Polish<'p, 'r, M: Model, V> {
     pub runner: &'p Runner<'r, M>,
@@ -121,25 +130,34 @@ pub(crate) struct Polish<'p, 'r, M: Model, V> {
 }
 
 impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
-    /// Room for `runs` more model runs within the run and wall budgets.
-    fn within_budget(&self, state: &State, runs: usize) -> bool {
+    /// The budget (runs or wall time) that leaves no room for `runs` more model runs.
+    fn budget_spent(&self, state: &State, runs: usize) -> Option<StopReason> {
         let st = self.settings;
-        st.max_model_runs
-            .is_none_or(|b| state.counts.total + runs <= b)
-            && !st
-                .max_wall_s
-                .is_some_and(|w| self.t_start.elapsed().as_secs_f64() >= w)
+        if st
+            .max_model_runs
+            .is_some_and(|b| state.counts.total + runs > b)
+        {
+            Some(StopReason::ModelRunBudget)
+        } else if st
+            .max_wall_s
+            .is_some_and(|w| self.t_start.elapsed().as_secs_f64() >= w)
+        {
+            Some(StopReason::WallClockBudget)
+        } else {
+            None
+        }
     }
 
     /// Runs up to `settings.polish_iterations` damped Gauss-Newton steps from the best
-    /// point, numbering them after `last_iteration`; returns their history records and
-    /// the model's last finite-difference Jacobian (the uncertainty's slopes).
+    /// point, numbering them after `last_iteration`; returns their history records, the
+    /// model's last finite-difference Jacobian (the uncertainty's slopes) and the budget
+    /// that cut the steps short, if one did.
     pub(crate) fn run(
         &self,
         state: &mut State,
         last_iteration: usize,
         mut emit: impl FnMut(&IterationRecord),
-    ) -> Result<(Vec<IterationRecord>, Option<ModelJacobian>)> {
+    ) -> Result<PolishOutcome> {
         let (obs, space) = (self.observations, self.space);
         let n_snap = obs.snapshots().len();
         let dim = space.dim();
@@ -147,6 +165,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
         let mut lambda = LAMBDA_START;
         let mut jac: Option<Linearisation> = None;
         let mut iteration = last_iteration;
+        let mut cut = None;
         // With numerical weighting the polish minimises the weighted misfit, which the
         // lowest plain MAE need not: the best point is the weighted optimum, and only an
         // accepted step moves it.
@@ -159,7 +178,8 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             let mut model_s = 0.0;
             let stale = jac.as_ref().is_none_or(|l| l.jacobian.unit != best.unit);
             if stale {
-                if !self.within_budget(state, (dim + 1) * n_snap) {
+                if let Some(spent) = self.budget_spent(state, (dim + 1) * n_snap) {
+                    cut = Some(spent);
                     break;
                 }
                 let (u0, y0) = (best.unit.clone(), best.outputs.clone());
@@ -232,7 +252,8 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             else {
                 break;
             };
-            if !self.within_budget(state, n_snap) {
+            if let Some(spent) = self.budget_spent(state, n_snap) {
+                cut = Some(spent);
                 break;
             }
             let t = Instant::now();
@@ -348,7 +369,11 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             records.push(rec);
         }
         state.best_held = false;
-        Ok((records, jac.map(|l| l.jacobian)))
+        Ok(PolishOutcome {
+            records,
+            jacobian: jac.map(|l| l.jacobian),
+            cut,
+        })
     }
 
     /// The Levenberg-Marquardt step in the unit box: `min |r0 - J d|^2 + lambda sum_j
