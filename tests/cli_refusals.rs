@@ -156,6 +156,16 @@ fn search_settings_out_of_their_ranges_are_refused_by_flag() {
             "`weight`: must be in [0, 1e6], got 1e308",
         ),
         (
+            "--rise-weight=-1",
+            "",
+            "`weight`: must be in [0, 1e6], got -1",
+        ),
+        (
+            "--crossover",
+            "1e308",
+            "`crossover`: must be in [0, 1], got 1e308",
+        ),
+        (
             "--rise-range",
             "0,1e308",
             "`upper_c`: must be at most 100 K, got 1e308",
@@ -166,8 +176,11 @@ fn search_settings_out_of_their_ranges_are_refused_by_flag() {
             "--max-runs: 5 is smaller than the initial design's 12 runs",
         ),
     ] {
+        // An empty value: the flag carries it (`--flag=-1`).
         let o = run(kalibre()
-            .args(["calibrate", flag, value, "--hall"])
+            .args(["calibrate", flag])
+            .args((!value.is_empty()).then_some(value))
+            .arg("--hall")
             .arg(data("of-dev-clean/hall.json"))
             .arg("--snapshots")
             .arg(data("of-dev-clean/snapshots.csv"))
@@ -210,6 +223,11 @@ fn an_out_that_cannot_take_the_files_is_refused_first() {
     }
     let o = run(kalibre().args(["synth", "--out"]).arg(dir.join("plain")));
     assert_input_error(&o, "is a file, not a directory");
+    // Nor one that would have to be made under a file.
+    let o = run(kalibre()
+        .args(["synth", "--out"])
+        .arg(dir.join("plain").join("sub")));
+    assert_input_error(&o, "plain is a file, not a directory");
     // Nor does `diagnose` wait on a FIFO where the calibration's journal should be.
     let o = run(&mut diagnose_cmd(
         &data("of-dev-clean/hall.json"),

@@ -25,6 +25,17 @@ pub struct OutLock {
 /// naming it, before any work is done.
 pub fn check_is_dir(out: &Path) -> CliResult {
     let Ok(link) = std::fs::symlink_metadata(out) else {
+        // Missing: made later, under its nearest existing ancestor, which must be a
+        // directory.
+        let ancestor = out.ancestors().skip(1).find(|p| p.exists());
+        if let Some(file) = ancestor.filter(|p| !p.as_os_str().is_empty() && !p.is_dir()) {
+            return Err(CliError::Input(format!(
+                "--out {}: {} is a file, not a directory; give a directory (it is made if \
+                 missing)",
+                out.display(),
+                file.display()
+            )));
+        }
         return Ok(());
     };
     let why = match std::fs::metadata(out) {

@@ -129,7 +129,10 @@ fn non_negative(name: &str, v: f64) -> Result<()> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
     } else {
-        Err(bad(name, format!("must be finite and >= 0, got {v}")))
+        Err(bad(
+            name,
+            format!("must be finite and >= 0, got {}", crate::number(v)),
+        ))
     }
 }
 
@@ -165,7 +168,7 @@ impl Settings {
             if !(w.is_finite() && w > 0.0) {
                 return Err(bad(
                     "max_wall_s",
-                    format!("must be finite and > 0, got {w}"),
+                    format!("must be finite and > 0, got {}", crate::number(w)),
                 ));
             }
         }
@@ -189,7 +192,10 @@ impl Settings {
         }
         if let Some(h) = self.stall_step {
             if !(h.is_finite() && h > 0.0 && h <= 1.0) {
-                return Err(bad("stall_step", format!("must be in (0, 1], got {h}")));
+                return Err(bad(
+                    "stall_step",
+                    format!("must be in (0, 1], got {}", crate::number(h)),
+                ));
             }
             if !self.linear_correction {
                 return Err(bad(
@@ -212,7 +218,7 @@ impl Settings {
             if !(s.is_finite() && s > 0.0 && s <= 1.0) {
                 return Err(bad(
                     "explore_on_repeat",
-                    format!("must be in (0, 1], got {s}"),
+                    format!("must be in (0, 1], got {}", crate::number(s)),
                 ));
             }
         }
@@ -220,7 +226,10 @@ impl Settings {
             if !(r.is_finite() && (MIN_TRUST_REGION..=1.0).contains(&r)) {
                 return Err(bad(
                     "trust_region",
-                    format!("must be in [{MIN_TRUST_REGION}, 1], got {r}"),
+                    format!(
+                        "must be in [{MIN_TRUST_REGION}, 1], got {}",
+                        crate::number(r)
+                    ),
                 ));
             }
         }
@@ -228,7 +237,10 @@ impl Settings {
             if !(f.is_finite() && f >= MIN_FOCUS) {
                 return Err(bad(
                     "focus",
-                    format!("must be finite and >= {MIN_FOCUS}, got {f}"),
+                    format!(
+                        "must be finite and >= {MIN_FOCUS}, got {}",
+                        crate::number(f)
+                    ),
                 ));
             }
         }
@@ -236,14 +248,20 @@ impl Settings {
             if !(nu.is_finite() && nu >= MIN_ROBUST_NU) {
                 return Err(bad(
                     "robust_nu",
-                    format!("must be finite and >= {MIN_ROBUST_NU}, got {nu}"),
+                    format!(
+                        "must be finite and >= {MIN_ROBUST_NU}, got {}",
+                        crate::number(nu)
+                    ),
                 ));
             }
         }
         if !(self.perturb_sigma.is_finite() && self.perturb_sigma > 0.0) {
             return Err(bad(
                 "perturb_sigma",
-                format!("must be finite and > 0, got {}", self.perturb_sigma),
+                format!(
+                    "must be finite and > 0, got {}",
+                    crate::number(self.perturb_sigma)
+                ),
             ));
         }
         Ok(())

@@ -89,7 +89,10 @@ fn non_negative(name: &str, v: f64) -> Result<()> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
     } else {
-        Err(bad(name, format!("must be finite and >= 0, got {v}")))
+        Err(bad(
+            name,
+            format!("must be finite and >= 0, got {}", crate::number(v)),
+        ))
     }
 }
 
@@ -172,7 +175,7 @@ impl DiagnoseSettings {
             if !(s.is_finite() && s > 0.0) {
                 return Err(bad(
                     "noise_sigma",
-                    format!("must be finite and > 0, got {s}"),
+                    format!("must be finite and > 0, got {}", crate::number(s)),
                 ));
             }
         }
@@ -181,7 +184,7 @@ impl DiagnoseSettings {
         if !(h.is_finite() && h < 1.0) {
             return Err(bad(
                 "min_held_out_improvement",
-                format!("must be finite and < 1, got {h}"),
+                format!("must be finite and < 1, got {}", crate::number(h)),
             ));
         }
         non_negative("inert_snr", self.inert_snr)?;
@@ -189,7 +192,7 @@ impl DiagnoseSettings {
         if !(v > 0.0 && v < 1.0) {
             return Err(bad(
                 "min_independence",
-                format!("must be in (0, 1), got {v}"),
+                format!("must be in (0, 1), got {}", crate::number(v)),
             ));
         }
         non_negative("prior_weight", self.prior_weight)?;
@@ -200,7 +203,10 @@ impl DiagnoseSettings {
             if !(nu.is_finite() && nu >= MIN_ROBUST_NU) {
                 return Err(bad(
                     "robust_nu",
-                    format!("must be finite and >= {MIN_ROBUST_NU}, got {nu}"),
+                    format!(
+                        "must be finite and >= {MIN_ROBUST_NU}, got {}",
+                        crate::number(nu)
+                    ),
                 ));
             }
         }

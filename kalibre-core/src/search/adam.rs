@@ -114,22 +114,30 @@ impl AdamBuilder {
         require(
             s.learning_rate.is_finite() && s.learning_rate > 0.0,
             "learning_rate",
-            || format!("must be positive and finite, got {}", s.learning_rate),
+            || {
+                format!(
+                    "must be positive and finite, got {}",
+                    crate::number(s.learning_rate)
+                )
+            },
         )?;
         require(s.decay > 0.0 && s.decay <= 1.0, "decay", || {
-            format!("must be in (0, 1], got {}", s.decay)
+            format!("must be in (0, 1], got {}", crate::number(s.decay))
         })?;
         require(s.decay_every >= 1, "decay_every", || {
             "must be at least 1 step".into()
         })?;
         require((0.0..1.0).contains(&s.beta1), "beta1", || {
-            format!("must be in [0, 1), got {}", s.beta1)
+            format!("must be in [0, 1), got {}", crate::number(s.beta1))
         })?;
         require((0.0..1.0).contains(&s.beta2), "beta2", || {
-            format!("must be in [0, 1), got {}", s.beta2)
+            format!("must be in [0, 1), got {}", crate::number(s.beta2))
         })?;
         require(s.epsilon.is_finite() && s.epsilon > 0.0, "epsilon", || {
-            format!("must be positive and finite, got {}", s.epsilon)
+            format!(
+                "must be positive and finite, got {}",
+                crate::number(s.epsilon)
+            )
         })?;
         require((1..=MAX_ADAM_STEPS).contains(&s.steps), "steps", || {
             format!("must be in 1..={MAX_ADAM_STEPS}, got {}", s.steps)

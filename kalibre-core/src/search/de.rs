@@ -134,10 +134,10 @@ impl DifferentialEvolutionBuilder {
             )
         })?;
         require((0.0..=1.0).contains(&s.crossover), "crossover", || {
-            format!("must be in [0, 1], got {}", s.crossover)
+            format!("must be in [0, 1], got {}", crate::number(s.crossover))
         })?;
         require(s.weight > 0.0 && s.weight <= 2.0, "weight", || {
-            format!("must be in (0, 2], got {}", s.weight)
+            format!("must be in (0, 2], got {}", crate::number(s.weight))
         })?;
         require(s.population <= MAX_POPULATION, "population", || {
             format!("must be at most {MAX_POPULATION}, got {}", s.population)

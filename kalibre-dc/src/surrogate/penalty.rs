@@ -17,7 +17,7 @@
 //! 15-20 C, so [`TemperatureRisePenalty::report`] says when and where it binds (a
 //! prior-data conflict) instead of silently clamping alpha.
 
-use kalibre_core::Regularizer;
+use kalibre_core::{number, Regularizer};
 use serde::{Deserialize, Serialize};
 
 use super::adjacency::setting;
@@ -99,25 +99,35 @@ impl PenaltySettings {
         if !(self.lower_c.is_finite() && self.lower_c >= 0.0) {
             return Err(setting(
                 "lower_c",
-                format!("must be >= 0, got {}", self.lower_c),
+                format!("must be >= 0, got {}", number(self.lower_c)),
             ));
         }
         if !(self.upper_c.is_finite() && self.upper_c > self.lower_c) {
             return Err(setting(
                 "upper_c",
-                format!("must exceed lower_c {}, got {}", self.lower_c, self.upper_c),
+                format!(
+                    "must exceed lower_c {}, got {}",
+                    number(self.lower_c),
+                    number(self.upper_c)
+                ),
             ));
         }
         if self.upper_c > MAX_RISE_C {
             return Err(setting(
                 "upper_c",
-                format!("must be at most {MAX_RISE_C} K, got {:e}", self.upper_c),
+                format!(
+                    "must be at most {MAX_RISE_C} K, got {}",
+                    number(self.upper_c)
+                ),
             ));
         }
         if !(self.weight.is_finite() && (0.0..=MAX_WEIGHT).contains(&self.weight)) {
             return Err(setting(
                 "weight",
-                format!("must be in [0, {MAX_WEIGHT:e}], got {:e}", self.weight),
+                format!(
+                    "must be in [0, {MAX_WEIGHT:e}], got {}",
+                    number(self.weight)
+                ),
             ));
         }
         for (name, v) in [
@@ -125,7 +135,10 @@ impl PenaltySettings {
             ("air_heat_capacity_j_kg_k", self.air_heat_capacity_j_kg_k),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(setting(name, format!("must be positive, got {v}")));
+                return Err(setting(
+                    name,
+                    format!("must be positive, got {}", number(v)),
+                ));
             }
         }
         Ok(self)
