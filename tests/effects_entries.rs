@@ -121,6 +121,33 @@ fn cases() -> Vec<Case> {
             "the same kind in the same place as effects/0",
         ),
         c(
+            "a side listed twice",
+            json!([{"kind": "containment_leakage", "sides": ["+x", "+x"]}]),
+            "/effects/0/sides",
+            "`+x` is listed twice",
+        ),
+        // The same opening written two ways is one placement: the sides in another
+        // order, the hall's only containment named or not, a gap over the rack's whole
+        // height or none given.
+        c(
+            "the same leak twice, written two ways",
+            json!([
+                {"kind": "containment_leakage", "sides": ["+x", "-x"]},
+                {"kind": "containment_leakage", "containment": 0, "sides": ["-x", "+x"]}
+            ]),
+            "/effects/1",
+            "the same kind in the same place as effects/0",
+        ),
+        c(
+            "the same gap twice, its whole height written out in one",
+            json!([
+                {"kind": "rack_recirculation", "rack": "A01"},
+                {"kind": "rack_recirculation", "rack": "A01", "z_m": [0.0, 2.0]}
+            ]),
+            "/effects/1",
+            "the same kind in the same place as effects/0",
+        ),
+        c(
             "a floor opening under a rack",
             json!([{"kind": "bypass", "position_m": [2.5, 2.5], "size_m": [0.4, 0.4]}]),
             "/effects/0/position_m",

@@ -107,13 +107,22 @@ impl EffectFactory for ContainmentLeakageFactory {
                 }
                 let mut out = Vec::new();
                 for s in list {
-                    out.push(WallSide::parse(s).ok_or_else(|| {
+                    let side = WallSide::parse(s).ok_or_else(|| {
                         f.error("sides", format!("`{s}` is not one of -x, +x, -y, +y, top"))
-                    })?);
+                    })?;
+                    if out.contains(&side) {
+                        return Err(f.error("sides", format!("`{s}` is listed twice")));
+                    }
+                    out.push(side);
                 }
-                Some(out)
+                // One order, and every side as none given: the same opening is one
+                // placement however it is written (two entries of it are refused).
+                out.sort_by_key(|w| WallSide::ALL.iter().position(|a| a == w));
+                (out.len() < WallSide::ALL.len()).then_some(out)
             }
         };
+        // The only containment is what "every containment" means.
+        let containment = containment.filter(|_| hall.containment.len() > 1);
         let param = f.param("open_fraction", BOUNDS[0], BOUNDS[1], 0.05)?;
         f.finish()?;
         Ok(Box::new(ContainmentLeakage {

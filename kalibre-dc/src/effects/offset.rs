@@ -81,6 +81,8 @@ impl EffectFactory for CracSupplyOffsetFactory {
                 None => return Err(f.error("crac", format!("no CRAC `{id}` in the hall"))),
             },
         };
+        // The only CRAC is what "every CRAC" means: one placement however written.
+        let crac = crac.filter(|_| hall.cracs.len() > 1);
         let param = f.param("offset_c", BOUNDS[0], BOUNDS[1], 0.0)?;
         f.finish()?;
         Ok(Box::new(CracSupplyOffset { crac, param }))

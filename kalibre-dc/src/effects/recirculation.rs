@@ -8,7 +8,7 @@
 //! | `fraction` | no | initial recirculated flow as a fraction of the rack's server flow, default 0.1 |
 //! | `fraction_bounds` | no | bounds, within and default `[0, 1]` |
 
-use kalibre_core::Param;
+use kalibre_core::{number, Param};
 use serde_json::Value;
 
 use super::fields::{param_fields, spec, Fields};
@@ -82,17 +82,23 @@ impl EffectFactory for RackRecirculationFactory {
             .ok_or_else(|| f.error("rack", format!("no rack `{id}` in the hall")))?;
         let r = &hall.racks[rack];
         let z_m = f.opt_array::<2>("z_m")?;
+        let (lo, hi) = (r.position_m[2], r.position_m[2] + r.size_m[2]);
         if let Some([z0, z1]) = z_m {
-            let (lo, hi) = (r.position_m[2], r.position_m[2] + r.size_m[2]);
             if !(z0 < z1 && z0 >= lo - 1e-9 && z1 <= hi + 1e-9) {
                 return Err(f.error(
                     "z_m",
                     format!(
-                        "[{z0}, {z1}] must be increasing and within the rack's height [{lo}, {hi}]"
+                        "[{}, {}] must be increasing and within the rack's height [{}, {}]",
+                        number(z0),
+                        number(z1),
+                        number(lo),
+                        number(hi)
                     ),
                 ));
             }
         }
+        // The whole height given is the whole height: one placement however written.
+        let z_m = z_m.filter(|&[z0, z1]| z0 > lo + 1e-9 || z1 < hi - 1e-9);
         let param = f.param("fraction", BOUNDS[0], BOUNDS[1], 0.1)?;
         f.finish()?;
         Ok(Box::new(RackRecirculationEffect {
