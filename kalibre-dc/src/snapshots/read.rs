@@ -96,6 +96,9 @@ fn parse(hall: &Hall, bytes: &[u8], file: &str, need_readings: bool) -> Result<V
         if label.is_empty() {
             return Err(row.err(Some(0), "expected a non-empty snapshot label"));
         }
+        if let Some(why) = crate::hall::unprintable_name(label) {
+            return Err(row.err(Some(0), format!("snapshot label {why}")));
+        }
         let slot = match by_label.get(label) {
             Some(&k) => k,
             None => {

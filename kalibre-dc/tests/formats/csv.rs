@@ -248,5 +248,11 @@ pub fn csv_cases() -> Vec<CsvCase> {
             "non-empty snapshot label",
             |r| replace_row(r, 7, ",sensor_c,h01,30"),
         ),
+        csv_case(
+            "a label with an escape sequence",
+            "line 9, column snapshot",
+            "snapshot label holds a control character (U+001B)",
+            |r| replace_row(r, 7, "t\u{1b}[31m0,sensor_c,h01,30"),
+        ),
     ]
 }

@@ -64,6 +64,18 @@ pub fn hall_cases() -> Vec<HallCase> {
             |v| set(v, "/racks/1/id", json!("R1")),
         ),
         hall_case(
+            "an id with an escape sequence",
+            "/sensors/2/id",
+            "id holds a control character (U+001B)",
+            |v| set(v, "/sensors/2/id", json!("h\u{1b}[31m2")),
+        ),
+        hall_case(
+            "an id too long to print",
+            "/racks/1/id",
+            "id is 100000 characters long; expected at most 200",
+            |v| set(v, "/racks/1/id", json!("R".repeat(100_000))),
+        ),
+        hall_case(
             "duplicate server id across racks",
             "/racks/2/servers/0/id",
             "duplicate id `R1-01`",
