@@ -49,56 +49,32 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
     std::fs::write(&params, r#"{ "alpha/web": 7.5 }"#).unwrap();
     let o = simulate(&hall, &snaps, Some(&params), &out);
     assert_input_error(&o, "alpha/web");
-    // A negative grid size.
-    let o = run(kalibre()
-        .args(["calibrate", "--grid-m=-0.2", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(dir.join("cal")));
-    assert_input_error(&o, "--grid-m");
-    // A Student-t likelihood with no degrees of freedom.
-    let o = run(kalibre()
-        .args([
-            "calibrate",
-            "--likelihood",
-            "student-t",
-            "--nu",
-            "0",
-            "--hall",
-        ])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(dir.join("cal")));
-    assert_input_error(&o, "--nu: expected a finite number >= 1 (1 is the Cauchy");
-    // Degrees of freedom without the Student-t likelihood (calibrate's default is least
-    // squares) would be ignored: refused.
-    let o = run(kalibre()
-        .args(["calibrate", "--nu", "2", "--hall"])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(dir.join("cal")));
-    assert_input_error(&o, "--nu is the Student-t likelihood's degrees of freedom");
-    // Edges from the built-in simulator's flow asked of another model.
-    let o = run(kalibre()
-        .args([
-            "calibrate",
-            "--model",
-            "openfoam",
+    for (flags, needle) in [
+        // A negative grid size.
+        (&["--grid-m=-0.2"][..], "--grid-m"),
+        // A Student-t likelihood with no degrees of freedom.
+        (
+            &["--likelihood", "student-t", "--nu", "0"][..],
+            "--nu: expected a finite number >= 1 (1 is the Cauchy",
+        ),
+        // Degrees of freedom without the Student-t likelihood (calibrate's default is
+        // least squares) would be ignored: refused.
+        (
+            &["--nu", "2"][..],
+            "--nu is the Student-t likelihood's degrees of freedom",
+        ),
+        // Edges from the built-in simulator's flow asked of another model.
+        (
+            &["--model", "openfoam", "--influence-edges"][..],
             "--influence-edges",
-            "--hall",
-        ])
-        .arg(&hall)
-        .arg("--snapshots")
-        .arg(&snaps)
-        .arg("--out")
-        .arg(dir.join("cal")));
-    assert_input_error(&o, "--influence-edges");
+        ),
+    ] {
+        let o = run(on_files("calibrate", &hall, &snaps)
+            .args(flags)
+            .arg("--out")
+            .arg(dir.join("cal")));
+        assert_input_error(&o, needle);
+    }
     // Snapshots of another hall: an unknown id.
     let bad_snaps = dir.join("snaps.csv");
     std::fs::write(
