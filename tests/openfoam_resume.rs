@@ -112,16 +112,23 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
         done_before < total,
         "killed before the end ({done_before} of {total})"
     );
+    // Every run that gave a result is replayed; one that failed (a design corner can
+    // miss the energy balance) runs again, as its cause may have passed.
+    let ok_before = before.iter().filter(|r| r["status"] == "ok").count();
     assert_eq!(
         report["runs"]["cached"].as_u64().unwrap() as usize,
-        done_before
+        ok_before
     );
     assert_eq!(
         report["runs"]["new"].as_u64().unwrap() as usize,
-        total - done_before,
+        total - ok_before,
         "no finished run is repeated"
     );
-    assert_each_run_once(&journal_lines(&journal));
+    let ok_runs: Vec<serde_json::Value> = journal_lines(&journal)
+        .into_iter()
+        .filter(|r| r["status"] == "ok")
+        .collect();
+    assert_each_run_once(&ok_runs);
     // Every run journals its servers' intakes, so the report shows them at the best
     // parameters without another solve.
     let servers = hall.servers().count();
