@@ -280,13 +280,8 @@ impl RunStore {
             match runs.entry(k) {
                 // Only a result is replayed; a failure is tried again (a later `ok` line
                 // of the same point is that retry's result).
-                Entry::Vacant(_) if rec.status == RunStatus::Failed => {
-                    failed.insert(key(
-                        &rec.scenario,
-                        &rec.scenario_key,
-                        &rec.param_names,
-                        &rec.params,
-                    ));
+                Entry::Vacant(v) if rec.status == RunStatus::Failed => {
+                    failed.insert(v.into_key());
                 }
                 Entry::Occupied(kept) => {
                     load.duplicates += 1;

@@ -414,14 +414,13 @@ pub fn run(args: SimulateArgs) -> CliResult {
         };
         // Past what any air can be, a what-if's answer is the question's fault: the
         // change is refused by name (exit 2), not reported as a failed model.
-        let unpredictable = |e: &dyn std::fmt::Display| {
-            match what_if.as_deref() {
+        let unpredictable = |e: &dyn std::fmt::Display| match what_if.as_deref() {
             Some(what) => CliError::Input(format!(
-                "what if {what}: snapshot `{}`: {e}; the change takes the hall past anything the model can predict: ask a smaller one",
+                "what if {what}: snapshot `{}`: {e}; the change takes the hall past anything \
+                 the model can predict: ask a smaller one",
                 state.label
             )),
             None => failed(e),
-        }
         };
         if let Some(k) = solution.sensor_c().iter().position(|v| !v.is_finite()) {
             return Err(unpredictable(&format!(

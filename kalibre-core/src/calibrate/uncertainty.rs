@@ -112,12 +112,12 @@ impl ParamUncertainty {
     }
 }
 
-/// The uncertainty of every parameter (but those fixed by equal bounds) at `best` from the Jacobian's columns `jac` (one
-/// per parameter, rows as the residuals, unit box; [`super::slopes`]), the residual
-/// variance scaled by `design_effect` ([`Repetition::design_effect`]), with the moves
-/// that the numerical variants' outputs `variant_outputs` (each per snapshot, as
-/// `best.outputs`) cause; empty when the columns do not match the residuals or are not
-/// finite.
+/// The uncertainty of every parameter (but those fixed by equal bounds) at `best` from
+/// the Jacobian's columns `jac` (one per parameter, rows as the residuals, unit box;
+/// [`super::slopes`]), the residual variance scaled by `design_effect`
+/// ([`Repetition::design_effect`]), with the moves that the numerical variants' outputs
+/// `variant_outputs` (each per snapshot, as `best.outputs`) cause; empty when the
+/// columns do not match the residuals or are not finite.
 pub(crate) fn estimate<S>(
     jac: &[Vec<f64>],
     obs: &Observations<S>,
