@@ -1,7 +1,8 @@
 //! Flag values far outside what they mean (a cell size of 1e-300 m, an inlet limit of
 //! 1e300 C, a grid check that checks nothing, fans slowed past any prediction) are
 //! refused as input errors (exit 2) that name the flag at fault and print the value
-//! readably, not as hundreds of digits.
+//! readably, not as hundreds of digits; so are flags that only act through another that
+//! is off.
 
 mod cli_support;
 use cli_support::*;
@@ -90,4 +91,55 @@ fn calibrate_refuses_a_cell_size_too_fine_to_build_by_its_flag() {
     assert_input_error(&o, "--nu: expected a finite number >= 1");
     assert!(stderr(&o).contains("got -1e-300"), "{}", stderr(&o));
     assert_readable(&o);
+}
+
+/// A flag that only acts through another, given where that other is off, would be
+/// ignored without a word: it is refused instead (clap's usage error, or ours), before
+/// any output.
+#[test]
+fn flags_that_only_act_through_another_are_refused_where_it_is_off() {
+    let dir = tmp("flag-values-pairs");
+    let cal = dir.join("cal");
+    for (extra, needle) in [
+        (
+            &["--no-grid-weighting", "--no-grid-check"][..],
+            "'--no-grid-weighting' cannot be used with '--no-grid-check'",
+        ),
+        (
+            &[
+                "--linear-correction",
+                "true",
+                "--output-correction",
+                "false",
+            ][..],
+            "--linear-correction true: the linear term corrects the output correction",
+        ),
+    ] {
+        let o = run(on_dataset("calibrate", "of-dev-clean")
+            .arg("--out")
+            .arg(&cal)
+            .args(extra));
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "{}", stderr(&o));
+        assert!(!cal.exists(), "no output for {extra:?}");
+    }
+    for (extra, needle) in [
+        (
+            &["--sensor-bias-rival", "6", "--no-single-output-check"][..],
+            "'--sensor-bias-rival <BIC>' cannot be used with '--no-single-output-check'",
+        ),
+        (
+            &["--refit-iterations", "2"][..],
+            "the following required arguments were not provided:\n  --refit <K>",
+        ),
+    ] {
+        let o = run(diagnose_cmd(
+            &data("of-dev-clean/hall.json"),
+            &data("of-dev-clean/snapshots.csv"),
+            &cal,
+        )
+        .args(extra));
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "{}", stderr(&o));
+    }
 }

@@ -16,6 +16,14 @@ use std::path::Path;
 /// assert_eq!(std::fs::read_to_string(&path).unwrap(), "{}");
 /// ```
 pub fn write_atomic(path: &Path, bytes: impl AsRef<[u8]>) -> std::io::Result<()> {
+    // A device or FIFO (`--out /dev/null`) is written into, never renamed over: as root
+    // that rename would replace /dev/null with a file for every process on the machine.
+    // Opened by the name given, links and all: `/dev/stdout` on a pipe resolves to
+    // `pipe:[N]`, which is no path.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        let mut f = std::fs::OpenOptions::new().write(true).open(path)?;
+        return f.write_all(bytes.as_ref()).and_then(|()| f.flush());
+    }
     // Through a symbolic link, as a plain write would: the link stays, its target changes.
     let resolved;
     let path = if path.is_symlink() {
@@ -24,12 +32,6 @@ pub fn write_atomic(path: &Path, bytes: impl AsRef<[u8]>) -> std::io::Result<()>
     } else {
         path
     };
-    // A device or FIFO (`--out /dev/null`) is written into, never renamed over: as root
-    // that rename would replace /dev/null with a file for every process on the machine.
-    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
-        let mut f = std::fs::OpenOptions::new().write(true).open(path)?;
-        return f.write_all(bytes.as_ref()).and_then(|()| f.flush());
-    }
     let name = path
         .file_name()
         .ok_or_else(|| std::io::Error::other("not a file path"))?

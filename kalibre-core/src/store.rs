@@ -16,7 +16,7 @@ use std::sync::Mutex;
 
 use serde::{Deserialize, Serialize};
 
-use crate::{Error, ModelError, Outputs, Result};
+use crate::{number, Error, ModelError, Outputs, Result};
 
 /// Whether a journaled run succeeded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -87,6 +87,22 @@ impl RunRecord {
                 self.params.len(),
                 self.param_names.len()
             ));
+        }
+        if !(self.wall_s.is_finite() && self.wall_s >= 0.0) {
+            return Err(format!("wall_s {} is not a duration", number(self.wall_s)));
+        }
+        if let (Some(spread), Some(outputs)) = (&self.spread, &self.outputs) {
+            if spread.len() != outputs.len() {
+                return Err(format!(
+                    "{} spreads for {} outputs",
+                    spread.len(),
+                    outputs.len()
+                ));
+            }
+            // A spread is a standard deviation.
+            if let Some((i, v)) = spread.iter().enumerate().find(|(_, v)| **v < 0.0) {
+                return Err(format!("spread {i} is negative ({})", number(*v)));
+            }
         }
         match self.status {
             RunStatus::Ok if self.outputs.is_none() => Err("status ok without outputs".into()),

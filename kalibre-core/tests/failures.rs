@@ -159,3 +159,33 @@ fn a_snapshot_that_fails_everywhere_is_named_with_its_reason() {
     );
     assert!(!e.contains("`t0`"), "{e}");
 }
+
+/// Poly with a spread reported at every output, `spread` each.
+struct WithSpread(Poly, f64);
+
+impl kalibre_core::Model for WithSpread {
+    type Scenario = Scen;
+    fn fingerprint(&self) -> String {
+        format!("poly-spread-{}", self.1)
+    }
+    fn evaluate(
+        &self,
+        scenario: &Scen,
+        params: &[f64],
+    ) -> Result<kalibre_core::Outputs, ModelError> {
+        let mut out = self.0.evaluate(scenario, params)?;
+        out.spread = Some(vec![self.1; out.values.len()]);
+        Ok(out)
+    }
+}
+
+#[test]
+fn a_negative_spread_fails_the_run_and_says_so() {
+    let sound = Poly::failing(FailZone {
+        a_err: 10.0,
+        b_nan: 0.0,
+    });
+    let e = failure_of(&WithSpread(sound, -0.1));
+    assert!(e.contains("runs of the initial design failed"), "{e}");
+    assert!(e.contains("a negative or non-finite value"), "{e}");
+}

@@ -368,3 +368,51 @@ fn a_file_that_is_not_a_journal_is_refused_and_left_alone() {
         assert_eq!(std::fs::read_to_string(&path).unwrap(), text, "{name}");
     }
 }
+
+/// Lines no run could write, a negative or non-finite wall time, a negative spread or
+/// one of another length than the outputs, are skipped as bad lines, naming why, and
+/// their runs are not replayed.
+#[test]
+fn records_with_impossible_times_or_spreads_are_bad_lines() {
+    let path = journal_of("journal-impossible", &[1.0]);
+    let good = lines(&path)[0].clone();
+    let with = |a: f64, edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+        v["params"][0] = serde_json::json!(a);
+        v["outputs"] = serde_json::json!([a]);
+        edit(&mut v);
+        v.to_string()
+    };
+    let edited = [
+        with(2.0, &|v| v["wall_s"] = serde_json::json!(-1.0)),
+        with(3.0, &|v| v["spread"] = serde_json::json!([-0.1])),
+        with(4.0, &|v| v["spread"] = serde_json::json!([0.1, 0.1])),
+        with(5.0, &|v| v["spread"] = serde_json::json!([0.1])),
+    ];
+    let mut f = fs::OpenOptions::new().append(true).open(&path).unwrap();
+    for line in &edited {
+        writeln!(f, "{line}").unwrap();
+    }
+    drop(f);
+    let store = RunStore::open(&path, "m1").unwrap();
+    let load = store.load_report();
+    let bad: Vec<(usize, &str)> = load
+        .bad_lines
+        .iter()
+        .map(|b| (b.line, b.reason.as_str()))
+        .collect();
+    assert_eq!(
+        bad,
+        vec![
+            (2, "wall_s -1 is not a duration"),
+            (3, "spread 0 is negative (-0.1)"),
+            (4, "2 spreads for 1 outputs"),
+        ]
+    );
+    assert_eq!(load.loaded, 2);
+    for a in [2.0, 3.0, 4.0] {
+        assert!(store.get("t0", &names(), &[a, 1.0]).is_none(), "a = {a}");
+    }
+    let kept = store.get("t0", &names(), &[5.0, 1.0]).unwrap();
+    assert_eq!(kept.result().unwrap().spread, Some(vec![0.1]));
+}

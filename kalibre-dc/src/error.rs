@@ -34,9 +34,15 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
-    /// The simulator could not solve (no convergence, inconsistent setup).
+    /// The simulator could not solve (no convergence, inconsistent state).
     #[error("simulator: {0}")]
     Simulation(String),
+    /// The hall (or an effect's place in it) cannot be laid on the simulator's grid, or a
+    /// simulator setting is out of range: bad input, found before any run, that no
+    /// parameter value would cure (a rack thinner than a cell, a tile over solid cells
+    /// only, a region with no return path).
+    #[error("the built-in simulator cannot set up the hall: {0}")]
+    Geometry(String),
     /// Inputs that do not fit together (lengths, ids).
     #[error("{0}")]
     Mismatch(String),

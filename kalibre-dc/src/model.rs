@@ -5,10 +5,30 @@ use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 use crate::effects::{Effect, EffectRegistry};
 use crate::hall::Hall;
 use crate::sim::{
-    rack_heat, server_air, RackHeat, SensorInfluence, ServerAir, SimConfig, Simulator, Solution,
+    rack_heat, server_air, RackHeat, SensorInfluence, ServerAir, SimConfig, SimMods, Simulator,
+    Solution,
 };
 use crate::snapshots::OperatingState;
 use crate::{Error, ParamLayout, Result};
+
+/// Checks that each effect acts somewhere on `sim`'s grid: its modifications at its
+/// parameters' upper bounds (so that a share or flow is not zero) resolved onto open
+/// cells. An effect that acts nowhere would fail every run that gives it a value.
+fn check_effect_placements(sim: &Simulator, effects: &[Box<dyn Effect>]) -> Result<()> {
+    for (i, effect) in effects.iter().enumerate() {
+        let upper: Vec<f64> = effect.parameters().iter().map(|p| p.upper).collect();
+        let mut mods = SimMods::new(sim.hall().cracs.len());
+        effect.modify(&upper, sim.hall(), &mut mods)?;
+        sim.check_placements(&mods).map_err(|e| match e {
+            Error::Geometry(message) => Error::Effect {
+                kind: effect.kind().to_string(),
+                message: format!("effects/{i}: {message}"),
+            },
+            other => other,
+        })?;
+    }
+    Ok(())
+}
 
 /// A hall's thermal model: the simulator, the hall's effects and the parameter layout.
 ///
@@ -61,6 +81,7 @@ impl HallModel {
             ])
         );
         let sim = Simulator::new(hall, config)?;
+        check_effect_placements(&sim, &effects)?;
         let sensor_names = hall.sensors.iter().map(|s| s.id.clone()).collect();
         Ok(HallModel {
             sim,

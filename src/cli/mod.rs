@@ -92,3 +92,40 @@ pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Cl
         .map_err(|e| CliError::Run(format!("cannot start {threads} threads: {e}")))?;
     Ok(pool.install(f))
 }
+
+/// Set when `simulate --out` is this process's stdout (`--out /dev/stdout`): the summary
+/// lines then go to stderr, so that stdout carries the predictions alone.
+static SAY_TO_STDERR: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// `println!`, or `eprintln!` once an output file is stdout ([`say_to_stderr_if_stdout`]).
+macro_rules! say {
+    ($($arg:tt)*) => {
+        if $crate::cli::says_to_stderr() {
+            eprintln!($($arg)*)
+        } else {
+            println!($($arg)*)
+        }
+    };
+}
+pub(crate) use say;
+
+/// Whether [`say!`] writes to stderr.
+pub(crate) fn says_to_stderr() -> bool {
+    SAY_TO_STDERR.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Sends [`say!`] to stderr when `out` is the file stdout writes to (the same device and
+/// inode: `/dev/stdout`, `/proc/self/fd/1`, or the file stdout is redirected to).
+pub(crate) fn say_to_stderr_if_stdout(out: &std::path::Path) {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let id = |p: &std::path::Path| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
+        let stdout = id(std::path::Path::new("/dev/stdout"));
+        if stdout.is_some() && id(out) == stdout {
+            SAY_TO_STDERR.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = out;
+}

@@ -1,6 +1,7 @@
 //! `kalibre simulate`: the built-in simulator on a hall's snapshots (OpenFOAM:
 //! `simulate_openfoam`).
 
+use super::say;
 use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
@@ -111,7 +112,7 @@ pub(super) fn print_under_read_note(
         _ => None,
     };
     if let Some(under) = residuals.and_then(|r| coldest_under_read(hall, &r)) {
-        println!("{}", under_read_note(&under, labels, headroom_c));
+        say!("{}", under_read_note(&under, labels, headroom_c));
     }
     Ok(())
 }
@@ -321,6 +322,7 @@ fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
     refuse_overwriting_inputs(&args)?;
+    super::say_to_stderr_if_stdout(&args.out);
     // Before anything is written, so a bad factor never replaces a good `--out`.
     super::calibrate::check_grid_factors(&args.grid_check)?;
     inlet_limit_c(&args)?;
@@ -337,7 +339,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     args.what_if.apply(&hall, &mut snaps)?;
     let what_if = args.what_if.describe();
     if let Some(what) = &what_if {
-        println!("what if: {what} (in every snapshot)");
+        say!("what if: {what} (in every snapshot)");
         let states = snaps.iter().map(|s| &s.state);
         super::plausible::warn_what_if_beyond_halls(what, &hall, states);
     }
@@ -455,7 +457,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
             .map_err(|e| io_err(path, e))?;
     }
     for (label, check) in labels.iter().zip(&checks) {
-        println!("{}", inlet_line(label, check));
+        say!("{}", inlet_line(label, check));
     }
     // Each snapshot's headroom, the least over the finer grids when asked for.
     let mut headroom: Vec<Option<f64>> = checks.iter().map(setpoint_headroom_c).collect();
@@ -471,7 +473,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
                 .map(|(_, rooms)| rooms[k])
                 .chain(headroom[k])
                 .reduce(f64::min);
-            println!(
+            say!(
                 "{label}: on finer grids the headroom is {}; the least, {:.2} C, allows for the grid",
                 shown.join(", "),
                 headroom[k].unwrap_or(f64::NAN)
@@ -479,7 +481,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         }
     }
     print_under_read_note(&args, file.as_ref(), &hall, &labels, &headroom)?;
-    println!(
+    say!(
         "wrote {} ({} snapshots x {} sensors){}",
         args.out.display(),
         labels.len(),
@@ -490,7 +492,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
             .unwrap_or_default()
     );
     if let Some(path) = &args.heat_sources {
-        println!(
+        say!(
             "wrote {} (per snapshot and sensor, the racks giving at least {:.0} % of its warming)",
             path.display(),
             100.0 * HEAT_SOURCE_MIN_SHARE
@@ -503,7 +505,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
 /// Says where `--servers` wrote the servers' air, if asked for.
 pub(super) fn print_servers_written(args: &SimulateArgs, labels: &[String], hall: &Hall) {
     if let Some(path) = &args.servers {
-        println!(
+        say!(
             "wrote {} ({} snapshots x {} servers)",
             path.display(),
             labels.len(),

@@ -2,6 +2,7 @@
 //! parameters or any others, what-ifs included; the predicted sensor readings, and every
 //! server's air with the intakes counted against the limit.
 
+use super::say;
 use std::time::Instant;
 
 use kalibre_core::Model;
@@ -101,7 +102,7 @@ pub(super) fn run(
             .extras
             .get(SERVER_INTAKE_KEY)
             .ok_or_else(|| failed(&"the run sampled no server intakes"))?;
-        println!(
+        say!(
             "{label}: OpenFOAM solved in {:.0} s",
             started.elapsed().as_secs_f64()
         );
@@ -120,11 +121,11 @@ pub(super) fn run(
         std::fs::write(path, write_server_air(&air)).map_err(|e| io_err(path, e))?;
     }
     for (label, check) in labels.iter().zip(&checks) {
-        println!("{}", inlet_line(label, check));
+        say!("{}", inlet_line(label, check));
     }
     let headroom: Vec<Option<f64>> = checks.iter().map(setpoint_headroom_c).collect();
     print_under_read_note(args, file, &hall, &labels, &headroom)?;
-    println!(
+    say!(
         "wrote {} ({} snapshots x {} sensors; OpenFOAM case in {})",
         args.out.display(),
         labels.len(),

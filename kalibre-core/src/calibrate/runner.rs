@@ -56,9 +56,10 @@ impl<M: Model> Runner<'_, M> {
     fn checked(&self, outputs: Outputs) -> std::result::Result<Outputs, ModelError> {
         let o = check_outputs(outputs, self.output_names)?;
         if let Some(sp) = &o.spread {
-            if sp.len() != o.values.len() || sp.iter().any(|v| !v.is_finite()) {
+            // A spread is a standard deviation: finite and not negative.
+            if sp.len() != o.values.len() || sp.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
                 return Err(ModelError::failed(
-                    "output spread has the wrong length or a non-finite value",
+                    "output spread has the wrong length, or a negative or non-finite value",
                 ));
             }
         }

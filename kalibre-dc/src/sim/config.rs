@@ -225,7 +225,7 @@ impl SimConfig {
     /// Checks every setting against its range, naming the first offender.
     pub fn check(&self) -> Result<()> {
         let bad = |field: &str, v: String, range: &str| {
-            Err(Error::Simulation(format!(
+            Err(Error::Geometry(format!(
                 "config `{field}` = {v} is outside {range}"
             )))
         };

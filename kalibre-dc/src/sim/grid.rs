@@ -21,6 +21,23 @@ fn cells_along(l: f64, cell_m: f64) -> f64 {
 }
 
 impl Grid {
+    /// The cell size for messages: `0.2` (m) when the axes agree to a nanometre, else
+    /// `0.2 x 0.25 x 0.2`. A room length that is not a whole number of cells leaves
+    /// rounding noise (4.8 m / 24 = 0.19999999999999998) that a reader should not see.
+    pub fn cell_m_text(&self) -> String {
+        let [x, y, z] = self.d;
+        if metres_text(x) == metres_text(y) && metres_text(y) == metres_text(z) {
+            metres_text(x)
+        } else {
+            format!(
+                "{} x {} x {}",
+                metres_text(x),
+                metres_text(y),
+                metres_text(z)
+            )
+        }
+    }
+
     /// The grid with cells of about `cell_m` over a room of `size_m` (each axis gets
     /// `round(L / cell_m)` cells, at least 2, so that cell faces fall on the room walls).
     pub fn new(size_m: [f64; 3], cell_m: f64) -> Self {
@@ -206,6 +223,11 @@ impl Grid {
         let end = ((hi - GEOM_EPS) / self.d[a]).ceil().max(0.0) as usize;
         first.min(self.n[a])..end.min(self.n[a]).max(first.min(self.n[a]))
     }
+}
+
+/// A length (m) rounded to the nanometre, for messages.
+pub(crate) fn metres_text(x: f64) -> String {
+    crate::snapshots::number((x * 1e9).round() / 1e9)
 }
 
 #[cfg(test)]

@@ -34,6 +34,7 @@ mod linalg;
 mod mods;
 mod multigrid;
 mod panel;
+mod placement;
 mod run;
 mod solution;
 mod supply;

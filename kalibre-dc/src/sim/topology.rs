@@ -2,7 +2,7 @@
 //! faces and their conductances, containment walls, supply and return cells, server
 //! intake and exhaust cells with weights, and sensor interpolation stencils.
 
-use super::grid::{Grid, GEOM_EPS};
+use super::grid::{metres_text, Grid, GEOM_EPS};
 use super::mods::WallSide;
 use super::panel::panel_face_g;
 use super::SimConfig;
@@ -71,7 +71,7 @@ impl Topology {
     pub fn build(hall: &Hall, config: &SimConfig) -> Result<Self> {
         if let Some(cells) = cells_beyond_cap(hall.room.size_m, config.cell_m) {
             let [x, y, z] = hall.room.size_m.map(crate::snapshots::number);
-            return Err(Error::Simulation(format!(
+            return Err(Error::Geometry(format!(
                 "the room ({x} x {y} x {z} m) at cells of {} m needs {cells:.3e} cells; \
                  the built-in simulator takes at most {MAX_CELLS}: use coarser cells \
                  (`--grid-m`) or check the room size",
@@ -127,11 +127,11 @@ impl Topology {
             let cells = layer_cells(&grid, &b, top);
             let open: Vec<usize> = cells.into_iter().filter(|&c| !solid[c]).collect();
             if open.is_empty() {
-                return Err(Error::Simulation(format!(
+                return Err(Error::Geometry(format!(
                     "return {ri} lies over solid cells only on cells of {} x {} m (the {} m \
                      asked for, fitted to the room): use finer cells (`--grid-m`)",
-                    number(grid.d[0]),
-                    number(grid.d[1]),
+                    metres_text(grid.d[0]),
+                    metres_text(grid.d[1]),
                     number(config.cell_m)
                 )));
             }
@@ -160,12 +160,12 @@ impl Topology {
                 .filter(|&c| !solid[c])
                 .collect();
             if cells.is_empty() {
-                return Err(Error::Simulation(format!(
+                return Err(Error::Geometry(format!(
                     "tile {ti} at {:?} lies over solid cells only on cells of {} x {} m (the {} \
                      m asked for, fitted to the room): use finer cells (`--grid-m`)",
                     t.position_m,
-                    number(grid.d[0]),
-                    number(grid.d[1]),
+                    metres_text(grid.d[0]),
+                    metres_text(grid.d[1]),
                     number(config.cell_m)
                 )));
             }
@@ -183,7 +183,7 @@ impl Topology {
                     let side = front_side(hall, &b);
                     face_stencil(&grid, &solid, &b, side, [b.min[2], b.max[2]]).ok_or_else(
                         || {
-                            Error::Simulation(format!(
+                            Error::Geometry(format!(
                                 "CRAC `{}`: its front face has no open cell",
                                 cr.id
                             ))
@@ -195,7 +195,7 @@ impl Topology {
                 Vec::new()
             } else {
                 top_stencil(&grid, &solid, &b).ok_or_else(|| {
-                    Error::Simulation(format!(
+                    Error::Geometry(format!(
                         "CRAC `{}` reaches the ceiling and the hall has no returns: no return path",
                         cr.id
                     ))
@@ -217,16 +217,18 @@ impl Topology {
             let z = [b.min[2], b.max[2]];
             let rb = Aabb::from_position_size(s.rack.position_m, s.rack.size_m);
             let inl = face_stencil(&grid, &solid, &rb, s.rack.inlet, z).ok_or_else(|| {
-                Error::Simulation(format!(
-                    "server `{}`: no open cell at its intake",
-                    s.server.id
+                Error::Geometry(format!(
+                    "server `{}`: no open cell at its intake{}",
+                    s.server.id,
+                    face_hint(&grid, s.rack.size_m)
                 ))
             })?;
             let exh =
                 face_stencil(&grid, &solid, &rb, s.rack.inlet.opposite(), z).ok_or_else(|| {
-                    Error::Simulation(format!(
-                        "server `{}`: no open cell at its exhaust",
-                        s.server.id
+                    Error::Geometry(format!(
+                        "server `{}`: no open cell at its exhaust{}",
+                        s.server.id,
+                        face_hint(&grid, s.rack.size_m)
                     ))
                 })?;
             server_intake.push(inl);
@@ -250,7 +252,7 @@ impl Topology {
         topo.deactivate_enclosed(hall)?;
         for s in &hall.sensors {
             let st = topo.sensor_stencil(s.position_m).ok_or_else(|| {
-                Error::Simulation(format!("sensor `{}`: no open cell around it", s.id))
+                Error::Geometry(format!("sensor `{}`: no open cell around it", s.id))
             })?;
             topo.sensors.push(st);
         }
@@ -294,7 +296,7 @@ impl Topology {
             .zip(self.server_intake.iter().zip(&self.server_exhaust))
         {
             if lost(i) || lost(e) {
-                return Err(Error::Simulation(format!(
+                return Err(Error::Geometry(format!(
                     "server `{}` draws or exhausts into an enclosed region with no return path \
                      (add a return, or containment leakage)",
                     s.server.id
@@ -302,7 +304,7 @@ impl Topology {
             }
         }
         if self.tiles.iter().any(lost) || self.crac_front.iter().chain(&self.crac_top).any(lost) {
-            return Err(Error::Simulation(
+            return Err(Error::Geometry(
                 "a tile or CRAC opens into an enclosed region with no return path".into(),
             ));
         }
@@ -375,6 +377,22 @@ impl Topology {
         }
         let w = 1.0 / cells.len() as f64;
         Some(cells.into_iter().map(|c| (c, w)).collect())
+    }
+}
+
+/// Why a rack face may have no open cell: the rack thinner than a cell on some axis, or
+/// its face against a wall, a CRAC or another rack.
+fn face_hint(grid: &Grid, size_m: [f64; 3]) -> String {
+    let thin = (0..3).find(|&a| size_m[a] < grid.d[a]);
+    match thin {
+        Some(a) => format!(
+            " (its rack is {} m across in {}, less than a cell of {} m: the grid cannot \
+             hold it; check its `size_m` or use finer cells, `--grid-m`)",
+            number(size_m[a]),
+            ["x", "y", "z"][a],
+            metres_text(grid.d[a])
+        ),
+        None => " (the face may stand against a wall, a CRAC or another rack)".into(),
     }
 }
 

@@ -92,7 +92,7 @@ pub struct CalibrateArgs {
     /// before the polish too, and a sensor the grid moves by u counts s^2 / (s^2 + u^2)
     /// (s: the noise the grid leaves unexplained), so the grid's error at a few sensors
     /// does not set the alphas.
-    #[arg(long = "no-grid-weighting")]
+    #[arg(long = "no-grid-weighting", conflicts_with = "no_grid_check")]
     no_grid_weighting: bool,
     /// How alpha is calibrated; default: the hall's `calibrate.alpha`.
     #[arg(long, value_enum)]
@@ -155,9 +155,10 @@ pub struct CalibrateArgs {
     #[arg(long = "output-correction", default_value_t = true, action = clap::ArgAction::Set)]
     output_correction: bool,
     /// With the output correction, also correct the surrogate's slopes: a linear term
-    /// fitted to the model-minus-surrogate discrepancy at the other runs (`true` or `false`).
-    #[arg(long = "linear-correction", default_value_t = true, action = clap::ArgAction::Set)]
-    linear_correction: bool,
+    /// fitted to the model-minus-surrogate discrepancy at the other runs (`true` or `false`;
+    /// default: true, and refused as `true` with `--output-correction false`).
+    #[arg(long = "linear-correction", action = clap::ArgAction::Set)]
+    linear_correction: Option<bool>,
     /// Search only within this distance (unit box) of the best point, growing after a
     /// step that improved the model and shrinking after one that did not (0.001 to 1);
     /// 0: whole box.

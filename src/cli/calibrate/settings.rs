@@ -72,6 +72,14 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         .with_steps(args.adam_steps)
         .build()
         .map_err(|e| CliError::Input(format!("--adam-steps: {e}")))?;
+    if args.linear_correction == Some(true) && !args.output_correction {
+        return Err(CliError::Input(
+            "--linear-correction true: the linear term corrects the output correction, \
+             which --output-correction false turns off"
+                .into(),
+        ));
+    }
+    let linear_correction = args.linear_correction.unwrap_or(true) && args.output_correction;
     let core = kalibre_core::Settings {
         seed: args.seed,
         max_iterations: args.iterations,
@@ -84,10 +92,10 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         explore_on_repeat: (args.explore != 0.0).then_some(args.explore),
         trust_region: (args.trust_region != 0.0).then_some(args.trust_region),
         output_correction: args.output_correction,
-        linear_correction: args.linear_correction && args.output_correction,
+        linear_correction,
         stall_step: HallCalibrationSettings::loop_defaults()
             .stall_step
-            .filter(|_| args.linear_correction && args.output_correction),
+            .filter(|_| linear_correction),
         polish_iterations: args.polish.unwrap_or(match args.model {
             ModelArg::Builtin => HallCalibrationSettings::loop_defaults().polish_iterations,
             ModelArg::Openfoam | ModelArg::Command => 0,

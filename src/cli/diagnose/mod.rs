@@ -82,7 +82,7 @@ pub struct DiagnoseArgs {
     /// this much below that of a constant bias of the one sensor it rests on (a faulty
     /// sensor reads as such a bias; an effect follows its cause from snapshot to
     /// snapshot). By default the check stops it.
-    #[arg(long, value_name = "BIC")]
+    #[arg(long, value_name = "BIC", conflicts_with = "no_single_output_check")]
     sensor_bias_rival: Option<f64>,
     /// Name the best explanation even when another of a different footprint fits about
     /// as well (BIC within 6). By default both are listed as undecided: the data then
@@ -109,7 +109,7 @@ pub struct DiagnoseArgs {
     #[arg(long, value_name = "K", default_value_t = 0)]
     refit: usize,
     /// Runs of each refit hypothesis (one solve per snapshot each).
-    #[arg(long, value_name = "N", default_value_t = 4)]
+    #[arg(long, value_name = "N", default_value_t = 4, requires = "refit")]
     refit_iterations: usize,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
