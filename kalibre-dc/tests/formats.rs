@@ -254,6 +254,22 @@ fn snapshots_resolve_rack_power_and_dead_sensors() {
     assert_eq!(snaps[1].sensor_c, vec![Some(22.0), Some(34.1), None]);
 }
 
+/// A snapshot with every fan off is read when nothing draws power (a hall at rest).
+#[test]
+fn every_fan_off_is_read_when_no_server_draws_power() {
+    let mut rows = csv_rows();
+    for (i, row) in rows.iter_mut().enumerate() {
+        if row.starts_with("t1,power_w") {
+            *row = format!("{},0", row.rsplit_once(',').unwrap().0);
+        } else if i == 10 {
+            *row = "t1,fan_speed,crac-1,0".into();
+        }
+    }
+    let snaps = parse_snapshots(&hall(), &csv_text(&rows), CSV_FILE).unwrap();
+    assert_eq!(snaps[1].state.fan_speed, vec![0.0]);
+    assert!(snaps[1].state.power_w.iter().all(|&p| p == 0.0));
+}
+
 #[test]
 fn snapshot_order_is_first_appearance_and_rows_may_interleave() {
     let h = hall();

@@ -150,6 +150,12 @@ pub fn csv_cases() -> Vec<CsvCase> {
             },
         ),
         csv_case(
+            "every fan off under load",
+            "snapshot `t1` (first at line 11)",
+            "every CRAC's fan_speed is 0 while the servers draw 6.8 kW",
+            |r| replace_row(r, 10, "t1,fan_speed,crac-1,0"),
+        ),
+        csv_case(
             "missing setpoint",
             "snapshot `t1` (first at line 11)",
             "missing setpoint_c for CRAC `crac-1`",
