@@ -213,3 +213,87 @@ fn weighing_outputs_by_their_numerics_keeps_a_grid_error_out_of_the_parameters()
     assert_eq!(weighted.numerical_checks.len(), 1);
     assert!(weighted.numerical_checks[0].error.is_none());
 }
+
+/// Poly that counts its runs and sleeps `sleep_ms` in each one after the first
+/// `fast_runs`.
+struct Timed {
+    fast_runs: usize,
+    sleep_ms: u64,
+    calls: std::sync::atomic::AtomicUsize,
+}
+
+impl Timed {
+    fn new(fast_runs: usize, sleep_ms: u64) -> Self {
+        let calls = std::sync::atomic::AtomicUsize::new(0);
+        Timed {
+            fast_runs,
+            sleep_ms,
+            calls,
+        }
+    }
+
+    fn calls(&self) -> usize {
+        self.calls.load(std::sync::atomic::Ordering::SeqCst)
+    }
+}
+
+impl Model for Timed {
+    type Scenario = Scen;
+    fn fingerprint(&self) -> String {
+        "poly-timed".into()
+    }
+    fn evaluate(&self, s: &Scen, p: &[f64]) -> Result<Outputs, ModelError> {
+        let k = self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        if k >= self.fast_runs {
+            std::thread::sleep(std::time::Duration::from_millis(self.sleep_ms));
+        }
+        Poly::new().evaluate(s, p)
+    }
+}
+
+/// Past the wall budget the variants (a finer grid's runs, the costliest of all) are not
+/// run, and the report says why: they used to run whatever the budget.
+#[test]
+fn variants_are_not_run_past_the_wall_budget() {
+    let (obs, space) = (observations(), space());
+    let settings = |max_wall_s| Settings {
+        seed: 5,
+        max_iterations: 3,
+        polish_iterations: 0,
+        max_wall_s,
+        ..Settings::default()
+    };
+    // The design's runs are fast; the first iteration's take 1 s each, past the budget.
+    let design_runs = Calibrator::new(&Poly::new(), QuadSurface::default(), &obs, &space)
+        .with_settings(settings(None))
+        .run()
+        .unwrap()
+        .initial
+        .design_runs;
+    let (model, variant) = (Timed::new(design_runs, 1000), Timed::new(usize::MAX, 0));
+    let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_settings(settings(Some(0.5)))
+        .with_numerical_variant("finer grid", &variant)
+        .run()
+        .unwrap();
+    assert_eq!(r.history.len(), 1, "one iteration, then the budget");
+    assert_eq!(variant.calls(), 0);
+    let check = &r.numerical_checks[0];
+    assert_eq!(
+        check.error.as_deref(),
+        Some(kalibre_core::calibrate::SKIPPED_PAST_WALL)
+    );
+    assert_eq!(
+        check.describe(),
+        "finer grid: not run: the wall-time budget (max_wall_s) had passed"
+    );
+    // With time to spare they run, once per snapshot.
+    let (model, variant) = (Timed::new(usize::MAX, 0), Timed::new(usize::MAX, 0));
+    let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_settings(settings(Some(600.0)))
+        .with_numerical_variant("finer grid", &variant)
+        .run()
+        .unwrap();
+    assert_eq!(variant.calls(), obs.snapshots().len());
+    assert!(r.numerical_checks[0].error.is_none());
+}

@@ -19,7 +19,7 @@ mod trust;
 mod uncertainty;
 mod unreached;
 
-pub use numerical::NumericalCheck;
+pub use numerical::{NumericalCheck, SKIPPED_PAST_WALL};
 pub use report::{
     Best, Errors, Initial, IterationRecord, NamedValues, PassedOver, Report, Residual, RunCounts,
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
@@ -484,8 +484,13 @@ where
             Some(b)
                 if polishing && st.numerical_weighting && !self.numerical_variants.is_empty() =>
             {
-                let (checks, outputs) =
-                    numerical::run_variants(&self.numerical_variants, obs, &b.outputs, &b.params);
+                let (checks, outputs) = numerical::run_variants(
+                    &self.numerical_variants,
+                    obs,
+                    &b.outputs,
+                    &b.params,
+                    deadline,
+                );
                 let changes = numerical::row_changes(obs, &b.outputs, &outputs);
                 pre_polish_variants = Some(numerical::VariantRuns {
                     unit: b.unit.clone(),
@@ -536,9 +541,13 @@ where
         let (numerical_checks, variant_outputs) = match (linearised_best, pre_polish_variants) {
             // The variants already ran at this point (the polish did not move it).
             (Some(b), Some(v)) if v.unit == b.unit => (v.checks, v.outputs),
-            (Some(b), _) => {
-                numerical::run_variants(&self.numerical_variants, obs, &b.outputs, &b.params)
-            }
+            (Some(b), _) => numerical::run_variants(
+                &self.numerical_variants,
+                obs,
+                &b.outputs,
+                &b.params,
+                deadline,
+            ),
             (None, _) => (Vec::new(), Vec::new()),
         };
         // The weights the polish used, at the reported point: the uncertainty of the

@@ -33,10 +33,14 @@ pub struct NumericalCheck {
     pub error: Option<String>,
 }
 
+/// [`NumericalCheck::error`] of a variant not run because the wall budget had passed.
+pub const SKIPPED_PAST_WALL: &str = "not run: the wall-time budget (max_wall_s) had passed";
+
 impl NumericalCheck {
     /// One line for summaries: `grid 0.1 m: the sensors move 0.074 C`, or why it failed.
     pub fn describe(&self) -> String {
         match (&self.error, self.mean_abs_change) {
+            (Some(e), _) if e == SKIPPED_PAST_WALL => format!("{}: {e}", self.variant),
             (Some(e), _) => format!("{}: failed ({e})", self.variant),
             (None, Some(m)) => format!("{}: the sensors move {m:.3} C", self.variant),
             (None, None) => format!("{}: nothing measured", self.variant),
@@ -79,11 +83,22 @@ pub(crate) fn run_variants<M: Model>(
     obs: &Observations<M::Scenario>,
     best_outputs: &[Vec<f64>],
     params: &[f64],
+    deadline: Option<std::time::Instant>,
 ) -> (Vec<NumericalCheck>, Vec<Vec<Vec<f64>>>) {
     let names: Vec<String> = obs.outputs().iter().map(|o| o.name.clone()).collect();
     let mut checks = Vec::new();
     let mut outputs = Vec::new();
     for (name, model) in variants {
+        // A finer grid's runs are the costliest of the calibration: past the wall budget
+        // they would overshoot it by more than any step it allows.
+        if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+            checks.push(NumericalCheck {
+                variant: name.clone(),
+                mean_abs_change: None,
+                error: Some(SKIPPED_PAST_WALL.into()),
+            });
+            continue;
+        }
         let model = match model {
             Ok(m) => m,
             Err(reason) => {

@@ -12,7 +12,7 @@ use crate::{Error, Result};
 /// | `max_iterations` | 20 | four-step iterations after the initial design | >= 1 |
 /// | `target_score` | none | stop when the best score (default: MAE) is at most this | finite, >= 0 |
 /// | `max_model_runs` | none | stop before exceeding this many model runs (design included) | >= design runs |
-/// | `max_wall_s` | none | stop once this much wall time passed: checked before each iteration and polish step, and inside each surrogate fit (per epoch) and search (per generation or step), which then end with their best so far and no model run at the proposal | finite, > 0 |
+/// | `max_wall_s` | none | stop once this much wall time passed: checked before each iteration, polish step and numerical variant (not run once it has passed), and inside each surrogate fit (per epoch) and search (per generation or step), which then end with their best so far and no model run at the proposal | finite, > 0 |
 /// | `max_parallel_runs` | none | model runs at once (a dedicated rayon pool); none: the current pool | 1 to 1024 |
 /// | `augment_copies` | 16 | samples per design run in the first fit: the run plus `copies - 1` noisy copies | >= 1 |
 /// | `augment_sigma` | 0.05 | standard deviation of the augmentation noise, unit box | finite, >= 0 |

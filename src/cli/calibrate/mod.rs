@@ -103,7 +103,8 @@ pub struct CalibrateArgs {
     /// Stop before exceeding this many model runs (initial design included).
     #[arg(long = "max-runs")]
     max_runs: Option<usize>,
-    /// Stop after this much wall time (s): checked before each step, and inside each
+    /// Stop after this much wall time (s): checked before each step (the grid check's
+    /// runs are skipped once it has passed, and the report says so), and inside each
     /// surrogate fit and search, which then end with their best so far and no model run
     /// at the proposal (a model run under way finishes; see --of-timeout-s for OpenFOAM).
     #[arg(long = "max-wall-s")]
