@@ -80,6 +80,50 @@ fn outputs_never_replace_inputs_journals_or_each_other() {
         assert_input_error(&o, what);
     }
     assert_eq!(std::fs::read_to_string(&journal).unwrap(), "{}\n");
+
+    // --vtk's files: one named as an input, as --out, or --vtk at --out's path.
+    let vtk = dir.join("vtk");
+    std::fs::create_dir_all(&vtk).unwrap();
+    let hall_in_vtk = vtk.join("t0.vtk");
+    std::fs::copy(&hall, &hall_in_vtk).unwrap();
+    let vtk_at = |out: &Path, vtk: &Path, hall: &Path| {
+        run(
+            cli_support::on_files("simulate", hall, &data("of-dev-clean/snapshots.csv"))
+                .arg("--out")
+                .arg(out)
+                .arg("--vtk")
+                .arg(vtk),
+        )
+    };
+    let o = vtk_at(&pred, &vtk, &hall_in_vtk);
+    assert_input_error(&o, "--vtk's t0.vtk");
+    assert_input_error(&o, "is the --hall file");
+    let o = vtk_at(&vtk.join("t1.vtk"), &vtk, &hall);
+    assert_input_error(&o, "is also the --out file");
+    let o = vtk_at(&pred, &pred, &hall);
+    assert_input_error(&o, "--vtk");
+    assert_input_error(&o, "is also the --out file");
+    assert!(!pred.exists() && !vtk.join("t1.vtk").exists());
+    let text = std::fs::read_to_string(&hall).unwrap();
+    assert_eq!(std::fs::read_to_string(&hall_in_vtk).unwrap(), text);
+
+    // calibrate --out holding an input under an output's name.
+    let out = dir.join("cal-out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::copy(&hall, out.join("report.json")).unwrap();
+    let o = run(cli_support::on_files(
+        "calibrate",
+        &out.join("report.json"),
+        &data("of-dev-clean/snapshots.csv"),
+    )
+    .arg("--out")
+    .arg(&out));
+    assert_input_error(&o, "--out's report.json");
+    assert_input_error(&o, "is the --hall file");
+    assert_eq!(
+        std::fs::read_to_string(out.join("report.json")).unwrap(),
+        text
+    );
 }
 
 /// `--out` a FIFO, or stdout: the predictions go through it, and a FIFO stays one

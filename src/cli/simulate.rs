@@ -297,19 +297,28 @@ pub(super) fn check_model_cells(hall: &Hall, cell_m: f64) -> CliResult {
 
 /// An output path that names an input file would replace the measurements (or the hall)
 /// with predictions: refused before anything runs.
-fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
+/// `vtk_files` are `--vtk`'s files (flag-like name, path), once the snapshots are known.
+fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)]) -> CliResult {
     // A calibration's report as --params has its journal beside it.
     let journal = args
         .params
         .as_ref()
         .and_then(|p| p.parent())
         .map(|d| d.join("runs.jsonl"));
+    let mut outputs = vec![
+        ("--out", Some(args.out.as_path())),
+        ("--servers", args.servers.as_deref()),
+        ("--heat-sources", args.heat_sources.as_deref()),
+        // A directory at an output file's path: the run would end on that file.
+        ("--vtk", args.vtk.as_deref()),
+    ];
+    outputs.extend(
+        vtk_files
+            .iter()
+            .map(|(what, p)| (what.as_str(), Some(p.as_path()))),
+    );
     super::same_file::refuse_same_files(
-        &[
-            ("--out", Some(args.out.as_path())),
-            ("--servers", args.servers.as_deref()),
-            ("--heat-sources", args.heat_sources.as_deref()),
-        ],
+        &outputs,
         &[
             ("the --hall file", Some(args.hall.as_path())),
             ("the --snapshots file", Some(args.snapshots.as_path())),
@@ -321,7 +330,7 @@ fn refuse_overwriting_inputs(args: &SimulateArgs) -> CliResult {
 
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
-    refuse_overwriting_inputs(&args)?;
+    refuse_overwriting_inputs(&args, &[])?;
     super::say_to_stderr_if_stdout(&args.out);
     // Before anything is written, so a bad factor never replaces a good `--out`.
     super::calibrate::check_grid_factors(&args.grid_check)?;
@@ -333,8 +342,16 @@ pub fn run(args: SimulateArgs) -> CliResult {
     // Before any what-if: the warning is about the files.
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
-    if args.vtk.is_some() {
+    if let Some(dir) = &args.vtk {
         check_vtk_names(&snaps)?;
+        let files: Vec<(String, PathBuf)> = snaps
+            .iter()
+            .map(|s| {
+                let name = kalibre_dc::sim::vtk_file_name(&s.state.label);
+                (format!("--vtk's {name}"), dir.join(name))
+            })
+            .collect();
+        refuse_overwriting_inputs(&args, &files)?;
     }
     args.what_if.apply(&hall, &mut snaps)?;
     let what_if = args.what_if.describe();

@@ -387,6 +387,24 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     // Held until the report is written: a second calibration here would repeat the runs.
     let _lock = super::out_dir::lock(&args.out, "calibrate")?;
     super::out_dir::check_files(&args.out, &["runs.jsonl", "report.json", "report.html"])?;
+    // An input kept in --out under an output's name would be replaced by it.
+    let (report, html, journal) = (
+        args.out.join("report.json"),
+        args.out.join("report.html"),
+        args.out.join("runs.jsonl"),
+    );
+    super::same_file::refuse_same_files(
+        &[
+            ("--out's report.json", Some(report.as_path())),
+            ("--out's report.html", Some(html.as_path())),
+            ("--out's runs.jsonl", Some(journal.as_path())),
+        ],
+        &[
+            ("the --hall file", Some(args.hall.as_path())),
+            ("the --snapshots file", Some(args.snapshots.as_path())),
+            ("the --config file", args.config.as_deref()),
+        ],
+    )?;
     if args.model == ModelArg::Command {
         // Checked before the loop so a bad template fails at once, not per run.
         let path = args
