@@ -455,7 +455,15 @@ pub fn diagnose_hall_with(
             let cols = steps
                 .iter()
                 .enumerate()
-                .map(|(i, (h, _))| column(s, 1 + i, *h))
+                .map(|(i, (h, _))| {
+                    // A fixed parameter (equal bounds) cannot move: a zero column, which
+                    // the fits leave out, not a 0 / 0.
+                    if space.params()[i].is_fixed() {
+                        vec![0.0; n_out]
+                    } else {
+                        column(s, 1 + i, *h)
+                    }
+                })
                 .collect();
             block(cols)
         })
