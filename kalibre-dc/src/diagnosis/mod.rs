@@ -263,6 +263,26 @@ fn effect_list<'a>(
 
 /// The name of a hypothesis parameter: unique across candidates and distinct from the
 /// calibrated `<kind>/<param>` of an effect the hall already has.
+/// A candidate's hypothesis name: [`candidate_name`], with the next free `#k` when its
+/// parameters would be named as calibrated ones (a candidate of defaults only, of a kind
+/// the hall already has: the suffix its entry gets once added).
+fn hypothesis_name(spec: &EffectSpec, effect: &dyn Effect, calibrated: &[String]) -> String {
+    let name = candidate_name(spec);
+    let params = effect.parameters();
+    let clashes = |n: &str| {
+        params
+            .iter()
+            .any(|p| calibrated.contains(&hypothesis_param(n, &p.name)))
+    };
+    if !clashes(&name) {
+        return name;
+    }
+    (2..)
+        .map(|k| format!("{name}#{k}"))
+        .find(|n| !clashes(n))
+        .expect("some suffix is free")
+}
+
 fn hypothesis_param(candidate: &str, param: &str) -> String {
     format!("{candidate}/{param}")
 }
@@ -500,10 +520,11 @@ pub fn diagnose_hall_with(
             residuals = residuals.with_model_form(spread_of(&others)?)?;
         }
     }
+    let calibrated_names = space.names();
     let mut ranked: Vec<refit::Candidate> = Vec::with_capacity(candidates.len());
     for (c, (spec, e)) in candidates.iter().enumerate() {
         let ps = e.parameters();
-        let name = candidate_name(spec);
+        let name = hypothesis_name(spec, e.as_ref(), &calibrated_names);
         if let Some(reason) = &failed[c] {
             not_tried.push(NotTried {
                 candidate: name,
@@ -561,7 +582,7 @@ pub fn diagnose_hall_with(
         .map(|h| {
             let (spec, e) = candidates
                 .iter()
-                .find(|(s, _)| candidate_name(s) == h.name)
+                .find(|(s, e)| hypothesis_name(s, e.as_ref(), &calibrated_names) == h.name)
                 .ok_or_else(|| Error::Mismatch(format!("unknown hypothesis `{}`", h.name)))?;
             let mut spec = spec.clone();
             for p in e.parameters() {
