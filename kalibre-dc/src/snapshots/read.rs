@@ -479,16 +479,17 @@ impl Acc {
             let (v, _) = v.ok_or_else(|| missing("power_w", "server", &s.server.id, &hint))?;
             power_w.push(v);
         }
-        let power_total_w: f64 = power_w.iter().sum();
-        if power_total_w > 0.0 && fan_speed.iter().all(|&f| f == 0.0) {
-            // Found here, not as a failed run at every design point (an OpenFOAM solve each).
+        if fan_speed.iter().all(|&f| f == 0.0) {
+            // Found here, not as a failed run at every design point (an OpenFOAM solve
+            // each). Without power too, still no air moves: nothing sets the temperatures.
+            let power_total_w: f64 = power_w.iter().sum();
             return Err(Error::format(
                 file,
                 field,
                 format!(
-                    "every CRAC's fan_speed is 0 while the servers draw {} kW: no air carries \
-                     the heat away, so no model of the hall has a steady state; expected at \
-                     least one fan running",
+                    "every CRAC's fan_speed is 0 (the servers draw {} kW): no air enters the \
+                     hall, so no model of it has a steady state; expected at least one fan \
+                     running",
                     super::number(power_total_w / 1000.0)
                 ),
             ));
