@@ -75,6 +75,22 @@ fn bad_inputs_give_one_line_and_exit_code_2() {
             .arg(dir.join("cal")));
         assert_input_error(&o, needle);
     }
+    // Only given parameters (alpha fixed, an effect of equal bounds): nothing to calibrate.
+    let text = std::fs::read_to_string(&hall).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    doc["effects"] = serde_json::json!([
+        { "kind": "crac_supply_offset", "offset_c": 0.5, "offset_c_bounds": [0.5, 0.5] }
+    ]);
+    let given = dir.join("given.json");
+    std::fs::write(&given, doc.to_string()).unwrap();
+    let o = run(on_files("calibrate", &given, &snaps)
+        .args(["--alpha", "fixed", "--out"])
+        .arg(dir.join("cal")));
+    assert_input_error(
+        &o,
+        "has nothing to calibrate: every parameter has equal bounds (crac_supply_offset/offset_c)",
+    );
+    assert!(!dir.join("cal").join("runs.jsonl").exists());
     // Snapshots of another hall: an unknown id.
     let bad_snaps = dir.join("snaps.csv");
     std::fs::write(

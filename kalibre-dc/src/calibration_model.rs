@@ -166,6 +166,20 @@ where
             hall.name
         )));
     }
+    // Parameters with equal bounds are given, not calibrated: a loop over them alone
+    // would run its design and call a fixed point calibrated.
+    if space.params().iter().all(|p| p.is_fixed()) {
+        return Err(Error::Mismatch(format!(
+            "hall `{}` has nothing to calibrate: every parameter has equal bounds ({}), so \
+             it is given, not calibrated; widen a bound (or use `kalibre simulate`)",
+            hall.name,
+            match space.names().as_slice() {
+                names @ [_, _, _, _, _, _, _, ..] =>
+                    format!("{}, ... {} in all", names[..6].join(", "), names.len()),
+                names => names.join(", "),
+            }
+        )));
+    }
     let mut surrogate = hall_surrogate(hall, layout, settings, flow)?;
     for &i in learned_params {
         surrogate =
