@@ -221,3 +221,28 @@ fn a_hidden_effect_of_size_zero_or_not_a_number_is_refused() {
     }
     assert!(!dir.join("s").exists());
 }
+
+/// An output file path that cannot take a file (a directory, `.`, a missing directory)
+/// is an input error before the solves; it used to fail with exit 1 after them.
+#[test]
+fn an_output_path_that_cannot_take_a_file_is_refused_first() {
+    let dir = tmp("output-file-paths");
+    let missing = dir.join("no-such-dir").join("pred.csv");
+    let pred = dir.join("pred.csv");
+    for (flag, path, why) in [
+        ("--out", dir.as_path(), "is a directory"),
+        ("--out", Path::new("."), "is a directory"),
+        ("--out", missing.as_path(), "no-such-dir does not exist"),
+        ("--servers", missing.as_path(), "no-such-dir does not exist"),
+    ] {
+        let mut extra = vec!["--out".as_ref(), os(&pred)];
+        if flag == "--out" {
+            extra.clear();
+        }
+        extra.extend([flag.as_ref(), path.as_os_str()]);
+        let o = simulate(&extra);
+        assert_input_error(&o, &format!("{flag} {}: ", path.display()));
+        assert_input_error(&o, why);
+    }
+    assert!(!pred.exists());
+}

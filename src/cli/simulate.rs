@@ -330,6 +330,15 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
 
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
+    for (flag, path) in [
+        ("--out", Some(&args.out)),
+        ("--servers", args.servers.as_ref()),
+        ("--heat-sources", args.heat_sources.as_ref()),
+    ] {
+        if let Some(path) = path {
+            super::out_dir::check_out_file(flag, path)?;
+        }
+    }
     refuse_overwriting_inputs(&args, &[])?;
     super::say_to_stderr_if_stdout(&args.out);
     // Before anything is written, so a bad factor never replaces a good `--out`.
