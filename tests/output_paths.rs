@@ -246,3 +246,23 @@ fn an_output_path_that_cannot_take_a_file_is_refused_first() {
     }
     assert!(!pred.exists());
 }
+
+/// `diagnose --write-hall /dev/stdout` with stdout redirected to a file: the hall renamed
+/// over that file dropped the diagnosis printed there. Refused first.
+#[cfg(target_os = "linux")]
+#[test]
+fn write_hall_onto_the_file_stdout_writes_to_is_refused() {
+    let dir = tmp("write-hall-stdout");
+    let printed = dir.join("printed.txt");
+    let o = diagnose_cmd(
+        &data("of-dev-clean/hall.json"),
+        &data("of-dev-clean/snapshots.csv"),
+        &dir.join("no-calibration"),
+    )
+    .args(["--json", "--write-hall", "/dev/stdout"])
+    .stdout(std::fs::File::create(&printed).unwrap())
+    .stderr(Stdio::piped())
+    .output()
+    .unwrap();
+    assert_input_error(&o, "--write-hall /dev/stdout: is the file stdout writes to");
+}

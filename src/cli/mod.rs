@@ -114,18 +114,26 @@ pub(crate) fn says_to_stderr() -> bool {
     SAY_TO_STDERR.load(std::sync::atomic::Ordering::Relaxed)
 }
 
-/// Sends [`say!`] to stderr when `out` is the file stdout writes to (the same device and
-/// inode: `/dev/stdout`, `/proc/self/fd/1`, or the file stdout is redirected to).
+/// Sends [`say!`] to stderr when `out` is the file stdout writes to ([`is_stdout`]:
+/// `/dev/stdout`, `/proc/self/fd/1`, or the file stdout is redirected to).
 pub(crate) fn say_to_stderr_if_stdout(out: &std::path::Path) {
+    if is_stdout(out) {
+        SAY_TO_STDERR.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// Whether `path` is the file stdout writes to (the same device and inode).
+pub(crate) fn is_stdout(path: &std::path::Path) -> bool {
     #[cfg(unix)]
     {
         use std::os::unix::fs::MetadataExt;
         let id = |p: &std::path::Path| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
         let stdout = id(std::path::Path::new("/dev/stdout"));
-        if stdout.is_some() && id(out) == stdout {
-            SAY_TO_STDERR.store(true, std::sync::atomic::Ordering::Relaxed);
-        }
+        stdout.is_some() && id(path) == stdout
     }
     #[cfg(not(unix))]
-    let _ = out;
+    {
+        let _ = path;
+        false
+    }
 }

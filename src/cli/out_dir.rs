@@ -102,6 +102,30 @@ pub fn lock(out: &Path, command: &str) -> CliResult<OutLock> {
     }
 }
 
+/// Refuses an output file path (`flag PATH`) that cannot take a file: a directory, a
+/// path with no file name (`.`), or one whose directory is missing. Found now, not when
+/// the file is written after the runs.
+pub fn check_out_file(flag: &str, path: &Path) -> CliResult {
+    let refuse = |why: &str| {
+        Err(CliError::Input(format!(
+            "{flag} {}: {why}; expected a file path",
+            path.display()
+        )))
+    };
+    if path.is_dir() {
+        return refuse("is a directory");
+    }
+    if path.file_name().is_none() {
+        return refuse("names no file");
+    }
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => {
+            refuse(&format!("its directory {} does not exist", dir.display()))
+        }
+        _ => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -146,29 +170,5 @@ mod tests {
             let err = check_is_dir(&dangling).unwrap_err().to_string();
             assert!(err.contains("symbolic link to nothing"), "{err}");
         }
-    }
-}
-
-/// Refuses an output file path (`flag PATH`) that cannot take a file: a directory, a
-/// path with no file name (`.`), or one whose directory is missing. Found now, not when
-/// the file is written after the runs.
-pub fn check_out_file(flag: &str, path: &Path) -> CliResult {
-    let refuse = |why: &str| {
-        Err(CliError::Input(format!(
-            "{flag} {}: {why}; expected a file path",
-            path.display()
-        )))
-    };
-    if path.is_dir() {
-        return refuse("is a directory");
-    }
-    if path.file_name().is_none() {
-        return refuse("names no file");
-    }
-    match path.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => {
-            refuse(&format!("its directory {} does not exist", dir.display()))
-        }
-        _ => Ok(()),
     }
 }

@@ -554,6 +554,11 @@ fn check_writable_file(path: &std::path::Path) -> CliResult {
         Ok(meta) if !meta.is_file() => {
             return bad("is not a regular file (a FIFO, socket or device)".into())
         }
+        // Stdout redirected to a file: the hall renamed over it would drop the diagnosis
+        // printed there.
+        Ok(_) if super::is_stdout(path) => {
+            return bad("is the file stdout writes to, where the diagnosis is printed".into())
+        }
         Ok(_) => match std::fs::canonicalize(path) {
             Ok(real) => real.parent().map(|p| p.to_path_buf()).unwrap_or(dir),
             Err(e) => return bad(format!("cannot resolve it: {e}")),
