@@ -105,6 +105,12 @@ fn cases() -> Vec<Case> {
             "expected an array of strings",
         ),
         c(
+            "a side with no panel",
+            json!([{"kind": "containment_leakage", "sides": ["-x", "top"]}]),
+            "/effects/0/sides",
+            "`top` opens nothing: containment 0 reaches the ceiling, so it has no top panel",
+        ),
+        c(
             "second entry bad",
             json!([{"kind": "crac_supply_offset"}, {"kind": "containment_leakage", "containment": 4}]),
             "/effects/1/containment",

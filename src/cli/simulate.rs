@@ -330,15 +330,6 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
 
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
-    for (flag, path) in [
-        ("--out", Some(&args.out)),
-        ("--servers", args.servers.as_ref()),
-        ("--heat-sources", args.heat_sources.as_ref()),
-    ] {
-        if let Some(path) = path {
-            super::out_dir::check_out_file(flag, path)?;
-        }
-    }
     refuse_overwriting_inputs(&args, &[])?;
     super::say_to_stderr_if_stdout(&args.out);
     // Before anything is written, so a bad factor never replaces a good `--out`.
@@ -348,6 +339,16 @@ pub fn run(args: SimulateArgs) -> CliResult {
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall.display().to_string())?;
     let mut snaps = snapshots::load_states(&hall, &args.snapshots)?;
+    // After the inputs (their errors first), before the solves.
+    for (flag, path) in [
+        ("--out", Some(&args.out)),
+        ("--servers", args.servers.as_ref()),
+        ("--heat-sources", args.heat_sources.as_ref()),
+    ] {
+        if let Some(path) = path {
+            super::out_dir::check_out_file(flag, path)?;
+        }
+    }
     // Before any what-if: the warning is about the files.
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);

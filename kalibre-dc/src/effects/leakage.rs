@@ -4,7 +4,7 @@
 //! | field | required | meaning |
 //! |---|---|---|
 //! | `containment` | no | index into `containment`; every containment when absent |
-//! | `sides` | no | panels opened: any of `-x`, `+x`, `-y`, `+y`, `top`; all when absent (`-x`/`+x` are the aisle-end doors for rows along x) |
+//! | `sides` | no | panels opened: any of `-x`, `+x`, `-y`, `+y`, `top`; all when absent (`-x`/`+x` are the aisle-end doors for rows along x); a side on the room's boundary, which has no panel (a ceiling-high containment's `top`), is refused |
 //! | `open_fraction` | no | initial open fraction of those panels, default 0.05 |
 //! | `open_fraction_bounds` | no | bounds, within and default `[0, 1]` |
 
@@ -121,6 +121,26 @@ impl EffectFactory for ContainmentLeakageFactory {
                 (out.len() < WallSide::ALL.len()).then_some(out)
             }
         };
+        // A side on the room's boundary has no panel to open: such an entry would hide
+        // nothing (synth wrote its truth all the same).
+        if let Some(list) = &sides {
+            let targets: Vec<usize> = match containment {
+                Some(c) => vec![c],
+                None => (0..hall.containment.len()).collect(),
+            };
+            for side in list {
+                if let Some(why) = targets
+                    .iter()
+                    .map(|&c| no_panel(hall, c, *side))
+                    .collect::<Option<Vec<_>>>()
+                    .and_then(|whys| whys.into_iter().next())
+                {
+                    return Err(
+                        f.error("sides", format!("`{}` opens nothing: {why}", side.as_str()))
+                    );
+                }
+            }
+        }
         // The only containment is what "every containment" means.
         let containment = containment.filter(|_| hall.containment.len() > 1);
         let param = f.param("open_fraction", BOUNDS[0], BOUNDS[1], 0.05)?;
@@ -146,7 +166,10 @@ impl EffectFactory for ContainmentLeakageFactory {
             }
         }
         for c in 0..hall.containment.len() {
-            for s in WallSide::ALL {
+            for s in WallSide::ALL
+                .into_iter()
+                .filter(|&s| no_panel(hall, c, s).is_none())
+            {
                 out.push(spec(
                     KIND,
                     vec![
@@ -158,4 +181,29 @@ impl EffectFactory for ContainmentLeakageFactory {
         }
         out
     }
+}
+
+/// Why containment `c` has no panel on `side`: that side lies on the room's boundary (a
+/// ceiling-high containment has no top; one against a wall, no panel there).
+fn no_panel(hall: &Hall, c: usize, side: WallSide) -> Option<String> {
+    let b = &hall.containment[c];
+    let room = hall.room.size_m;
+    let tol = crate::hall::GEOMETRY_TOL_M;
+    let (at_boundary, what) = match side {
+        WallSide::MinusX => (b.min_m[0] <= tol, "stands against the room wall at x = 0"),
+        WallSide::PlusX => (
+            b.max_m[0] >= room[0] - tol,
+            "stands against the room's +x wall",
+        ),
+        WallSide::MinusY => (b.min_m[1] <= tol, "stands against the room wall at y = 0"),
+        WallSide::PlusY => (
+            b.max_m[1] >= room[1] - tol,
+            "stands against the room's +y wall",
+        ),
+        WallSide::Top => (
+            b.max_m[2] >= room[2] - tol,
+            "reaches the ceiling, so it has no top panel",
+        ),
+    };
+    at_boundary.then(|| format!("containment {c} {what}"))
 }
