@@ -7,37 +7,47 @@
 
 mod cli_support;
 
-use cli_support::{data, diagnose_cmd, kalibre, on_files, run, stderr, tmp};
+use std::path::Path;
+
+use cli_support::{data, diagnose_cmd, kalibre, on_files, run, stderr, tmp, QUICK_CALIBRATION};
+
+/// `hall` (a `hall.json` document) written to `dir`, calibrated quickly on `snaps` (with
+/// `extra` flags) and diagnosed: the diagnosis's JSON.
+fn calibrate_and_diagnose(
+    dir: &Path,
+    hall: &serde_json::Value,
+    snaps: &Path,
+    extra: &[&str],
+) -> serde_json::Value {
+    let path = dir.join("hall.json");
+    std::fs::write(&path, serde_json::to_string_pretty(hall).unwrap()).unwrap();
+    let cal = dir.join("cal");
+    let o = run(on_files("calibrate", &path, snaps)
+        .args(QUICK_CALIBRATION)
+        .args(extra)
+        .arg("--out")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(diagnose_cmd(&path, snaps, &cal).arg("--json"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    serde_json::from_slice(&o.stdout).expect("JSON on stdout")
+}
+
+/// A `hall.json` document.
+fn hall_doc(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
 
 #[test]
 fn fixed_alpha_and_fixed_effect_parameters_are_diagnosed() {
     let dir = tmp("diagnose-fixed");
-    let text = std::fs::read_to_string(data("of-dev-bypass/hall.json")).unwrap();
-    let mut doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut doc = hall_doc(&data("of-dev-bypass/hall.json"));
     doc["server_types"][0]["alpha_cfm_per_w"] =
         serde_json::json!({ "initial": 0.13, "min": 0.13, "max": 0.13 });
     doc["effects"] = serde_json::json!([{
         "kind": "bypass", "behind_rack": "B3", "fraction": 0.05, "fraction_bounds": [0.05, 0.05]
     }]);
-    let hall = dir.join("hall.json");
-    std::fs::write(&hall, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
-    let snaps = data("of-dev-bypass/snapshots.csv");
-    let cal = dir.join("cal");
-    let o = run(on_files("calibrate", &hall, &snaps)
-        .args([
-            "--iterations",
-            "2",
-            "--polish",
-            "0",
-            "--no-grid-check",
-            "--quiet",
-            "--out",
-        ])
-        .arg(&cal));
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(diagnose_cmd(&hall, &snaps, &cal).arg("--json"));
-    assert!(o.status.success(), "{}", stderr(&o));
-    let d: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    let d = calibrate_and_diagnose(&dir, &doc, &data("of-dev-bypass/snapshots.csv"), &[]);
     let hyps = d["hypotheses"].as_array().unwrap();
     assert!(!hyps.is_empty());
     for h in hyps {
@@ -54,30 +64,12 @@ fn a_hall_with_a_containment_leakage_entry_is_diagnosed() {
         .args(["synth", "--preset", "demo", "--seed", "3", "--out"])
         .arg(&synth));
     assert!(o.status.success(), "{}", stderr(&o));
-    let text = std::fs::read_to_string(synth.join("hall.json")).unwrap();
-    let mut doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut doc = hall_doc(&synth.join("hall.json"));
     doc["effects"] = serde_json::json!([{
         "kind": "containment_leakage", "containment": 0, "open_fraction": 0.05, "sides": ["+y"]
     }]);
-    let hall = dir.join("hall.json");
-    std::fs::write(&hall, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
     let snaps = synth.join("snapshots.csv");
-    let cal = dir.join("cal");
-    let o = run(on_files("calibrate", &hall, &snaps)
-        .args([
-            "--iterations",
-            "1",
-            "--polish",
-            "0",
-            "--no-grid-check",
-            "--quiet",
-        ])
-        .args(["--grid-m", "0.4", "--out"])
-        .arg(&cal));
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(diagnose_cmd(&hall, &snaps, &cal).arg("--json"));
-    assert!(o.status.success(), "{}", stderr(&o));
-    let d: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    let d = calibrate_and_diagnose(&dir, &doc, &snaps, &["--grid-m", "0.4"]);
     // The all-sides candidate, named as a second entry of its kind is.
     let h = d["hypotheses"]
         .as_array()
