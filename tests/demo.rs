@@ -138,10 +138,15 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
 }
 
 #[test]
-fn demo_refuses_a_bad_or_unknown_effect_kind() {
+fn demo_refuses_a_bad_unknown_or_empty_effect() {
     for (arg, needle) in [
         ("Bypass!", "--effect `Bypass!`"),
         ("no_such_kind", "no_such_kind"),
+        // Size 0 hides nothing, as `synth` says too.
+        (
+            "crac_supply_offset:offset_c=0",
+            "offset_c is 0, which hides nothing",
+        ),
     ] {
         let out = tmp("bad");
         let o = Command::new(env!("CARGO_BIN_EXE_kalibre"))

@@ -68,9 +68,10 @@ fn hidden_effect(arg: &str) -> CliResult<Option<EffectSpec>> {
         .iter()
         .find(|(kind, _)| *kind == arg)
         .map_or(arg, |(_, entry)| entry);
-    parse_effect_arg(full)
-        .map(Some)
-        .map_err(|e| CliError::Input(e.to_string()))
+    let effect = parse_effect_arg(full).map_err(|e| CliError::Input(e.to_string()))?;
+    // As `synth` does: a size-0 effect would leave the story nothing to find.
+    super::synth::refuse_inert(arg, &effect)?;
+    Ok(Some(effect))
 }
 
 fn entry_json(e: &EffectSpec) -> String {

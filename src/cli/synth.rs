@@ -86,7 +86,7 @@ const SIZES: [(&str, &str, Option<f64>); 4] = [
 
 /// Refuses a hidden effect of size 0: its measurements would be the clean hall's while
 /// truth.json lists it, and a diagnosis that finds nothing there would look wrong.
-fn refuse_inert(arg: &str, effect: &kalibre_dc::hall::EffectSpec) -> CliResult {
+pub(super) fn refuse_inert(arg: &str, effect: &kalibre_dc::hall::EffectSpec) -> CliResult {
     let Some((_, field, default)) = SIZES.iter().find(|(k, _, _)| *k == effect.kind) else {
         return Ok(());
     };
