@@ -119,7 +119,7 @@ pub use data::{Observations, OutputInfo, Snapshot};
 pub use error::{Error, Result};
 pub use fsio::write_atomic;
 pub use model::{check_outputs, scenario_digest, Model, ModelError, Outputs};
-pub use number::number;
+pub use number::{number, some_names};
 pub use observe::{Event, Observe};
 pub use param::{Param, ParamSpace, Scale};
 pub use search::{

@@ -173,11 +173,7 @@ where
             "hall `{}` has nothing to calibrate: every parameter has equal bounds ({}), so \
              it is given, not calibrated; widen a bound (or use `kalibre simulate`)",
             hall.name,
-            match space.names().as_slice() {
-                names @ [_, _, _, _, _, _, _, ..] =>
-                    format!("{}, ... {} in all", names[..6].join(", "), names.len()),
-                names => names.join(", "),
-            }
+            kalibre_core::some_names(&space.names())
         )));
     }
     let mut surrogate = hall_surrogate(hall, layout, settings, flow)?;

@@ -2,23 +2,20 @@
 
 use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 
-use crate::effects::{Effect, EffectRegistry};
+use crate::effects::{mods_at_upper_bounds, Effect, EffectRegistry};
 use crate::hall::Hall;
 use crate::sim::{
-    rack_heat, server_air, RackHeat, SensorInfluence, ServerAir, SimConfig, SimMods, Simulator,
-    Solution,
+    rack_heat, server_air, RackHeat, SensorInfluence, ServerAir, SimConfig, Simulator, Solution,
 };
 use crate::snapshots::OperatingState;
 use crate::{Error, ParamLayout, Result};
 
 /// Checks that each effect acts somewhere on `sim`'s grid: its modifications at its
-/// parameters' upper bounds (so that a share or flow is not zero) resolved onto open
-/// cells. An effect that acts nowhere would fail every run that gives it a value.
+/// parameters' upper bounds ([`mods_at_upper_bounds`]) resolved onto open cells. An
+/// effect that acts nowhere would fail every run that gives it a value.
 fn check_effect_placements(sim: &Simulator, effects: &[Box<dyn Effect>]) -> Result<()> {
     for (i, effect) in effects.iter().enumerate() {
-        let upper: Vec<f64> = effect.parameters().iter().map(|p| p.upper).collect();
-        let mut mods = SimMods::new(sim.hall().cracs.len());
-        effect.modify(&upper, sim.hall(), &mut mods)?;
+        let mods = mods_at_upper_bounds(effect.as_ref(), sim.hall())?;
         sim.check_placements(&mods).map_err(|e| match e {
             Error::Geometry(message) => Error::Effect {
                 kind: effect.kind().to_string(),

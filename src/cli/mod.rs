@@ -56,15 +56,7 @@ pub fn run(cli: Cli) -> CliResult {
     }
 }
 
-/// A list of names for a message: all of a short one, the first few and the count of a
-/// long one (a per-server hall has thousands of parameters).
-pub fn some_names(names: &[String]) -> String {
-    const SHOWN: usize = 6;
-    match names.len() {
-        n if n > SHOWN => format!("{}, ... ({n} in all)", names[..SHOWN].join(", ")),
-        _ => names.join(", "),
-    }
-}
+pub use kalibre_core::some_names;
 
 /// The most worker threads a command takes.
 pub const MAX_THREADS: usize = 1024;

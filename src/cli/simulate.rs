@@ -1,7 +1,6 @@
 //! `kalibre simulate`: the built-in simulator on a hall's snapshots (OpenFOAM:
 //! `simulate_openfoam`).
 
-use super::say;
 use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
@@ -16,7 +15,7 @@ use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::inlets::{inlet_line, under_read_note};
 use super::openfoam_args::OpenFoamArgs;
 use super::what_if::WhatIfArgs;
-use super::{io_err, CliError, CliResult};
+use super::{io_err, say, CliError, CliResult};
 
 /// `--heat-sources` lists a rack when it gives at least this share of a sensor's warming.
 const HEAT_SOURCE_MIN_SHARE: f64 = 0.02;

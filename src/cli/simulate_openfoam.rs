@@ -2,7 +2,6 @@
 //! parameters or any others, what-ifs included; the predicted sensor readings, and every
 //! server's air with the intakes counted against the limit.
 
-use super::say;
 use std::time::Instant;
 
 use kalibre_core::Model;
@@ -17,7 +16,7 @@ use super::openfoam_args::of_err;
 use super::simulate::{
     inlet_limit_c, load_params, print_servers_written, print_under_read_note, SimulateArgs,
 };
-use super::{io_err, CliError, CliResult};
+use super::{io_err, say, CliError, CliResult};
 
 /// The built-in simulator's options that OpenFOAM runs do not have, by flag.
 fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {

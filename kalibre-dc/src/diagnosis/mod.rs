@@ -261,8 +261,6 @@ fn effect_list<'a>(
         .collect()
 }
 
-/// The name of a hypothesis parameter: unique across candidates and distinct from the
-/// calibrated `<kind>/<param>` of an effect the hall already has.
 /// A candidate's hypothesis name: [`candidate_name`], with the next free `#k` when its
 /// parameters would be named as calibrated ones (a candidate of defaults only, of a kind
 /// the hall already has: the suffix its entry gets once added).
@@ -283,6 +281,9 @@ fn hypothesis_name(spec: &EffectSpec, effect: &dyn Effect, calibrated: &[String]
         .expect("some suffix is free")
 }
 
+/// The name of a hypothesis parameter: unique across candidates and (by
+/// [`hypothesis_name`]) distinct from the calibrated `<kind>/<param>` of an effect the hall
+/// already has.
 fn hypothesis_param(candidate: &str, param: &str) -> String {
     format!("{candidate}/{param}")
 }
@@ -387,8 +388,14 @@ pub fn diagnose_hall_with(
     let n_snap = snaps.len();
     let unit = space.to_unit(params)?;
     // Calibrated parameters: forward (backward at the upper bound) steps in the unit box.
-    let mut steps = Vec::with_capacity(space.dim());
+    // A fixed parameter (equal bounds) cannot move: no step and no run, a zero column
+    // (which the fits leave out) instead of a 0 / 0.
+    let mut steps: Vec<Option<(f64, Vec<f64>)>> = Vec::with_capacity(space.dim());
     for i in 0..space.dim() {
+        if space.params()[i].is_fixed() {
+            steps.push(None);
+            continue;
+        }
         let mut u = unit.clone();
         u[i] = if u[i] + settings.unit_step <= 1.0 {
             u[i] + settings.unit_step
@@ -396,26 +403,28 @@ pub fn diagnose_hall_with(
             u[i] - settings.unit_step
         };
         let p = space.from_unit(&u)?;
-        steps.push((p[i] - params[i], p));
+        steps.push(Some((p[i] - params[i], p)));
     }
-    let mut jobs = Vec::new();
+    // `None`: a fixed parameter's step, not run.
+    let mut jobs: Vec<Option<Job>> = Vec::new();
     for s in 0..n_snap {
-        jobs.push(Job {
+        jobs.push(Some(Job {
             snapshot: s,
             alpha: alpha0.clone(),
             effects: values0.clone(),
             extra: None,
-        });
-        for (_, p) in &steps {
-            let vals = (0..effects.len())
-                .map(|e| layout.effect_values(p, e).to_vec())
-                .collect();
-            jobs.push(Job {
-                snapshot: s,
-                alpha: layout.alpha_per_server(p),
-                effects: vals,
-                extra: None,
-            });
+        }));
+        for step in &steps {
+            jobs.push(step.as_ref().map(|(_, p)| {
+                Job {
+                    snapshot: s,
+                    alpha: layout.alpha_per_server(p),
+                    effects: (0..effects.len())
+                        .map(|e| layout.effect_values(p, e).to_vec())
+                        .collect(),
+                    extra: None,
+                }
+            }));
         }
         for (c, (_, e)) in candidates.iter().enumerate() {
             let v: Vec<f64> = e
@@ -423,18 +432,21 @@ pub fn diagnose_hall_with(
                 .iter()
                 .map(|p| absent(p) + effect_step_size(settings, p))
                 .collect();
-            jobs.push(Job {
+            jobs.push(Some(Job {
                 snapshot: s,
                 alpha: alpha0.clone(),
                 effects: values0.clone(),
                 extra: Some((c, v)),
-            });
+            }));
         }
     }
     let states: Vec<&OperatingState> = snaps.iter().map(|s| &s.state).collect();
     let outputs: Vec<Result<Vec<f64>>> = jobs
         .par_iter()
         .map(|job| {
+            let Some(job) = job else {
+                return Ok(Vec::new());
+            };
             let mut list = effect_list(&effects, &job.effects);
             if let Some((c, v)) = &job.extra {
                 list.push((candidates[*c].1.as_ref(), v.as_slice()));
@@ -475,14 +487,9 @@ pub fn diagnose_hall_with(
             let cols = steps
                 .iter()
                 .enumerate()
-                .map(|(i, (h, _))| {
-                    // A fixed parameter (equal bounds) cannot move: a zero column, which
-                    // the fits leave out, not a 0 / 0.
-                    if space.params()[i].is_fixed() {
-                        vec![0.0; n_out]
-                    } else {
-                        column(s, 1 + i, *h)
-                    }
+                .map(|(i, step)| match step {
+                    Some((h, _)) => column(s, 1 + i, *h),
+                    None => vec![0.0; n_out],
                 })
                 .collect();
             block(cols)
@@ -521,10 +528,14 @@ pub fn diagnose_hall_with(
         }
     }
     let calibrated_names = space.names();
+    let names: Vec<String> = candidates
+        .iter()
+        .map(|(spec, e)| hypothesis_name(spec, e.as_ref(), &calibrated_names))
+        .collect();
     let mut ranked: Vec<refit::Candidate> = Vec::with_capacity(candidates.len());
-    for (c, (spec, e)) in candidates.iter().enumerate() {
+    for (c, (_, e)) in candidates.iter().enumerate() {
         let ps = e.parameters();
-        let name = hypothesis_name(spec, e.as_ref(), &calibrated_names);
+        let name = names[c].clone();
         if let Some(reason) = &failed[c] {
             not_tried.push(NotTried {
                 candidate: name,
@@ -580,9 +591,10 @@ pub fn diagnose_hall_with(
         .hypotheses
         .iter()
         .map(|h| {
-            let (spec, e) = candidates
+            let (spec, e) = names
                 .iter()
-                .find(|(s, e)| hypothesis_name(s, e.as_ref(), &calibrated_names) == h.name)
+                .position(|n| *n == h.name)
+                .map(|c| &candidates[c])
                 .ok_or_else(|| Error::Mismatch(format!("unknown hypothesis `{}`", h.name)))?;
             let mut spec = spec.clone();
             for p in e.parameters() {

@@ -193,6 +193,15 @@ impl EffectRegistry {
     }
 }
 
+/// What `effect` asks of a run at its parameters' upper bounds, so that no share or
+/// flow is zero: every region where it acts, for checks and meshing before any run.
+pub fn mods_at_upper_bounds(effect: &dyn Effect, hall: &Hall) -> Result<SimMods> {
+    let upper: Vec<f64> = effect.parameters().iter().map(|p| p.upper).collect();
+    let mut mods = SimMods::new(hall.cracs.len());
+    effect.modify(&upper, hall, &mut mods)?;
+    Ok(mods)
+}
+
 /// The placement of an effect entry: the entry without its parameters' values and
 /// bounds, i.e. where and how the effect acts.
 pub fn placement(spec: &EffectSpec, effect: &dyn Effect) -> EffectSpec {

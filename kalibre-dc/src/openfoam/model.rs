@@ -11,7 +11,7 @@ use super::geometry::{CaseExtras, CaseGeometry, RackGap};
 use super::params::RunInputs;
 use super::results::{file_tail, last_field_value, log_verdict, probe_window};
 use super::{OpenFoamError, OpenFoamSettings};
-use crate::effects::{Effect, EffectRegistry};
+use crate::effects::{mods_at_upper_bounds, Effect, EffectRegistry};
 use crate::hall::Hall;
 use crate::sim::SimMods;
 use crate::snapshots::OperatingState;
@@ -112,10 +112,7 @@ impl OpenFoamModel {
         // each effect at its parameters' upper bounds shows where they are.
         let mut extras = CaseExtras::default();
         for (e, effect) in effects.iter().enumerate() {
-            let upper: Vec<f64> = effect.parameters().iter().map(|p| p.upper).collect();
-            let mut mods = SimMods::new(hall.cracs.len());
-            effect
-                .modify(&upper, hall, &mut mods)
+            let mods = mods_at_upper_bounds(effect.as_ref(), hall)
                 .map_err(|err| OpenFoamError::Unsupported(format!("effect {e}: {err}")))?;
             for o in mods.supply_openings {
                 if !extras.openings.contains(&o.region) {

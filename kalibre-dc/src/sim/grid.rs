@@ -25,16 +25,11 @@ impl Grid {
     /// `0.2 x 0.25 x 0.2`. A room length that is not a whole number of cells leaves
     /// rounding noise (4.8 m / 24 = 0.19999999999999998) that a reader should not see.
     pub fn cell_m_text(&self) -> String {
-        let [x, y, z] = self.d;
-        if metres_text(x) == metres_text(y) && metres_text(y) == metres_text(z) {
-            metres_text(x)
+        let [x, y, z] = self.d.map(metres_text);
+        if x == y && y == z {
+            x
         } else {
-            format!(
-                "{} x {} x {}",
-                metres_text(x),
-                metres_text(y),
-                metres_text(z)
-            )
+            format!("{x} x {y} x {z}")
         }
     }
 

@@ -369,6 +369,9 @@ fn model_record(
     })
 }
 
+/// What `kalibre calibrate` writes in `--out`.
+const OUT_FILES: [&str; 3] = ["runs.jsonl", "report.json", "report.html"];
+
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     let settings = settings(&args)?;
@@ -386,19 +389,18 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.
     let _lock = super::out_dir::lock(&args.out, "calibrate")?;
-    super::out_dir::check_files(&args.out, &["runs.jsonl", "report.json", "report.html"])?;
+    super::out_dir::check_files(&args.out, &OUT_FILES)?;
     // An input kept in --out under an output's name would be replaced by it.
-    let (report, html, journal) = (
-        args.out.join("report.json"),
-        args.out.join("report.html"),
-        args.out.join("runs.jsonl"),
-    );
+    let outputs: Vec<(String, PathBuf)> = OUT_FILES
+        .iter()
+        .map(|name| (format!("--out's {name}"), args.out.join(name)))
+        .collect();
+    let outputs: Vec<(&str, Option<&Path>)> = outputs
+        .iter()
+        .map(|(what, path)| (what.as_str(), Some(path.as_path())))
+        .collect();
     super::same_file::refuse_same_files(
-        &[
-            ("--out's report.json", Some(report.as_path())),
-            ("--out's report.html", Some(html.as_path())),
-            ("--out's runs.jsonl", Some(journal.as_path())),
-        ],
+        &outputs,
         &[
             ("the --hall file", Some(args.hall.as_path())),
             ("the --snapshots file", Some(args.snapshots.as_path())),

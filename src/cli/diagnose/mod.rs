@@ -14,8 +14,6 @@ use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::openfoam::{OpenFoamEffectSolver, OpenFoamModel};
 use kalibre_dc::sim::Simulator;
-
-use super::likelihood::Likelihood;
 use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
@@ -31,6 +29,7 @@ pub(super) use print::{sensor_line, warming_racks, worst_sensors};
 use super::calibrated_model::{
     check_same_conditions, check_same_measurements, grid_or_recorded, CalibratedModel,
 };
+use super::likelihood::Likelihood;
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::simulate::{check_model_cells, load_params, sim_config};
 use super::{with_threads, CliError, CliResult};
