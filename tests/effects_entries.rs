@@ -154,6 +154,15 @@ fn cases() -> Vec<Case> {
             "the same kind in the same place as effects/0",
         ),
         c(
+            "two openings that could take the whole supply",
+            json!([
+                {"kind": "bypass", "behind_rack": "A01"},
+                {"kind": "bypass", "behind_rack": "B03"}
+            ]),
+            "/effects/1/fraction_bounds",
+            "take the whole supply (effects/0 0.5, effects/1 0.5: 1 in all)",
+        ),
+        c(
             "a floor opening under a rack",
             json!([{"kind": "bypass", "position_m": [2.5, 2.5], "size_m": [0.4, 0.4]}]),
             "/effects/0/position_m",

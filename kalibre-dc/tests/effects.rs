@@ -355,3 +355,83 @@ fn containment_leakage_draws_hot_air_out_where_the_panels_open() {
         );
     }
 }
+
+#[test]
+fn bypass_candidates_leave_the_tiles_a_share_beside_the_halls_own_openings() {
+    let registry = EffectRegistry::builtin();
+    let factory = registry.get("bypass").expect("bypass kind");
+    let rack = demo_hall().racks[0].id.clone();
+    let upper_of = |c: &EffectSpec| c.fields.get("fraction_bounds").map(|b| b[1].as_f64());
+
+    // No openings yet: the default bounds, written as defaults (no field).
+    let clean = demo_hall();
+    let candidates = factory.candidates(&clean);
+    assert_eq!(candidates.len(), clean.racks.len());
+    assert!(candidates.iter().all(|c| upper_of(c).is_none()));
+
+    // One default bypass (upper 0.5): the candidates stop at 0.45, and the hall with
+    // any one of them added is a hall every check accepts.
+    let mut one = demo_hall();
+    one.effects
+        .push(spec(json!({"kind": "bypass", "behind_rack": rack})));
+    let candidates = factory.candidates(&one);
+    assert!(!candidates.is_empty());
+    for c in &candidates {
+        assert_eq!(upper_of(c), Some(Some(0.45)), "{c:?}");
+        let mut next = one.clone();
+        next.effects.push(c.clone());
+        if c.fields["behind_rack"] == json!(rack) {
+            continue; // the hall's own placement, which the diagnosis skips
+        }
+        registry
+            .check_hall(&next, "hall.json")
+            .expect("hall with a candidate");
+        HallModel::new(&next, SimConfig::default()).expect("model with a candidate");
+    }
+
+    // The same two at their default bounds could take the whole supply: refused.
+    let mut both = one.clone();
+    let other = &one.racks[1].id;
+    both.effects
+        .push(spec(json!({"kind": "bypass", "behind_rack": other})));
+    match HallModel::new(&both, SimConfig::default()) {
+        Err(Error::Effect { kind, message }) => {
+            assert_eq!(kind, "bypass");
+            assert!(message.starts_with("effects/1: "), "{message}");
+            assert!(message.contains("take the whole supply"), "{message}");
+        }
+        other => panic!("expected Error::Effect, got {other:?}"),
+    }
+
+    // Openings that may take 0.96 of it leave no room: no bypass candidates at all.
+    both.effects[1]
+        .fields
+        .insert("fraction_bounds".into(), json!([0.0, 0.46]));
+    registry
+        .check_hall(&both, "hall.json")
+        .expect("0.96 in all");
+    assert!(factory.candidates(&both).is_empty());
+}
+
+#[test]
+fn a_floor_opening_partly_under_a_rack_is_refused_like_one_wholly_under_it() {
+    let hall = demo_hall();
+    let r = &hall.racks[0];
+    let [x, y] = [r.position_m[0], r.position_m[1]];
+    let [dx, dy] = [r.size_m[0], r.size_m[1]];
+    // Wholly under, half under (straddling the rack's x edge), and touching its edge.
+    let under = json!({"kind": "bypass", "position_m": [x + 0.1 * dx, y + 0.1 * dy], "size_m": [0.5 * dx, 0.5 * dy]});
+    let partly =
+        json!({"kind": "bypass", "position_m": [x - 0.5 * dx, y], "size_m": [dx, 0.5 * dy]});
+    let id = &r.id;
+    assert!(effect_error(under, &hall).contains(&format!("lies under rack `{id}`")));
+    let e = effect_error(partly, &hall);
+    assert!(e.contains(&format!("runs partly under rack `{id}`")), "{e}");
+    assert!(e.contains("position_m"), "{e}");
+    let touching =
+        spec(json!({"kind": "bypass", "position_m": [x - 0.4, y], "size_m": [0.4, 0.4]}));
+    if let Err(e) = from_spec(&touching, &hall) {
+        // Only another solid beside the rack may refuse it, never this rack.
+        assert!(!e.to_string().contains(&format!("`{id}`")), "{e}");
+    }
+}

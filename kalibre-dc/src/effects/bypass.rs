@@ -9,6 +9,10 @@
 //! | `depth_m` | no | depth of the `behind_rack` strip (m), default 0.4 |
 //! | `fraction` | no | initial share of the CRAC flow, default 0.05 |
 //! | `fraction_bounds` | no | bounds, within and default `[0, 0.5]` |
+//!
+//! The hall's openings together, each at its upper bound, must leave the tiles some of
+//! the supply ([`super::first_oversubscribed`]): two bypasses at the default bounds are
+//! refused.
 
 use kalibre_core::Param;
 use serde_json::Value;
@@ -21,6 +25,11 @@ use crate::Result;
 
 const KIND: &str = "bypass";
 const BOUNDS: [f64; 2] = [0.0, 0.5];
+/// The share of the supply a diagnosis candidate leaves the tiles at its upper bound,
+/// with the hall's own openings at theirs.
+pub const CANDIDATE_TILE_SHARE: f64 = 0.05;
+/// No candidates when less than this share is left for them.
+const MIN_CANDIDATE_UPPER: f64 = 0.01;
 
 /// Where the bypass air enters.
 #[derive(Debug, Clone, PartialEq)]
@@ -121,17 +130,27 @@ impl EffectFactory for BypassFactory {
                         min: [p[0], p[1], 0.0],
                         max: [p[0] + sz[0], p[1] + sz[1], 0.0],
                     };
-                    // Air cannot rise through a rack or a CRAC standing on the opening.
-                    if let Some((what, id, _)) = hall.solid_boxes().find(|(_, _, b)| {
-                        let footprint = Aabb {
-                            min: [b.min[0], b.min[1], 0.0],
-                            max: [b.max[0], b.max[1], 0.0],
+                    // Air cannot rise through a rack or a CRAC standing on the opening,
+                    // and an opening partly under one would silently lose that part:
+                    // the same rule as for tiles (touching is fine).
+                    let column = Aabb {
+                        min: region.min,
+                        max: [region.max[0], region.max[1], room[2]],
+                    };
+                    if let Some((what, id, b)) = hall
+                        .solid_boxes()
+                        .find(|(_, _, b)| column.overlaps(b, GEOMETRY_TOL_M))
+                    {
+                        let under = match b.contains_box(&region, GEOMETRY_TOL_M) {
+                            true => "lies under",
+                            false => "runs partly under",
                         };
-                        footprint.contains_box(&region, GEOMETRY_TOL_M)
-                    }) {
                         return Err(f.error(
                             "position_m",
-                            format!("the opening lies under {what} `{id}`; expected open floor"),
+                            format!(
+                                "the opening {under} {what} `{id}`; expected open floor \
+                                 (touching is fine, tolerance 1 mm)"
+                            ),
                         ));
                     }
                     (
@@ -209,10 +228,32 @@ impl EffectFactory for BypassFactory {
         }))
     }
 
+    /// A strip behind each rack. When the hall's own openings could take much of the
+    /// supply at their upper bounds, the candidates' upper bound is lowered so that the
+    /// tiles keep [`CANDIDATE_TILE_SHARE`] of it: a hall written with a candidate added
+    /// (`kalibre diagnose --write-hall`) then calibrates over its whole box.
     fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {
+        let taken: f64 = hall
+            .effects
+            .iter()
+            .filter_map(|s| super::from_spec(s, hall).ok())
+            .map(|e| super::supply_share_at_upper_bounds(e.as_ref(), hall))
+            .sum();
+        let upper = BOUNDS[1].min(1.0 - CANDIDATE_TILE_SHARE - taken);
+        if upper < MIN_CANDIDATE_UPPER {
+            // The hall's openings may take (almost) all of it already.
+            return Vec::new();
+        }
         hall.racks
             .iter()
-            .map(|r| spec(KIND, vec![("behind_rack", Value::from(r.id.clone()))]))
+            .map(|r| {
+                let mut fields = vec![("behind_rack", Value::from(r.id.clone()))];
+                if upper < BOUNDS[1] {
+                    let upper = (upper * 1e4).floor() / 1e4;
+                    fields.push(("fraction_bounds", Value::from(vec![BOUNDS[0], upper])));
+                }
+                spec(KIND, fields)
+            })
             .collect()
     }
 }

@@ -21,7 +21,7 @@ mod leakage;
 mod offset;
 mod recirculation;
 
-pub use bypass::{Bypass, BypassFactory};
+pub use bypass::{Bypass, BypassFactory, CANDIDATE_TILE_SHARE};
 pub use fields::Fields;
 pub use leakage::{ContainmentLeakage, ContainmentLeakageFactory};
 pub use offset::{CracSupplyOffset, CracSupplyOffsetFactory};
@@ -173,6 +173,12 @@ impl EffectRegistry {
                 message: format!("effects/{again}: {}", repeat_message(first)),
             });
         }
+        if let Some((at, parts)) = first_oversubscribed(&effects, hall) {
+            return Err(Error::Effect {
+                kind: effects[at].kind().to_string(),
+                message: format!("effects/{at}: {}", oversubscribed_message(&parts)),
+            });
+        }
         Ok(effects)
     }
 
@@ -228,6 +234,52 @@ pub fn first_repeat(effects: &[Box<dyn Effect>]) -> Option<(usize, usize)> {
     })
 }
 
+/// The share of the supply that `effect`'s openings take at its parameters' upper
+/// bounds (0 when it opens none, or when it cannot take its upper bounds: that is
+/// reported where it is built).
+pub fn supply_share_at_upper_bounds(effect: &dyn Effect, hall: &Hall) -> f64 {
+    mods_at_upper_bounds(effect, hall).map_or(0.0, |m| m.supply_opening_share())
+}
+
+/// Where the effects' supply openings, each at its parameters' upper bounds, first take
+/// the whole supply: the entry at which their shares reach 1, and each opening entry's
+/// share so far. The tiles (or CRAC fronts) must deliver some of the supply, so such a
+/// box holds points no run can take: a calibration would lose every run there (the
+/// design's upper bounds among them).
+pub fn first_oversubscribed(
+    effects: &[Box<dyn Effect>],
+    hall: &Hall,
+) -> Option<(usize, Vec<(usize, f64)>)> {
+    let mut parts = Vec::new();
+    let mut total = 0.0;
+    for (i, e) in effects.iter().enumerate() {
+        let share = supply_share_at_upper_bounds(e.as_ref(), hall);
+        if share > 0.0 {
+            parts.push((i, share));
+            total += share;
+            if total >= 1.0 {
+                return Some((i, parts));
+            }
+        }
+    }
+    None
+}
+
+fn oversubscribed_message(parts: &[(usize, f64)]) -> String {
+    let terms: Vec<String> = parts
+        .iter()
+        .map(|(i, s)| format!("effects/{i} {}", crate::snapshots::number(*s)))
+        .collect();
+    let total: f64 = parts.iter().map(|(_, s)| s).sum();
+    format!(
+        "at their upper bounds the supply openings take the whole supply ({}: {} in all), \
+         leaving the tiles none, so no run could be made there; lower an upper bound so \
+         that the shares sum below 1",
+        terms.join(", "),
+        crate::snapshots::number(total)
+    )
+}
+
 fn repeat_message(first: usize) -> String {
     format!(
         "the same kind in the same place as effects/{first}: the two could not be told \
@@ -265,6 +317,23 @@ impl EffectRegistry {
                     "effect `{}`: {}",
                     effects[again].kind(),
                     repeat_message(first)
+                ),
+            ));
+        }
+        if let Some((at, parts)) = first_oversubscribed(&effects, hall) {
+            // The field to change: the bounds of the effect's one parameter, if one.
+            let params = effects[at].parameters();
+            let field = match params.as_slice() {
+                [p] => format!("/effects/{at}/{}_bounds", p.name),
+                _ => format!("/effects/{at}"),
+            };
+            return Err(Error::format(
+                file,
+                field,
+                format!(
+                    "effect `{}`: {}",
+                    effects[at].kind(),
+                    oversubscribed_message(&parts)
                 ),
             ));
         }
