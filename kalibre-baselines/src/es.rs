@@ -326,6 +326,15 @@ pub fn run_es<M: Model>(
         .run()
         .map_err(|e| kalibre_core::Error::Argmin(format!("{e:#}")))?;
     let history = result.solver.history;
+    let runs = history.last().map_or(0, |h| h.model_runs);
+    if !result.state.get_best_cost().is_finite() {
+        // Every point failed at some snapshot: there is no best point to report.
+        return Err(kalibre_core::Error::NoSuccessfulRun(format!(
+            "no parameter point ran successfully at every snapshot in {runs} model runs of \
+             the (1+1)-ES (each failed run's reason is in the run journal, when one is kept)"
+        ))
+        .into());
+    }
     let best_unit = result
         .state
         .get_best_param()
@@ -342,7 +351,7 @@ pub fn run_es<M: Model>(
         best_params,
         best_mae_c: result.state.get_best_cost(),
         initial_mae_c: history.first().map_or(f64::INFINITY, |h| h.mae_c),
-        model_runs: history.last().map_or(0, |h| h.model_runs),
+        model_runs: runs,
         history,
         wall_s: t0.elapsed().as_secs_f64(),
     })

@@ -172,7 +172,7 @@ impl ManualHeuristic {
             )));
         }
         let servers: Vec<_> = hall.servers().collect();
-        let near = hall
+        let near: Vec<Vec<usize>> = hall
             .sensors
             .iter()
             .map(|sensor| {
@@ -211,6 +211,21 @@ impl ManualHeuristic {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
+        if near.iter().all(Vec::is_empty) {
+            // The procedure would stop after its first run without a word.
+            return Err(crate::Error::InvalidSetting {
+                name: "neighbourhood".into(),
+                reason: format!(
+                    "no guiding sensor of hall `{}` has a server in it ({:?}{})",
+                    hall.name,
+                    settings.neighbourhood,
+                    match settings.use_cold_aisle {
+                        true => "",
+                        false => ", hot-aisle sensors only",
+                    }
+                ),
+            });
+        }
         Ok(ManualHeuristic {
             settings,
             layout,
@@ -227,13 +242,33 @@ impl ManualHeuristic {
 
     /// The expert's move direction in the unit box from the model's outputs per snapshot:
     /// per parameter, the mean suggestion (C) of its servers; zero where no guiding
-    /// sensor is near.
+    /// sensor is near. The observations and each snapshot's outputs are the hall's
+    /// sensors, in hall order.
     pub fn suggestion(
         &self,
         observations: &Observations<OperatingState>,
         outputs: &[Vec<f64>],
-    ) -> Vec<f64> {
+    ) -> Result<Vec<f64>> {
         let n_sensors = self.near.len();
+        let snaps = observations.snapshots().len();
+        if observations.outputs().len() != n_sensors || outputs.len() != snaps {
+            return Err(crate::Error::Mismatch(format!(
+                "the observations have {} outputs in {snaps} snapshots, the model's outputs \
+                 {} snapshots; the expert reads the hall's {n_sensors} sensors per snapshot",
+                observations.outputs().len(),
+                outputs.len()
+            )));
+        }
+        if let Some((i, o)) = outputs
+            .iter()
+            .enumerate()
+            .find(|(_, o)| o.len() != n_sensors)
+        {
+            return Err(crate::Error::Mismatch(format!(
+                "snapshot {i}: {} model outputs for the hall's {n_sensors} sensors",
+                o.len()
+            )));
+        }
         // Mean residual per sensor over the snapshots where it was measured.
         let mut r = vec![0.0; n_sensors];
         let mut cnt = vec![0usize; n_sensors];
@@ -283,10 +318,10 @@ impl ManualHeuristic {
                 sn[*i] += 1;
             }
         }
-        s.iter()
+        Ok(s.iter()
             .zip(&sn)
             .map(|(v, &n)| if n > 0 { v / n as f64 } else { 0.0 })
-            .collect()
+            .collect())
     }
 
     /// Runs the procedure from the layout's initial values, journaling runs in `store`
@@ -324,7 +359,7 @@ impl ManualHeuristic {
                         .into(),
                 ));
             };
-            let dir = self.suggestion(observations, outputs);
+            let dir = self.suggestion(observations, outputs)?;
             let scale = dir.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             if scale == 0.0 {
                 break; // No guiding sensor disagrees: nothing left to turn.

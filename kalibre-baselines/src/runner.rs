@@ -180,7 +180,7 @@ where
                 mae_c: f64::INFINITY,
             });
         }
-        let v = ErrorMetrics.validate(self.observations, &outputs);
+        let v = ErrorMetrics.validate(self.observations, &outputs)?;
         Ok(PointResult {
             outputs: Some(outputs),
             mae_c: ErrorMetrics.score(&v),

@@ -191,4 +191,44 @@ fn manual_settings_are_checked() {
     )
     .unwrap();
     assert!(m.neighbours().iter().any(|n| !n.is_empty()));
+    // A neighbourhood no server lies in leaves the expert nothing to read: refused
+    // rather than a run that stops after its first point.
+    let e = ManualHeuristic::new(
+        &s.hall,
+        s.model.layout().clone(),
+        ManualSettings::default().with_neighbourhood(Neighbourhood::RadiusM(1e-6)),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("no guiding sensor"), "{e}");
+    // Outputs that are not the hall's sensors are refused, not read past their end.
+    let outputs: Vec<Vec<f64>> = s.obs.snapshots().iter().map(|_| vec![25.0; 1]).collect();
+    let e = m.suggestion(&s.obs, &outputs).unwrap_err();
+    assert!(
+        e.to_string().contains("model outputs for the hall's"),
+        "{e}"
+    );
+    let e = m.suggestion(&s.obs, &outputs[..0]).unwrap_err();
+    assert!(e.to_string().contains("the expert reads"), "{e}");
+}
+
+#[test]
+fn es_without_one_successful_point_is_an_error() {
+    struct Failing;
+    impl Model for Failing {
+        type Scenario = OperatingState;
+        fn fingerprint(&self) -> String {
+            "failing".into()
+        }
+        fn evaluate(&self, _: &OperatingState, _: &[f64]) -> Result<Outputs, ModelError> {
+            Err(ModelError::failed("the solver diverged"))
+        }
+    }
+    let s = support::setup(AlphaMode::PerType);
+    let es = OnePlusOneEs::default().with_max_iterations(3);
+    match run_es(&Failing, &s.obs, s.model.layout().space(), &es, None) {
+        Err(kalibre_baselines::Error::Core(kalibre_core::Error::NoSuccessfulRun(m))) => {
+            assert!(m.contains("(1+1)-ES"), "{m}")
+        }
+        other => panic!("expected NoSuccessfulRun, got {other:?}"),
+    }
 }

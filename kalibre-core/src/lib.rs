@@ -128,4 +128,4 @@ pub use search::{
 };
 pub use store::{BadLine, LoadReport, RunRecord, RunStatus, RunStore};
 pub use surrogate::{FitSummary, Sample, Surrogate, TrainingSet};
-pub use validate::{ErrorMetrics, ErrorStats, Validation, Validator};
+pub use validate::{check_prediction_shape, ErrorMetrics, ErrorStats, Validation, Validator};

@@ -77,6 +77,18 @@ impl Param {
                 number(lower)
             )));
         }
+        // The unit box maps through the span: one that overflows maps every point to NaN.
+        let span = match scale {
+            Scale::Linear => upper - lower,
+            Scale::Log => (upper / lower).ln(),
+        };
+        if !span.is_finite() {
+            return Err(bad(format!(
+                "the bounds [{}, {}] span more than a float can hold",
+                number(lower),
+                number(upper)
+            )));
+        }
         Ok(Param {
             name,
             lower,
@@ -129,8 +141,9 @@ impl Param {
             Scale::Linear => self.lower + u * (self.upper - self.lower),
             Scale::Log => self.lower * (u * log_span).exp(),
         };
-        // Rounding must never step outside the box.
-        x.clamp(self.lower, self.upper)
+        // Rounding must never step outside the box (max/min, not clamp: a parameter
+        // written as a struct literal with inverted bounds must not panic here).
+        x.max(self.lower).min(self.upper)
     }
 
     fn dphys_dunit_at(&self, u: f64, log_span: f64) -> f64 {
@@ -378,6 +391,18 @@ mod tests {
                 assert_eq!(d[k].to_bits(), p.dphys_dunit(u[k]).to_bits());
             }
         }
+    }
+
+    #[test]
+    fn bounds_whose_span_overflows_are_refused() {
+        for (lower, upper, scale) in [
+            (-1e308, 1e308, Scale::Linear),
+            (f64::MIN_POSITIVE, f64::MAX, Scale::Log),
+        ] {
+            let e = Param::new("x", lower, upper, lower, scale).unwrap_err();
+            assert!(e.to_string().contains("span more than a float"), "{e}");
+        }
+        Param::new("x", -1e307, 1e307, 0.0, Scale::Linear).expect("a span that fits");
     }
 
     #[test]

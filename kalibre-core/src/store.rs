@@ -91,6 +91,23 @@ impl RunRecord {
         if !(self.wall_s.is_finite() && self.wall_s >= 0.0) {
             return Err(format!("wall_s {} is not a duration", number(self.wall_s)));
         }
+        // JSON has no NaN or infinity: such a value would be written as null, and the
+        // journal could not be read back.
+        let lists = [
+            ("parameter", Some(&self.params)),
+            ("output", self.outputs.as_ref()),
+            ("spread", self.spread.as_ref()),
+        ];
+        for (what, values) in lists {
+            if let Some((i, v)) = values
+                .into_iter()
+                .flatten()
+                .enumerate()
+                .find(|(_, v)| !v.is_finite())
+            {
+                return Err(format!("{what} {i} is not finite ({})", number(*v)));
+            }
+        }
         if let (Some(spread), Some(outputs)) = (&self.spread, &self.outputs) {
             if spread.len() != outputs.len() {
                 return Err(format!(
@@ -533,6 +550,16 @@ impl RunStore {
             error,
             wall_s,
         };
+        if let Err(reason) = rec.check() {
+            // Refused before it is written: a line no reader could take back.
+            return Err(Error::Journal {
+                path: self
+                    .path
+                    .as_deref()
+                    .map_or_else(|| "(in memory)".into(), |p| p.display().to_string()),
+                reason: format!("run at scenario `{scenario}` not recorded: {reason}"),
+            });
+        }
         let repair = inner.repair;
         if let Some(file) = inner.file.as_mut() {
             let path = self.path.as_deref().unwrap_or(Path::new("runs.jsonl"));

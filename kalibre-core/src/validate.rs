@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::Observations;
+use crate::{Error, Observations, Result};
 
 /// Mean absolute, root-mean-square and maximum absolute error over a set of values.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -64,8 +64,13 @@ pub struct Validation {
 
 /// Scores predictions (one vector per snapshot) against observations.
 pub trait Validator: Sync {
-    /// Errors at every granularity.
-    fn validate<S>(&self, observations: &Observations<S>, predicted: &[Vec<f64>]) -> Validation;
+    /// Errors at every granularity. Predictions of another shape than the observations
+    /// (one vector per snapshot, one value per output) are an error.
+    fn validate<S>(
+        &self,
+        observations: &Observations<S>,
+        predicted: &[Vec<f64>],
+    ) -> Result<Validation>;
 
     /// The single number the loop minimises (lower is better).
     fn score(&self, validation: &Validation) -> f64 {
@@ -83,16 +88,24 @@ pub trait Validator: Sync {
 /// ];
 /// let obs = Observations::new(outputs, vec![Snapshot {
 ///     label: "t0".into(), scenario: (), measured: vec![Some(20.0), Some(30.0)] }]).unwrap();
-/// let v = ErrorMetrics.validate(&obs, &[vec![21.0, 27.0]]);
+/// let v = ErrorMetrics.validate(&obs, &[vec![21.0, 27.0]]).unwrap();
 /// assert_eq!(v.overall.mae, 2.0);
 /// assert_eq!(v.overall.max_abs, 3.0);
 /// assert_eq!(v.per_group["hot"].mae, 3.0);
+/// // A missing prediction is an error, not a perfect score.
+/// assert!(ErrorMetrics.validate(&obs, &[]).is_err());
+/// assert!(ErrorMetrics.validate(&obs, &[vec![21.0]]).is_err());
 /// ```
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ErrorMetrics;
 
 impl Validator for ErrorMetrics {
-    fn validate<S>(&self, observations: &Observations<S>, predicted: &[Vec<f64>]) -> Validation {
+    fn validate<S>(
+        &self,
+        observations: &Observations<S>,
+        predicted: &[Vec<f64>],
+    ) -> Result<Validation> {
+        check_prediction_shape(observations, predicted)?;
         let outputs = observations.outputs();
         let mut overall = Acc::default();
         let mut per_output = vec![Acc::default(); outputs.len()];
@@ -114,7 +127,7 @@ impl Validator for ErrorMetrics {
             }
             per_snapshot.push((snap.label.clone(), acc.stats()));
         }
-        Validation {
+        Ok(Validation {
             overall: overall.stats(),
             per_snapshot,
             per_group: per_group.into_iter().map(|(g, a)| (g, a.stats())).collect(),
@@ -123,6 +136,35 @@ impl Validator for ErrorMetrics {
                 .zip(&per_output)
                 .map(|(o, a)| (o.name.clone(), a.stats()))
                 .collect(),
-        }
+        })
+    }
+}
+
+/// Checks that `predicted` has one vector per snapshot of `observations`, each with one
+/// value per output: what every [`Validator`] needs before it can score them.
+pub fn check_prediction_shape<S>(
+    observations: &Observations<S>,
+    predicted: &[Vec<f64>],
+) -> Result<()> {
+    let snaps = observations.snapshots();
+    let outputs = observations.outputs().len();
+    if predicted.len() != snaps.len() {
+        return Err(Error::Mismatch(format!(
+            "{} predicted snapshots for {} observed ones",
+            predicted.len(),
+            snaps.len()
+        )));
+    }
+    match snaps
+        .iter()
+        .zip(predicted)
+        .find(|(_, p)| p.len() != outputs)
+    {
+        Some((snap, p)) => Err(Error::Mismatch(format!(
+            "snapshot `{}`: {} predicted values for {outputs} outputs",
+            snap.label,
+            p.len()
+        ))),
+        None => Ok(()),
     }
 }

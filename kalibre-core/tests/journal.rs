@@ -416,3 +416,31 @@ fn records_with_impossible_times_or_spreads_are_bad_lines() {
     let kept = store.get("t0", &names(), &[5.0, 1.0]).unwrap();
     assert_eq!(kept.result().unwrap().spread, Some(vec![0.1]));
 }
+
+#[test]
+fn a_run_no_reader_could_take_back_is_refused_before_it_is_written() {
+    let path = journal_of("journal-refused", &[0.5]);
+    let store = RunStore::open(&path, "m1").unwrap();
+    let before = lines(&path);
+    let refused = [
+        store.record("t0", &names(), &[0.6, 1.0], &ok(&[f64::NAN]), 0.1),
+        store.record("t0", &names(), &[f64::INFINITY, 1.0], &ok(&[1.0]), 0.1),
+        store.record("t0", &names(), &[0.6], &ok(&[1.0]), 0.1),
+        store.record("t0", &names(), &[0.6, 1.0], &ok(&[1.0]), -1.0),
+    ];
+    let reasons = [
+        "output 0 is not finite (NaN)",
+        "parameter 0 is not finite (inf)",
+        "1 parameter values for 2 names",
+        "wall_s -1 is not a duration",
+    ];
+    for (r, why) in refused.into_iter().zip(reasons) {
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("not recorded") && e.contains(why), "{e}");
+    }
+    // Nothing was written, and the journal still opens with its one run.
+    assert_eq!(lines(&path), before);
+    drop(store);
+    let store = RunStore::open(&path, "m1").unwrap();
+    assert_eq!(store.len(), 1);
+}

@@ -4,6 +4,7 @@
 //! settings checked once, and [`Calibrator::run`] returning a serialisable [`Report`].
 
 mod builder;
+mod contract;
 mod correction;
 mod design;
 mod geometry;
@@ -189,7 +190,7 @@ where
                 &design_units[i],
                 &design_phys[i],
                 results,
-            );
+            )?;
             for s in state.samples[state.samples.len() - eval.ok_runs..].iter() {
                 design_samples.push((design_units[i].clone(), s.clone()));
             }
@@ -313,6 +314,11 @@ where
                 Some(b) => b.unit.clone(),
                 None => design_units[initial_idx].clone(),
             };
+            let start_params = space.from_unit(&start)?;
+            contract::check_surrogate(&self.surrogate, obs, &start_params, iteration)?;
+            if let Some(reg) = self.regularizer {
+                contract::check_regularizer(reg, &start_params)?;
+            }
             let mut objective = SurrogateObjective::new(&self.surrogate, obs, space);
             if st.output_correction {
                 if let Some(best) = &state.best {
@@ -436,7 +442,7 @@ where
                 .pop()
                 .unwrap_or_default();
             let model_s = t.elapsed().as_secs_f64();
-            let eval = state.absorb(&self.validator, obs, iteration, &unit, &params, results);
+            let eval = state.absorb(&self.validator, obs, iteration, &unit, &params, results)?;
             // A geometry step tests the model, not the surrogate's proposal: the radius
             // stays.
             if let Some(r) = radius.as_mut().filter(|_| !geometry_step) {

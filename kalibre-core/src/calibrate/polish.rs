@@ -227,7 +227,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                         }
                     };
                     cols.push(col);
-                    state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res);
+                    state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res)?;
                 }
                 jac = Some(Linearisation {
                     jacobian: ModelJacobian {
@@ -304,7 +304,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 .pop()
                 .unwrap_or_default();
             model_s += t.elapsed().as_secs_f64();
-            let eval = state.absorb(self.validator, obs, iteration, &unit, &params, results);
+            let eval = state.absorb(self.validator, obs, iteration, &unit, &params, results)?;
             let improved = match row_weights {
                 Some(w) => {
                     // `absorb` keeps a point's outputs only when every snapshot ran.
@@ -316,7 +316,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                         .filter(|o| weighted_mae(&residuals(obs, o), w) < weighted_mae(r0, w));
                     let improved = better.is_some();
                     if let Some(outputs) = better {
-                        state.promote(self.validator, obs, iteration, &unit, &params, outputs);
+                        state.promote(self.validator, obs, iteration, &unit, &params, outputs)?;
                     }
                     improved
                 }

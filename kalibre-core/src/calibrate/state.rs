@@ -4,7 +4,7 @@
 use super::report::PassedOver;
 use super::runner::RunResult;
 use super::RunCounts;
-use crate::{Observations, Regularizer, Sample, Validation, Validator};
+use crate::{Observations, Regularizer, Result, Sample, Validation, Validator};
 
 /// The best point so far.
 pub(crate) struct BestPoint {
@@ -91,7 +91,7 @@ impl<'r> State<'r> {
         unit: &[f64],
         params: &[f64],
         results: Vec<RunResult>,
-    ) -> PointEval {
+    ) -> Result<PointEval> {
         let mut outputs = Vec::with_capacity(results.len());
         let mut ok_runs = 0;
         for (s, r) in results.into_iter().enumerate() {
@@ -117,15 +117,15 @@ impl<'r> State<'r> {
         }
         if ok_runs < obs.snapshots().len() {
             self.failed_units.push(unit.to_vec());
-            return PointEval {
+            return Ok(PointEval {
                 validation: None,
                 score: None,
                 ok_runs,
-            };
+            });
         }
         self.ok_units.push(unit.to_vec());
         self.ok_runs.push((params.to_vec(), outputs.clone()));
-        let validation = validator.validate(obs, &outputs);
+        let validation = validator.validate(obs, &outputs)?;
         let score = validator.score(&validation);
         let rank = self.rank(score, params);
         if score.is_finite() && self.lowest.is_none_or(|(_, s, _)| score < s) {
@@ -143,11 +143,11 @@ impl<'r> State<'r> {
                 outputs,
             });
         }
-        PointEval {
+        Ok(PointEval {
             validation: Some(validation),
             score: Some(score),
             ok_runs,
-        }
+        })
     }
 
     /// Makes a point that ran at every snapshot the best one whatever its score: the
@@ -160,11 +160,11 @@ impl<'r> State<'r> {
         unit: &[f64],
         params: &[f64],
         outputs: Vec<Vec<f64>>,
-    ) {
+    ) -> Result<()> {
         if self.best.as_ref().is_some_and(|b| b.unit == unit) {
-            return;
+            return Ok(());
         }
-        let validation = validator.validate(obs, &outputs);
+        let validation = validator.validate(obs, &outputs)?;
         let score = validator.score(&validation);
         let rank = self.rank(score, params);
         self.best = Some(BestPoint {
@@ -176,6 +176,7 @@ impl<'r> State<'r> {
             validation,
             outputs,
         });
+        Ok(())
     }
 }
 
@@ -217,9 +218,13 @@ mod tests {
         .unwrap();
         let mut state = State::judged_with(prior);
         // MAE 0.5 at a parameter 0.1 above the prior's edge (1 K of prior).
-        state.absorb(&ErrorMetrics, &obs, 1, &[0.6], &[0.6], run(20.5));
+        state
+            .absorb(&ErrorMetrics, &obs, 1, &[0.6], &[0.6], run(20.5))
+            .unwrap();
         // MAE 0.8 within the prior.
-        state.absorb(&ErrorMetrics, &obs, 2, &[0.4], &[0.4], run(19.2));
+        state
+            .absorb(&ErrorMetrics, &obs, 2, &[0.4], &[0.4], run(19.2))
+            .unwrap();
         let b = state.best.as_ref().unwrap();
         let passed = state.passed_over(b);
         if b.iteration == 2 {

@@ -98,7 +98,9 @@ pub(crate) fn summarise<S, V: Validator>(
             continue;
         }
         complete_points += 1;
-        let validation = validator.validate(observations, &outputs);
+        let Ok(validation) = validator.validate(observations, &outputs) else {
+            continue;
+        };
         let score = validator.score(&validation);
         if score.is_finite() && best.as_ref().is_none_or(|b| score < b.score) {
             best = Some(UnreachedBest {

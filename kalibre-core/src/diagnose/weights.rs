@@ -142,17 +142,20 @@ pub(crate) fn row_weights(
         let e = refit(&vec![1.0; n]);
         (e.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt()
     });
+    // Floor: a noise-free fit would weigh every uncertain row at 0. Relative to the
+    // first estimate, so that it does not compound from round to round (it fell to
+    // 1e-120 of the residuals in 20 rounds when the uncertainty covered them all).
+    let floor = 1e-6 * s.max(1e-300);
     let mut c = 1.0;
     // As many rounds as before the model-form share existed when there is none.
     let rounds = if model_form.is_some() { 50 } else { 20 };
     for _ in 0..rounds {
         let e = refit(&weights_for(s, c));
-        // Floor: a noise-free fit would weigh every uncertain row at 0.
         let next_s = match noise_sigma {
             Some(s) => s,
             None => {
                 let u2: Vec<f64> = a.iter().zip(&b).map(|(a, b)| a + c * b).collect();
-                ml_variance(&e, &u2).sqrt().max(1e-6 * s.max(1e-300))
+                ml_variance(&e, &u2).sqrt().max(floor)
             }
         };
         let next_c = share(&e, next_s);
@@ -250,5 +253,22 @@ mod tests {
         let expected = 0.25;
         assert!((c - expected).abs() < 0.05, "share {c} vs about {expected}");
         assert_eq!(w.sigma, 0.1);
+    }
+
+    #[test]
+    fn the_noise_floor_does_not_compound_when_the_uncertainty_covers_every_residual() {
+        // Residuals well inside an uncertainty of 1: the maximum-likelihood noise is 0,
+        // and the estimate stops at its floor, a millionth of the first estimate (the
+        // residuals' root mean square, 0.5), rather than shrinking round after round.
+        let r = [1.0, 0.1, -0.1, 0.0];
+        let rms = (r.iter().map(|x| x * x).sum::<f64>() / 4.0).sqrt();
+        let w = row_weights(&r, &[], Some(&[1.0; 4]), None, None);
+        assert!(
+            (w.sigma - 1e-6 * rms).abs() < 1e-12 * rms,
+            "sigma {} against the floor {}",
+            w.sigma,
+            1e-6 * rms
+        );
+        assert!(w.weights.iter().all(|x| x.is_finite() && *x > 0.0));
     }
 }

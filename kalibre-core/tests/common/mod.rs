@@ -211,7 +211,8 @@ impl Surrogate for QuadSurface {
 
     fn vjp(&self, scenario: &Scen, params: &[f64], cotangent: &[f64]) -> Vec<f64> {
         let (a, b) = (params[0], params[1]);
-        let mut g = vec![0.0; 2];
+        // One entry per parameter: those past `a` and `b` it does not read.
+        let mut g = vec![0.0; params.len()];
         for (w, c) in self.coef[scenario.id].iter().zip(cotangent) {
             g[0] += c * (w[1] + 2.0 * w[3] * a + w[4] * b);
             g[1] += c * (w[2] + w[4] * a + 2.0 * w[5] * b);

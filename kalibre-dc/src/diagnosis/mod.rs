@@ -4,74 +4,25 @@
 //! supplies its candidate placements, and `kalibre_core::diagnose` ranks them.
 
 mod refit;
+mod settings;
 mod solver;
 
 pub use refit::{Refit, RefitStep};
+pub use settings::HallDiagnosisSettings;
 pub use solver::EffectSolver;
 
 use ndarray::Array2;
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use kalibre_core::diagnose::{
-    diagnose, DiagnoseSettings, Diagnosis, Hypothesis, HypothesisParam, Residuals,
-};
+use kalibre_core::diagnose::{diagnose, Diagnosis, Hypothesis, HypothesisParam, Residuals};
 use kalibre_core::ParamSpace;
 
 use crate::effects::{placement, Effect, EffectRegistry};
 use crate::hall::{EffectSpec, Hall};
-use crate::sim::{SimConfig, Simulator};
+use crate::sim::Simulator;
 use crate::snapshots::{self, HallSnapshot, OperatingState};
 use crate::{Error, ParamLayout, Result};
-
-/// Settings of a hall diagnosis.
-///
-/// | Name | Default | Meaning |
-/// |---|---|---|
-/// | `sim` | [`SimConfig::default`] | the built-in simulator, when it supplies the Jacobians ([`diagnose_hall`]) |
-/// | `unit_step` | 0.01 | finite-difference step of calibrated parameters (unit box) |
-/// | `effect_step` | 0.05 | finite-difference step of effect parameters (share of their range) |
-/// | `refine_factor` | 0.5 | the model's own discretisation error, estimated by one more solve per snapshot on a grid this much finer, is each sensor's model uncertainty (no hypothesis earns credit for what the grid alone could produce); none: no such solve (nor when the solver offers no finer grid) |
-/// | `model_form` | true | each sensor's model uncertainty also counts what the solver's model-form variants ([`EffectSolver::model_form_variants`]; the built-in simulator: its tile jets carried up the cold aisle) read beyond it at the calibrated parameters, one solve per snapshot and variant, by the share of that variance the residuals bear out ([`Diagnosis::model_form_share`](kalibre_core::diagnose::Diagnosis::model_form_share): near 0 where the model reproduces the data) |
-/// | `refit_top` | 0 | how many leading one-parameter hypotheses are refit with the solver itself (secant steps at their fitted point; `refit` module) before the final ranking |
-/// | `refit_iterations` | 4 | runs per refit hypothesis (one solve per snapshot each): a step towards its fitted point, halved after a run that reads worse than its best point |
-/// | `diagnose` | [`DiagnoseSettings::default`] | ranking, significance, held-out check |
-#[derive(Debug, Clone)]
-pub struct HallDiagnosisSettings {
-    /// Built-in simulator configuration.
-    pub sim: SimConfig,
-    /// Step of calibrated parameters in the unit box.
-    pub unit_step: f64,
-    /// Step of effect parameters as a share of their range.
-    pub effect_step: f64,
-    /// Cell size of the refined grid relative to `sim.cell_m` (in (0, 1)), or none.
-    pub refine_factor: Option<f64>,
-    /// Whether the solver's model-form variants
-    /// ([`EffectSolver::model_form_variants`]) add to each sensor's model uncertainty
-    /// (by the share of their variance the residuals bear out).
-    pub model_form: bool,
-    /// How many leading hypotheses are refit with the solver (0: none).
-    pub refit_top: usize,
-    /// Secant steps per refit hypothesis.
-    pub refit_iterations: usize,
-    /// The generic diagnosis settings.
-    pub diagnose: DiagnoseSettings,
-}
-
-impl Default for HallDiagnosisSettings {
-    fn default() -> Self {
-        HallDiagnosisSettings {
-            sim: SimConfig::default(),
-            unit_step: 0.01,
-            effect_step: 0.05,
-            refine_factor: Some(0.5),
-            model_form: true,
-            refit_top: 0,
-            refit_iterations: 4,
-            diagnose: DiagnoseSettings::default(),
-        }
-    }
-}
 
 /// Adds each reading's squared difference between `other` and `base` (snapshot x
 /// sensor) to `u2`.
@@ -338,6 +289,7 @@ pub fn diagnose_hall_with(
     settings: &HallDiagnosisSettings,
     solver: &dyn EffectSolver,
 ) -> Result<HallDiagnosis> {
+    settings.check()?;
     let obs = snapshots::to_observations(hall, snaps)?;
     let effects = registry.build_all(hall)?;
     let layout = ParamLayout::new(hall, &effects)?;
@@ -511,11 +463,6 @@ pub fn diagnose_hall_with(
         Ok(measured_sqrt(snaps, &u2))
     };
     if let Some(factor) = settings.refine_factor {
-        if !(factor > 0.0 && factor < 1.0) {
-            return Err(Error::Mismatch(format!(
-                "refine_factor must be in (0, 1), got {factor}"
-            )));
-        }
         if let Some(fine) = solver.refined(factor)? {
             residuals = residuals.with_uncertainty(spread_of(&[fine.as_ref()])?)?;
         }

@@ -9,4 +9,4 @@ mod write;
 
 pub use geometry::{distance, face_centre, Aabb, ServerRef};
 pub use types::*;
-pub use validate::{unprintable_name, GEOMETRY_TOL_M, MAX_NAME_CHARS};
+pub use validate::{unprintable_name, GEOMETRY_TOL_M, MAX_ALPHA_CFM_PER_W, MAX_NAME_CHARS};

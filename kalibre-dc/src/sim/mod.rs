@@ -79,9 +79,12 @@ pub struct Simulator {
 }
 
 impl Simulator {
-    /// Builds the grid topology of `hall` (checks the configuration first).
+    /// Builds the grid topology of `hall` (checks the configuration and the hall first:
+    /// a hall built in code rather than read from a file gets the file's checks, named
+    /// `hall `<name>``).
     pub fn new(hall: &Hall, config: SimConfig) -> Result<Self> {
         config.check()?;
+        hall.validate(&format!("hall `{}`", hall.name))?;
         let topo = topology::Topology::build(hall, &config)?;
         let pressure_mg = (config.preconditioner == Preconditioner::Multigrid).then(|| {
             let g = [

@@ -16,8 +16,9 @@ use super::solution::Solution;
 use super::supply::{crac_flows_m3_s, floor_flow_m3_s, split_over_tiles};
 use super::topology::{open_face_g, Stencil};
 use super::{Simulator, M3_S_PER_CFM};
-use crate::hall::SupplyKind;
-use crate::snapshots::OperatingState;
+use crate::hall::{SupplyKind, MAX_ALPHA_CFM_PER_W};
+use crate::snapshots::{number, OperatingState, MAX_POWER_W};
+use crate::PLAUSIBLE_SENSOR_C;
 use crate::{Error, Result};
 
 /// Air entering at a fixed temperature.
@@ -26,6 +27,10 @@ struct Inflow {
     flow_m3_s: f64,
     temp_c: f64,
 }
+
+/// The largest supply temperature offset a run takes (C): beyond it the CRAC would not
+/// be the one in the hall file.
+const MAX_SUPPLY_OFFSET_C: f64 = 100.0;
 
 fn check_inputs(
     sim: &Simulator,
@@ -58,10 +63,22 @@ fn check_inputs(
         len("supply offsets", mods.supply_offset_c.len(), nc)?;
     }
     for (k, c) in hall.cracs.iter().enumerate() {
-        if !state.setpoint_c[k].is_finite() {
+        if !PLAUSIBLE_SENSOR_C.contains(&state.setpoint_c[k]) {
             return Err(Error::Mismatch(format!(
-                "CRAC `{}`: setpoint is not finite",
-                c.id
+                "CRAC `{}`: setpoint {} C is outside [{}, {}] C",
+                c.id,
+                number(state.setpoint_c[k]),
+                PLAUSIBLE_SENSOR_C.start(),
+                PLAUSIBLE_SENSOR_C.end()
+            )));
+        }
+        let offset = mods.supply_offset_c.get(k).copied().unwrap_or(0.0);
+        if !(-MAX_SUPPLY_OFFSET_C..=MAX_SUPPLY_OFFSET_C).contains(&offset) {
+            return Err(Error::Mismatch(format!(
+                "CRAC `{}`: supply offset {} C is outside [-{MAX_SUPPLY_OFFSET_C}, \
+                 {MAX_SUPPLY_OFFSET_C}] C",
+                c.id,
+                number(offset)
             )));
         }
         if !(0.0..=1.0).contains(&state.fan_speed[k]) {
@@ -72,16 +89,27 @@ fn check_inputs(
         }
     }
     for (s, (p, a)) in hall.servers().zip(state.power_w.iter().zip(alpha)) {
-        if !(p.is_finite() && *p >= 0.0) {
+        if !(*p >= 0.0 && *p <= MAX_POWER_W) {
             return Err(Error::Mismatch(format!(
-                "server `{}`: power {p} W is not >= 0",
-                s.server.id
+                "server `{}`: power {} W is outside [0, {MAX_POWER_W:e}] W",
+                s.server.id,
+                number(*p)
             )));
         }
-        if !(a.is_finite() && *a > 0.0) {
+        if !(*a > 0.0 && *a <= MAX_ALPHA_CFM_PER_W) {
             return Err(Error::Mismatch(format!(
-                "server `{}`: alpha {a} cfm/W is not > 0",
-                s.server.id
+                "server `{}`: alpha {} cfm/W is outside (0, {MAX_ALPHA_CFM_PER_W}] cfm/W",
+                s.server.id,
+                number(*a)
+            )));
+        }
+    }
+    for rr in &mods.rack_recirculation {
+        if !(0.0..=1.0).contains(&rr.fraction) {
+            return Err(Error::Mismatch(format!(
+                "rack recirculation at rack index {}: fraction {} is outside [0, 1]",
+                rr.rack,
+                number(rr.fraction)
             )));
         }
     }
