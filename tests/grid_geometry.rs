@@ -55,8 +55,13 @@ fn an_effect_that_acts_on_no_cell_is_refused_before_any_run() {
             "z_m": [1.0, 1.000001]
         }]);
     });
-    let needle = "effects/0: rack `A2`'s recirculation in z 1-1.000001 m, at its exhaust \
-                  face, covers no open cell on cells of 0.2 m";
+    // Named as the hall file's entry, as a bad field of it would be.
+    let needle = format!(
+        "{}: /effects/0: effect `rack_recirculation`: rack `A2`'s recirculation in z \
+         1-1.000001 m, at its exhaust face, covers no open cell on cells of 0.2 m",
+        band.display()
+    );
+    let needle = needle.as_str();
     let o = run(on_files("simulate", &band, &snaps)
         .arg("--out")
         .arg(dir.join("band.csv")));

@@ -37,12 +37,15 @@ use crate::error::require;
 use crate::runner::{BaselineReport, HistoryPoint, ModelMae};
 use crate::Result;
 
+/// The largest initial mutation standard deviation taken (unit box).
+pub const MAX_SIGMA0: f64 = 1000.0;
+
 /// Settings of the (1+1)-ES, checked by [`OnePlusOneEs::check`].
 ///
 /// | Name | Default | Meaning | Range |
 /// |---|---|---|---|
 /// | `seed` | 0 | seeds the mutations | any |
-/// | `sigma0` | 0.2 | initial mutation standard deviation, unit box (see the module docs) | > 0 |
+/// | `sigma0` | 0.2 | initial mutation standard deviation, unit box (see the module docs) | (0, 1000] |
 /// | `expand` | 1.5 | sigma factor after a success (failure: `expand^(-1/4)`) | > 1 |
 /// | `min_sigma` | 1e-3 | sigma never falls below this | (0, sigma0] |
 /// | `max_iterations` | 150 | mutations (each one model run per snapshot) | >= 1 |
@@ -112,10 +115,12 @@ impl OnePlusOneEs {
 
     /// Checks every setting, naming the first one out of range.
     pub fn check(&self) -> Result<()> {
+        // Past a few box widths a mutation is already uniform after reflection (the
+        // literal sigma 5 is); far past it, the step overflows to a NaN coordinate.
         require(
-            self.sigma0.is_finite() && self.sigma0 > 0.0,
+            self.sigma0 > 0.0 && self.sigma0 <= MAX_SIGMA0,
             "sigma0",
-            || format!("must be finite and > 0, got {}", self.sigma0),
+            || format!("must be in (0, {MAX_SIGMA0}], got {}", self.sigma0),
         )?;
         require(
             self.expand.is_finite() && self.expand > 1.0,
@@ -377,6 +382,15 @@ mod tests {
             .check()
             .unwrap_err();
         assert!(e.to_string().contains("sigma0"));
+        let e = OnePlusOneEs::default()
+            .with_sigma0(f64::MAX)
+            .check()
+            .unwrap_err();
+        assert!(e.to_string().contains("sigma0"), "{e}");
+        OnePlusOneEs::default()
+            .with_sigma0(5.0)
+            .check()
+            .expect("the literal sigma");
         let e = OnePlusOneEs::default()
             .with_expand(1.0)
             .check()

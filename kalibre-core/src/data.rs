@@ -32,9 +32,22 @@ pub struct Observations<S> {
 }
 
 impl<S> Observations<S> {
-    /// Checked observations: at least one snapshot, unique labels, one entry per output,
-    /// every measured value finite, every snapshot with at least one measurement.
+    /// Checked observations: output names unique and not empty (reports and journals
+    /// name outputs by them), at least one snapshot, unique labels, one entry per
+    /// output, every measured value finite, every snapshot with at least one measurement.
     pub fn new(outputs: Vec<OutputInfo>, snapshots: Vec<Snapshot<S>>) -> Result<Self> {
+        let mut seen = std::collections::HashSet::with_capacity(outputs.len());
+        for (k, o) in outputs.iter().enumerate() {
+            if o.name.is_empty() {
+                return Err(Error::Mismatch(format!("output {k} has an empty name")));
+            }
+            if !seen.insert(o.name.as_str()) {
+                return Err(Error::Mismatch(format!(
+                    "output {k}: duplicate output name `{}`",
+                    o.name
+                )));
+            }
+        }
         if snapshots.is_empty() {
             return Err(Error::Mismatch(
                 "observations need at least one snapshot".into(),
@@ -97,5 +110,33 @@ impl<S> Observations<S> {
             .iter()
             .map(|s| s.measured.iter().flatten().count())
             .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn output(name: &str) -> OutputInfo {
+        OutputInfo {
+            name: name.into(),
+            group: "g".into(),
+        }
+    }
+
+    #[test]
+    fn output_names_must_be_unique_and_not_empty() {
+        let snap = || {
+            vec![Snapshot {
+                label: "t0".into(),
+                scenario: (),
+                measured: vec![Some(20.0), Some(21.0)],
+            }]
+        };
+        let e = Observations::new(vec![output("a"), output("a")], snap()).unwrap_err();
+        assert!(e.to_string().contains("duplicate output name `a`"), "{e}");
+        let e = Observations::new(vec![output("a"), output("")], snap()).unwrap_err();
+        assert!(e.to_string().contains("output 1 has an empty name"), "{e}");
+        Observations::new(vec![output("a"), output("b")], snap()).expect("distinct names");
     }
 }

@@ -67,11 +67,13 @@ pub trait Surrogate {
         self.fit(data, seed)
     }
 
-    /// Predicted outputs at a scenario and physical parameters.
+    /// Predicted outputs at a scenario and physical parameters, one per output. The loop
+    /// checks this, finite, after each fit at the search's start (an error otherwise).
     fn predict(&self, scenario: &Self::Scenario, params: &[f64]) -> Vec<f64>;
 
     /// The vector-Jacobian product at a scenario and physical parameters: for a cotangent
     /// `g` (one value per output) the gradient `d(sum_k g_k * out_k) / d params`, one value
-    /// per parameter.
+    /// per parameter (0 for a parameter the surrogate does not read; checked as
+    /// [`Self::predict`] is).
     fn vjp(&self, scenario: &Self::Scenario, params: &[f64], cotangent: &[f64]) -> Vec<f64>;
 }

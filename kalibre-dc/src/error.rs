@@ -85,6 +85,40 @@ impl Error {
             source,
         }
     }
+
+    /// An [`Error::Effect`] about an entry of `hall.effects` (its message starts with
+    /// `effects/<i>: `, as the registry and the model's placement checks write it) as an
+    /// [`Error::Format`] naming the hall's `file` and the entry's JSON pointer, as
+    /// [`crate::effects::EffectRegistry::check_hall`] reports; any other error as it is.
+    ///
+    /// ```
+    /// use kalibre_dc::Error;
+    /// let e = Error::Effect { kind: "bypass".into(), message: "effects/1: covers no open cell".into() };
+    /// assert_eq!(
+    ///     e.in_hall_file("hall.json").to_string(),
+    ///     "hall.json: /effects/1: effect `bypass`: covers no open cell"
+    /// );
+    /// ```
+    pub fn in_hall_file(self, file: &str) -> Self {
+        let Error::Effect { kind, message } = self else {
+            return self;
+        };
+        let entry = message
+            .strip_prefix("effects/")
+            .and_then(|m| m.split_once(": "))
+            .filter(|(i, _)| i.parse::<usize>().is_ok());
+        match entry {
+            Some((i, rest)) => {
+                let (field, rest) = crate::effects::fields::split_field(rest);
+                let pointer = match field {
+                    Some(f) => format!("/effects/{i}/{f}"),
+                    None => format!("/effects/{i}"),
+                };
+                Error::format(file, pointer, format!("effect `{kind}`: {rest}"))
+            }
+            None => Error::Effect { kind, message },
+        }
+    }
 }
 
 /// The crate's result type.

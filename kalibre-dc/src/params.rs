@@ -146,6 +146,10 @@ impl ParamLayout {
     }
 
     /// Alpha (cfm/W) of every server, in hall order.
+    ///
+    /// # Panics
+    /// When `params` is shorter than the layout's parameter vector (a kernel for
+    /// vectors the layout made; the loop checks lengths at its boundary).
     pub fn alpha_per_server(&self, params: &[f64]) -> Vec<f64> {
         self.alpha_per_server_iter(params).collect()
     }
@@ -167,6 +171,9 @@ impl ParamLayout {
     }
 
     /// Adds a gradient with respect to per-server alpha into a gradient over parameters.
+    ///
+    /// # Panics
+    /// When `grad_params` is shorter than the layout's parameter vector.
     pub fn accumulate_alpha_gradient(
         &self,
         grad_alpha_per_server: &[f64],
@@ -180,11 +187,17 @@ impl ParamLayout {
     }
 
     /// The values of effect `e`'s parameters.
+    ///
+    /// # Panics
+    /// When there is no effect `e`, or `params` is shorter than the layout's vector.
     pub fn effect_values<'p>(&self, params: &'p [f64], e: usize) -> &'p [f64] {
         &params[self.effect_ranges[e].clone()]
     }
 
     /// The range of effect `e`'s parameters in the vector.
+    ///
+    /// # Panics
+    /// When there is no effect `e`.
     pub fn effect_range(&self, e: usize) -> std::ops::Range<usize> {
         self.effect_ranges[e].clone()
     }

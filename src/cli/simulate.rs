@@ -412,7 +412,8 @@ pub fn run(args: SimulateArgs) -> CliResult {
     // Before any solve: a factor whose grid is the model's own in this room, or too
     // fine to build, would otherwise fail (or check nothing) after the predictions.
     super::calibrate::check_finer_grids(&hall, config.cell_m, &args.grid_check)?;
-    let model = HallModel::new(&hall, config)?;
+    let model = HallModel::new(&hall, config)
+        .map_err(|e| e.in_hall_file(&args.hall.display().to_string()))?;
     let space = model.layout().space();
     let params = match (&args.params, &file) {
         (Some(p), Some((json, _))) => load_params(p, json, space)?,

@@ -136,6 +136,9 @@ impl Network {
     }
 
     /// Sets every weight and bias from a vector in [`Self::to_flat`] order.
+    ///
+    /// # Panics
+    /// When `flat` is shorter than [`Self::to_flat`]'s vector.
     pub fn set_flat(&mut self, flat: &[f64]) {
         let mut i = 0;
         for l in &mut self.layers {
@@ -147,6 +150,10 @@ impl Network {
     }
 
     /// Forward pass over a batch `(samples, inputs)`.
+    ///
+    /// # Panics
+    /// When the batch's width is not the network's input width (as ndarray's product
+    /// does; [`crate::Mlp`] checks its inputs before it gets here).
     pub fn forward(&self, x: ArrayView2<'_, f64>) -> Tape {
         self.forward_owned(x.to_owned())
     }
@@ -165,6 +172,9 @@ impl Network {
 
     /// The outputs alone, `(samples, outputs)`: [`Self::forward`] without keeping the
     /// hidden layers (bitwise the same values).
+    ///
+    /// # Panics
+    /// As [`Self::forward`].
     pub fn predict(&self, x: ArrayView2<'_, f64>) -> Array2<f64> {
         let mut a: Option<Array2<f64>> = None;
         for i in 0..self.layers.len() {
@@ -195,6 +205,9 @@ impl Network {
 
     /// Backward pass: from `d loss / d outputs` (`(samples, outputs)`) to the gradients
     /// with respect to every layer and to the inputs (`(samples, inputs)`).
+    ///
+    /// # Panics
+    /// When `grad_out` is not `(samples, outputs)` of the tape's batch.
     pub fn backward(&self, tape: &Tape, grad_out: Array2<f64>) -> (Gradients, Array2<f64>) {
         let (grads, dx) = self.backward_parts(tape, grad_out, true, true);
         (grads, dx.expect("input gradient asked for"))

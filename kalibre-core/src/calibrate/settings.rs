@@ -17,7 +17,7 @@ use crate::{Error, Result};
 /// | `augment_copies` | 16 | samples per design run in the first fit: the run plus `copies - 1` noisy copies | >= 1 |
 /// | `augment_sigma` | 0.05 | standard deviation of the augmentation noise, unit box | finite, >= 0 |
 /// | `regularizer_weight` | 1 | weight of the regulariser in the search loss (when one is given) | finite, >= 0 |
-/// | `duplicate_tol` | 1e-9 | max-norm distance in the unit box under which two points are the same | finite, >= 0 |
+/// | `duplicate_tol` | 1e-9 | max-norm distance in the unit box under which two points are the same | [0, 1) |
 /// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point, unit box | finite, > 0 |
 /// | `explore_on_repeat` | none | when the search proposes a point already run: none stops (converged); a sigma moves the proposal with that much seeded noise (unit box) and goes on | (0, 1] |
 /// | `output_correction` | false | search the surrogate plus, per snapshot and output, the model's outputs minus the surrogate's at the best run (the corrected surrogate matches the model there) | bool |
@@ -212,7 +212,17 @@ impl Settings {
         }
         non_negative("augment_sigma", self.augment_sigma)?;
         non_negative("regularizer_weight", self.regularizer_weight)?;
-        non_negative("duplicate_tol", self.duplicate_tol)?;
+        // The unit box is 1 wide: a tolerance of 1 makes every proposal a repeat, and
+        // the loop would stop as converged right after its design.
+        if !(self.duplicate_tol >= 0.0 && self.duplicate_tol < 1.0) {
+            return Err(bad(
+                "duplicate_tol",
+                format!(
+                    "must be in [0, 1), got {}",
+                    crate::number(self.duplicate_tol)
+                ),
+            ));
+        }
         // The unit box is 1 wide: noise beyond that only lands on its faces.
         if let Some(s) = self.explore_on_repeat {
             if !(s.is_finite() && s > 0.0 && s <= 1.0) {

@@ -16,7 +16,7 @@
 //! the given bounds must lie within).
 
 mod bypass;
-mod fields;
+pub(crate) mod fields;
 mod leakage;
 mod offset;
 mod recirculation;

@@ -267,7 +267,7 @@ fn calibrate_with_model<'o>(
                 Err(e) => e,
             }
         }
-        e => flag_error(e),
+        e => flag_error(e.in_hall_file(&args.hall.display().to_string())),
     };
     match args.model {
         ModelArg::Builtin => {

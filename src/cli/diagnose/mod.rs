@@ -217,7 +217,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     if args.model == DiagnoseModel::Builtin {
         check_model_cells(&hall, sim.cell_m)?;
     }
-    let model = HallModel::new(&hall, sim.clone())?;
+    let model = HallModel::new(&hall, sim.clone())
+        .map_err(|e| e.in_hall_file(&args.hall.display().to_string()))?;
     // The solver, and the fingerprint of the model the calibration must have run.
     let (solver, fp): (Box<dyn EffectSolver>, String) = match args.model {
         DiagnoseModel::Builtin => (
