@@ -81,7 +81,7 @@ pub struct Simulator {
 impl Simulator {
     /// Builds the grid topology of `hall` (checks the configuration and the hall first:
     /// a hall built in code rather than read from a file gets the file's checks, named
-    /// `hall `<name>``).
+    /// ``hall `NAME` `` for the hall named NAME).
     pub fn new(hall: &Hall, config: SimConfig) -> Result<Self> {
         config.check()?;
         hall.validate(&format!("hall `{}`", hall.name))?;
