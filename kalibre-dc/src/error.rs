@@ -100,6 +100,12 @@ impl Error {
     /// );
     /// ```
     pub fn in_hall_file(self, file: &str) -> Self {
+        self.in_hall_file_at(file, None)
+    }
+
+    /// [`Self::in_hall_file`], pointing at the entry's `no_field` when the message names
+    /// no field.
+    pub(crate) fn in_hall_file_at(self, file: &str, no_field: Option<&str>) -> Self {
         let Error::Effect { kind, message } = self else {
             return self;
         };
@@ -110,7 +116,7 @@ impl Error {
         match entry {
             Some((i, rest)) => {
                 let (field, rest) = crate::effects::fields::split_field(rest);
-                let pointer = match field {
+                let pointer = match field.or(no_field) {
                     Some(f) => format!("/effects/{i}/{f}"),
                     None => format!("/effects/{i}"),
                 };

@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::report::NamedValues;
-use crate::{Observations, RunRecord, RunStatus, RunStore, Validator};
+use crate::{check_prediction_shape, Observations, RunRecord, RunStatus, RunStore, Validator};
 
 /// Journaled runs (of this model) the calibration did not ask for.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -91,10 +91,7 @@ pub(crate) fn summarise<S, V: Validator>(
         else {
             continue;
         };
-        if outputs
-            .iter()
-            .any(|o| o.len() != observations.outputs().len())
-        {
+        if check_prediction_shape(observations, &outputs).is_err() {
             continue;
         }
         complete_points += 1;

@@ -164,21 +164,11 @@ impl EffectRegistry {
     }
 
     /// Builds every entry of `hall.effects`, naming the entry index on error. Two entries
-    /// of one kind in one place are refused ([`first_repeat`]).
+    /// of one kind in one place are refused ([`first_repeat`]), as are openings that could
+    /// take the whole supply ([`first_oversubscribed`]).
     pub fn build_all(&self, hall: &Hall) -> Result<Vec<Box<dyn Effect>>> {
         let effects = self.build_each(hall)?;
-        if let Some((first, again)) = first_repeat(&effects) {
-            return Err(Error::Effect {
-                kind: effects[again].kind().to_string(),
-                message: format!("effects/{again}: {}", repeat_message(first)),
-            });
-        }
-        if let Some((at, parts)) = first_oversubscribed(&effects, hall) {
-            return Err(Error::Effect {
-                kind: effects[at].kind().to_string(),
-                message: format!("effects/{at}: {}", oversubscribed_message(&parts)),
-            });
-        }
+        check_together(&effects, hall)?;
         Ok(effects)
     }
 
@@ -265,6 +255,29 @@ pub fn first_oversubscribed(
     None
 }
 
+/// The checks across the entries of a hall, each error naming the entry (and the field
+/// to change) as [`EffectRegistry::build_all`]'s entry errors do.
+fn check_together(effects: &[Box<dyn Effect>], hall: &Hall) -> Result<()> {
+    if let Some((first, again)) = first_repeat(effects) {
+        return Err(Error::Effect {
+            kind: effects[again].kind().to_string(),
+            message: format!("effects/{again}: {}", repeat_message(first)),
+        });
+    }
+    if let Some((at, parts)) = first_oversubscribed(effects, hall) {
+        // The field to change: the bounds of the effect's one parameter, if one.
+        let field = match effects[at].parameters().as_slice() {
+            [p] => format!("field `{}_bounds`: ", p.name),
+            _ => String::new(),
+        };
+        return Err(Error::Effect {
+            kind: effects[at].kind().to_string(),
+            message: format!("effects/{at}: {field}{}", oversubscribed_message(&parts)),
+        });
+    }
+    Ok(())
+}
+
 fn oversubscribed_message(parts: &[(usize, f64)]) -> String {
     let terms: Vec<String> = parts
         .iter()
@@ -294,50 +307,11 @@ impl EffectRegistry {
     /// call it right after loading a hall (loading alone cannot check the entries: the
     /// kinds depend on the registry).
     pub fn check_hall(&self, hall: &Hall, file: &str) -> Result<()> {
-        let mut effects = Vec::with_capacity(hall.effects.len());
-        for (i, s) in hall.effects.iter().enumerate() {
-            match self.build(s, hall) {
-                Ok(effect) => effects.push(effect),
-                Err(Error::Effect { kind, message }) => {
-                    let (field, rest) = fields::split_field(&message);
-                    return Err(Error::Format {
-                        file: file.to_string(),
-                        field: format!("/effects/{i}/{}", field.unwrap_or("kind")),
-                        message: format!("effect `{kind}`: {rest}"),
-                    });
-                }
-                Err(other) => return Err(other),
-            }
-        }
-        if let Some((first, again)) = first_repeat(&effects) {
-            return Err(Error::format(
-                file,
-                format!("/effects/{again}"),
-                format!(
-                    "effect `{}`: {}",
-                    effects[again].kind(),
-                    repeat_message(first)
-                ),
-            ));
-        }
-        if let Some((at, parts)) = first_oversubscribed(&effects, hall) {
-            // The field to change: the bounds of the effect's one parameter, if one.
-            let params = effects[at].parameters();
-            let field = match params.as_slice() {
-                [p] => format!("/effects/{at}/{}_bounds", p.name),
-                _ => format!("/effects/{at}"),
-            };
-            return Err(Error::format(
-                file,
-                field,
-                format!(
-                    "effect `{}`: {}",
-                    effects[at].kind(),
-                    oversubscribed_message(&parts)
-                ),
-            ));
-        }
-        Ok(())
+        // An entry's own error without a field is about its kind (an unknown one).
+        let effects = self
+            .build_each(hall)
+            .map_err(|e| e.in_hall_file_at(file, Some("kind")))?;
+        check_together(&effects, hall).map_err(|e| e.in_hall_file(file))
     }
 }
 
