@@ -3,7 +3,9 @@
 
 mod search_support;
 
-use kalibre_core::search::{Adam, DifferentialEvolution, Hybrid, PopulationEval};
+use kalibre_core::search::{
+    Adam, DifferentialEvolution, Hybrid, PopulationEval, ProjectedGradient,
+};
 use kalibre_core::{Error, Objective, SearchOutcome, Searcher};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
@@ -400,10 +402,49 @@ fn non_finite_costs_never_win_and_do_not_stop_the_search() {
     let out = adam.search(&Holes, &[0.65, 0.3], 0).unwrap();
     assert!(out.best_cost.is_finite() && out.best_cost >= 0.0);
     assert!(max_abs_diff(&out.best_unit, &optimum) <= 0.01);
-    let stuck = Adam::default().search(&Holes, &[0.9, 0.9], 0).unwrap();
-    assert_eq!(stuck.best_cost, f64::INFINITY);
-    assert_eq!(stuck.evaluations, 1);
-    assert_eq!(stuck.best_unit, vec![0.9, 0.9]);
+    // Its one evaluation was NaN: no result, rather than the start scored infinite.
+    match Adam::default().search(&Holes, &[0.9, 0.9], 0) {
+        Err(Error::Search(m)) => assert!(m.contains("Adam") && m.contains("any of the 1 "), "{m}"),
+        other => panic!("expected a search error, got {other:?}"),
+    }
+}
+
+/// Not finite anywhere (`value` NaN or infinite at every point).
+struct Nowhere(f64);
+
+impl Objective for Nowhere {
+    fn dim(&self) -> usize {
+        3
+    }
+    fn cost(&self, _: &[f64]) -> f64 {
+        self.0
+    }
+    fn cost_and_gradient(&self, _: &[f64]) -> (f64, Vec<f64>) {
+        (self.0, vec![self.0; 3])
+    }
+}
+
+/// A search that met no finite cost is an error naming the searcher, not an outcome
+/// whose best point is the start at an infinite cost.
+#[test]
+fn an_objective_finite_nowhere_is_an_error_for_every_searcher() {
+    let searchers: [(&str, Box<dyn Searcher>); 4] = [
+        ("differential evolution", Box::new(de_small())),
+        ("Adam", Box::new(adam_small(0.1))),
+        ("projected gradient", Box::new(ProjectedGradient::default())),
+        // The hybrid stops at its first phase.
+        ("differential evolution", Box::new(Hybrid::default())),
+    ];
+    for value in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        for (name, searcher) in &searchers {
+            match searcher.search(&Nowhere(value), &[0.5; 3], 1) {
+                Err(Error::Search(m)) => {
+                    assert!(m.starts_with(name) && m.contains("not finite"), "{m}")
+                }
+                other => panic!("{name} at {value}: expected a search error, got {other:?}"),
+            }
+        }
+    }
 }
 
 // ---------------------------------------------------------------- settings and inputs

@@ -435,3 +435,43 @@ fn a_floor_opening_partly_under_a_rack_is_refused_like_one_wholly_under_it() {
         assert!(!e.to_string().contains(&format!("`{id}`")), "{e}");
     }
 }
+
+/// A whole-hall supply offset beside per-CRAC offsets for every CRAC sets each CRAC's
+/// offset twice (the whole-hall one is their sum's direction): refused, naming the
+/// entries. One CRAC short of every one, the two can be told apart and pass.
+#[test]
+fn a_whole_hall_offset_beside_one_for_every_crac_is_refused() {
+    let registry = EffectRegistry::builtin();
+    let mut hall = demo_hall();
+    assert!(hall.cracs.len() > 1);
+    hall.effects
+        .push(spec(json!({"kind": "crac_supply_offset"})));
+    let ids: Vec<String> = hall.cracs.iter().map(|c| c.id.clone()).collect();
+    for id in &ids[..ids.len() - 1] {
+        hall.effects
+            .push(spec(json!({"kind": "crac_supply_offset", "crac": id})));
+    }
+    registry
+        .check_hall(&hall, "hall.json")
+        .expect("one CRAC without its own entry");
+    hall.effects.push(spec(
+        json!({"kind": "crac_supply_offset", "crac": ids.last().unwrap()}),
+    ));
+    let last = hall.effects.len() - 1;
+    match HallModel::new(&hall, SimConfig::default()) {
+        Err(Error::Effect { kind, message }) => {
+            assert_eq!(kind, "crac_supply_offset");
+            assert!(
+                message.starts_with(&format!("effects/{last}: with effects/0 (every CRAC)")),
+                "{message}"
+            );
+            assert!(message.contains("set twice"), "{message}");
+        }
+        other => panic!("expected Error::Effect, got {other:?}"),
+    }
+    let e = registry
+        .check_hall(&hall, "hall.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with(&format!("hall.json: /effects/{last}")), "{e}");
+}

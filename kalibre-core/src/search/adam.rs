@@ -203,13 +203,14 @@ impl Adam {
         solver.phase_offset = trace_offset;
         let (best_unit, best_cost, evaluations, solver, timed_out) =
             run_from_start(objective, solver, start, self.steps as u64, deadline)?;
-        Ok(SearchOutcome {
+        SearchOutcome {
             best_unit,
             best_cost,
             evaluations,
             trace: solver.trace,
             timed_out,
-        })
+        }
+        .found_finite("Adam")
     }
 }
 

@@ -235,13 +235,14 @@ impl Searcher for DifferentialEvolution {
         let timed_out = timed_out(&result.state);
         let solver = result.solver;
         let (best_unit, best_cost) = solver.best();
-        Ok(SearchOutcome {
+        SearchOutcome {
             best_unit: best_unit.to_vec(),
             best_cost,
             evaluations: evaluations(&result.problem),
             trace: solver.trace,
             timed_out,
-        })
+        }
+        .found_finite("differential evolution")
     }
 }
 

@@ -72,6 +72,22 @@ pub struct SearchOutcome {
     pub timed_out: bool,
 }
 
+impl SearchOutcome {
+    /// The outcome, or [`crate::Error::Search`] when the objective was evaluated and
+    /// not finite at any point: its best point would be the start, scored infinite, and
+    /// a caller would take it for a result.
+    pub(crate) fn found_finite(self, searcher: &str) -> Result<Self> {
+        if self.evaluations > 0 && !self.best_cost.is_finite() {
+            return Err(crate::Error::Search(format!(
+                "{searcher}: the objective was not finite (NaN or infinite) at any of the {} \
+                 points evaluated",
+                self.evaluations
+            )));
+        }
+        Ok(self)
+    }
+}
+
 /// Minimises an objective in the unit box, starting from (or seeded with) `start`.
 pub trait Searcher: Sync {
     /// Runs the search. Deterministic for a given `seed`, at any thread count.

@@ -264,6 +264,19 @@ fn check_together(effects: &[Box<dyn Effect>], hall: &Hall) -> Result<()> {
             message: format!("effects/{again}: {}", repeat_message(first)),
         });
     }
+    if let Some((whole, at, per_crac)) = offset::offsets_set_twice(effects, hall) {
+        let entries: Vec<String> = per_crac.iter().map(|j| format!("effects/{j}")).collect();
+        return Err(Error::Effect {
+            kind: effects[at].kind().to_string(),
+            message: format!(
+                "effects/{at}: with effects/{whole} (every CRAC) and {} (one CRAC each), \
+                 every CRAC's supply offset is set twice: only each CRAC's sum acts, so \
+                 the entries could not be told apart; drop the entry for every CRAC or \
+                 one CRAC's entry",
+                entries.join(", ")
+            ),
+        });
+    }
     if let Some((at, parts)) = first_oversubscribed(effects, hall) {
         // The field to change: the bounds of the effect's one parameter, if one.
         let field = match effects[at].parameters().as_slice() {

@@ -63,6 +63,41 @@ impl Effect for CracSupplyOffset {
     }
 }
 
+/// Where a whole-hall offset and per-CRAC offsets over every CRAC meet:
+/// `(whole-hall entry, the entry that completes the CRACs, the per-CRAC entries)`. The
+/// whole-hall offset is then the sum of the others' directions, so the calibration
+/// could not tell them apart (only each CRAC's total acts). `None` with fewer entries.
+pub(super) fn offsets_set_twice(
+    effects: &[Box<dyn Effect>],
+    hall: &Hall,
+) -> Option<(usize, usize, Vec<usize>)> {
+    let crac_of = |e: &dyn Effect| -> Option<Option<String>> {
+        (e.kind() == KIND).then(|| {
+            e.to_spec()
+                .fields
+                .get("crac")
+                .and_then(Value::as_str)
+                .map(str::to_string)
+        })
+    };
+    let mut whole = None;
+    let mut per_crac: Vec<(usize, String)> = Vec::new();
+    for (i, e) in effects.iter().enumerate() {
+        match crac_of(e.as_ref()) {
+            Some(None) => whole = whole.or(Some(i)),
+            Some(Some(id)) if !per_crac.iter().any(|(_, c)| *c == id) => per_crac.push((i, id)),
+            _ => continue,
+        }
+        if let Some(w) = whole {
+            if hall.cracs.len() > 1 && per_crac.len() == hall.cracs.len() {
+                let entries = per_crac.iter().map(|(j, _)| *j).collect();
+                return Some((w, i, entries));
+            }
+        }
+    }
+    None
+}
+
 /// Builds [`CracSupplyOffset`].
 #[derive(Debug, Clone, Copy)]
 pub struct CracSupplyOffsetFactory;
