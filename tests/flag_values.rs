@@ -130,7 +130,7 @@ fn flags_that_only_act_through_another_are_refused_where_it_is_off() {
         ),
         (
             &["--refit-iterations", "2"][..],
-            "the following required arguments were not provided:\n  --refit <K>",
+            "the following required arguments were not provided: --refit <K>",
         ),
     ] {
         let o = run(diagnose_cmd(
@@ -141,5 +141,46 @@ fn flags_that_only_act_through_another_are_refused_where_it_is_off() {
         .args(extra));
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
         assert!(stderr(&o).contains(needle), "{}", stderr(&o));
+    }
+}
+
+/// The command line's own refusals (clap's: an unknown subcommand or flag, a missing or
+/// repeated argument, a value of the wrong type or not among the choices) are one line
+/// like every other error, keeping clap's suggestion and the usage; help is not an error.
+#[test]
+fn command_line_refusals_are_one_line_and_help_is_not_an_error() {
+    for (args, needle) in [
+        (
+            &["calibrat"][..],
+            "a similar subcommand exists: 'calibrate'",
+        ),
+        (
+            &["diagnose", "--refit-iterations", "2"][..],
+            "not provided: --hall <HALL>, --snapshots <SNAPSHOTS>",
+        ),
+        (
+            &["calibrate", "--hall", "a", "--hall", "b"][..],
+            "'--hall <HALL>' cannot be used multiple times (usage: kalibre calibrate",
+        ),
+        (
+            &["simulate", "--grid-m", "abc"][..],
+            "invalid value 'abc' for '--grid-m",
+        ),
+        (
+            &["calibrate", "--likelihood", "cauchy"][..],
+            "'--likelihood <LIKELIHOOD>' [possible values: student-t, gaussian]",
+        ),
+        (
+            &["demo", "--no-such-flag"][..],
+            "unexpected argument '--no-such-flag'",
+        ),
+    ] {
+        let o = run(kalibre().args(args));
+        assert_input_error(&o, needle);
+    }
+    for args in [&["--help"][..], &["calibrate", "--help"], &["--version"]] {
+        let o = run(kalibre().args(args));
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {}", stderr(&o));
+        assert!(!o.stdout.is_empty() && o.stderr.is_empty(), "{args:?}");
     }
 }

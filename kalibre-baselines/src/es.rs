@@ -203,7 +203,9 @@ impl EsSolver {
     }
 }
 
-/// Folds `u` back into `[0, 1]` by reflection at the bounds (any distance out).
+/// Folds `u` back into `[0, 1]` by reflection at the bounds (any distance out). A
+/// non-finite `u` has no reflection and gives NaN (the ES's steps are finite: sigma is
+/// capped).
 pub fn reflect_unit(u: f64) -> f64 {
     let r = u.rem_euclid(2.0);
     let v = if r > 1.0 { 2.0 - r } else { r };
@@ -373,6 +375,7 @@ mod tests {
         assert!((reflect_unit(-0.25) - 0.25).abs() < 1e-12);
         assert!((reflect_unit(2.3) - 0.3).abs() < 1e-12);
         assert!((reflect_unit(-7.6) - 0.4).abs() < 1e-12);
+        assert!(reflect_unit(f64::NAN).is_nan() && reflect_unit(f64::INFINITY).is_nan());
     }
 
     #[test]

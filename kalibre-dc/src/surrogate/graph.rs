@@ -499,6 +499,8 @@ impl Surrogate for ThermalGraph {
 
     /// Predicted sensor temperatures (C). Inputs that [`ThermalGraph::check_inputs`]
     /// rejects give NaN for every sensor, which any loss turns into a visible failure.
+    /// Before a fit ([`ThermalGraph::is_fitted`] false) every sensor reads the CRACs'
+    /// supply mix with no server rise: the graph's form with nothing learned.
     fn predict(&self, scenario: &OperatingState, params: &[f64]) -> Vec<f64> {
         let n = self.hot.len();
         if self.check_inputs(scenario, params).is_err() {
