@@ -5,7 +5,7 @@
 //! | field | required | meaning |
 //! |---|---|---|
 //! | `position_m`, `size_m` | one placement | floor opening: `[x, y]` minimum corner and `[dx, dy]` size (m), inside the room and not under a rack or CRAC |
-//! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep) behind its exhaust |
+//! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep, or to the wall if that is nearer) behind its exhaust; a rack that exhausts against the wall is refused |
 //! | `depth_m` | no | depth of the `behind_rack` strip (m), default 0.4 |
 //! | `fraction` | no | initial share of the CRAC flow, default 0.05 |
 //! | `fraction_bounds` | no | bounds, within and default `[0, 0.5]` |
