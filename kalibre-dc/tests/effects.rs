@@ -475,3 +475,49 @@ fn a_whole_hall_offset_beside_one_for_every_crac_is_refused() {
         .to_string();
     assert!(e.starts_with(&format!("hall.json: /effects/{last}")), "{e}");
 }
+
+/// The strip behind a rack ends at a CRAC (or rack) behind the exhaust, as it ends at
+/// the wall: no air enters under a solid. A rack whose exhaust touches one has no strip.
+#[test]
+fn a_strip_behind_a_rack_ends_at_the_solid_behind_it() {
+    let strip = |hall: &Hall, rack: &str| -> Result<[f64; 2], String> {
+        let e = from_spec(
+            &spec(json!({"kind": "bypass", "behind_rack": rack, "fraction": 0.1})),
+            hall,
+        )
+        .map_err(|e| e.to_string())?;
+        let mut mods = SimMods::new(hall.cracs.len());
+        e.modify(&[0.1], hall, &mut mods).unwrap();
+        let r = mods.supply_openings[0].region;
+        Ok([r.min[1], r.max[1]])
+    };
+    let mut hall = demo_hall();
+    // Row A (y 1.8-3.0) exhausts towards -y; a CRAC 0.2 m behind A01 (x 1.8-2.4).
+    hall.cracs[0].position_m = [1.8, 0.0, 0.0];
+    hall.cracs[0].size_m = [0.9, 1.6, 2.0];
+    let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9;
+    let got = strip(&hall, "A01").unwrap();
+    assert!(near(got, [1.6, 1.8]), "{got:?}");
+    let got = strip(&hall, "A05").unwrap();
+    assert!(near(got, [1.4, 1.8]), "{got:?}");
+    // Touching the rack's back: refused by name.
+    hall.cracs[0].size_m = [0.9, 1.8, 2.0];
+    let e = strip(&hall, "A01").unwrap_err();
+    assert!(
+        e.contains("rack `A01` exhausts against CRAC `crac-1`"),
+        "{e}"
+    );
+    assert!(e.contains("behind_rack"), "{e}");
+    // Nor is it a diagnosis candidate; nor A02, whose back the CRAC (x 1.8-2.7) also
+    // touches; every other rack is.
+    assert!(strip(&hall, "A02").is_err());
+    let factory = EffectRegistry::builtin();
+    let candidates = factory.get("bypass").unwrap().candidates(&hall);
+    assert_eq!(candidates.len(), hall.racks.len() - 2);
+    let named = |id: &str| {
+        candidates
+            .iter()
+            .any(|c| c.fields["behind_rack"] == json!(id))
+    };
+    assert!(!named("A01") && !named("A02") && named("A03"));
+}

@@ -5,7 +5,7 @@
 //! | field | required | meaning |
 //! |---|---|---|
 //! | `position_m`, `size_m` | one placement | floor opening: `[x, y]` minimum corner and `[dx, dy]` size (m), inside the room and not under a rack or CRAC |
-//! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep, or to the wall if that is nearer) behind its exhaust; a rack that exhausts against the wall is refused |
+//! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep, or to the wall, rack or CRAC behind it if that is nearer) behind its exhaust; a rack that exhausts against one is refused |
 //! | `depth_m` | no | depth of the `behind_rack` strip (m), default 0.4 |
 //! | `fraction` | no | initial share of the CRAC flow, default 0.05 |
 //! | `fraction_bounds` | no | bounds, within and default `[0, 0.5]` |
@@ -182,10 +182,29 @@ impl EffectFactory for BypassFactory {
                         region.max[axis] = b.min[axis];
                         region.min[axis] = (b.min[axis] - d).max(0.0);
                     }
+                    // The strip ends at the first rack or CRAC behind the exhaust, as it
+                    // ends at the wall: air cannot enter under a solid, and a strip
+                    // partly under one would lose that part of the flow.
+                    let mut against = "a wall".to_string();
+                    let column = |r: &Aabb| Aabb {
+                        min: r.min,
+                        max: [r.max[0], r.max[1], room[2]],
+                    };
+                    for (what, other, o) in hall.solid_boxes() {
+                        if other == id || !column(&region).overlaps(&o, GEOMETRY_TOL_M) {
+                            continue;
+                        }
+                        if sign > 0.0 {
+                            region.max[axis] = region.max[axis].min(o.min[axis]);
+                        } else {
+                            region.min[axis] = region.min[axis].max(o.max[axis]);
+                        }
+                        against = format!("{what} `{other}`");
+                    }
                     if region.max[axis] - region.min[axis] <= 1e-9 {
                         return Err(f.error(
                             "behind_rack",
-                            format!("rack `{id}` exhausts against a wall"),
+                            format!("rack `{id}` exhausts against {against}"),
                         ));
                     }
                     (
@@ -254,6 +273,8 @@ impl EffectFactory for BypassFactory {
                 }
                 spec(KIND, fields)
             })
+            // A rack exhausting against a wall, rack or CRAC has no strip to open.
+            .filter(|c| self.build(c, hall).is_ok())
             .collect()
     }
 }
