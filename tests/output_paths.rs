@@ -222,18 +222,21 @@ fn a_hidden_effect_of_size_zero_or_not_a_number_is_refused() {
     assert!(!dir.join("s").exists());
 }
 
-/// An output file path that cannot take a file (a directory, `.`, a missing directory)
-/// is an input error before the solves; it used to fail with exit 1 after them.
+/// An output file path that cannot take a file (a directory, `.`, a directory that
+/// cannot be made) is an input error before the solves; it used to fail with exit 1
+/// after them. A missing directory is made.
 #[test]
 fn an_output_path_that_cannot_take_a_file_is_refused_first() {
     let dir = tmp("output-file-paths");
-    let missing = dir.join("no-such-dir").join("pred.csv");
+    let blocked = dir.join("a-file");
+    std::fs::write(&blocked, "not a directory").unwrap();
+    let under_file = blocked.join("pred.csv");
     let pred = dir.join("pred.csv");
     for (flag, path, why) in [
         ("--out", dir.as_path(), "is a directory"),
         ("--out", Path::new("."), "is a directory"),
-        ("--out", missing.as_path(), "no-such-dir does not exist"),
-        ("--servers", missing.as_path(), "no-such-dir does not exist"),
+        ("--out", under_file.as_path(), "a-file cannot be made"),
+        ("--servers", under_file.as_path(), "a-file cannot be made"),
     ] {
         let mut extra = vec!["--out".as_ref(), os(&pred)];
         if flag == "--out" {
@@ -245,6 +248,16 @@ fn an_output_path_that_cannot_take_a_file_is_refused_first() {
         assert_input_error(&o, why);
     }
     assert!(!pred.exists());
+    // A missing directory is made, for each output file.
+    let fresh = dir.join("new").join("deeper");
+    let o = simulate(&[
+        "--out".as_ref(),
+        os(&fresh.join("pred.csv")),
+        "--servers".as_ref(),
+        os(&dir.join("new2").join("servers.csv")),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(fresh.join("pred.csv").is_file() && dir.join("new2/servers.csv").is_file());
 }
 
 /// `diagnose --write-hall /dev/stdout` with stdout redirected to a file: the hall renamed

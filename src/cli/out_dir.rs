@@ -103,8 +103,9 @@ pub fn lock(out: &Path, command: &str) -> CliResult<OutLock> {
 }
 
 /// Refuses an output file path (`flag PATH`) that cannot take a file: a directory, a
-/// path with no file name (`.`), or one whose directory is missing. Found now, not when
-/// the file is written after the runs.
+/// path with no file name (`.`), or one whose directory cannot be made. A missing
+/// directory is made, as `--out` directories are. Found now, not when the file is
+/// written after the runs.
 pub fn check_out_file(flag: &str, path: &Path) -> CliResult {
     let refuse = |why: &str| {
         Err(CliError::Input(format!(
@@ -120,7 +121,13 @@ pub fn check_out_file(flag: &str, path: &Path) -> CliResult {
     }
     match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => {
-            refuse(&format!("its directory {} does not exist", dir.display()))
+            match std::fs::create_dir_all(dir) {
+                Ok(()) => Ok(()),
+                Err(e) => refuse(&format!(
+                    "its directory {} cannot be made: {e}",
+                    dir.display()
+                )),
+            }
         }
         _ => Ok(()),
     }

@@ -29,8 +29,9 @@ pub struct SimulateArgs {
     /// Operating conditions (`snapshots.csv`); sensor readings in it are optional and ignored.
     #[arg(long)]
     pub(super) snapshots: PathBuf,
-    /// Parameter values: a JSON object `{ "alpha/<type>": 0.12, ... }`, or a calibration's
-    /// `report.json` (its best parameters, and the alpha mode and grid it ran with).
+    /// Parameter values: a JSON file holding an object `{ "alpha/<type>": 0.12, ... }`,
+    /// or a calibration's `report.json` (its best parameters, and the alpha mode and grid
+    /// it ran with).
     /// Parameters not given keep the hall's initial values.
     #[arg(long)]
     pub(super) params: Option<PathBuf>,
@@ -483,6 +484,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         std::fs::write(path, kalibre_dc::sim::write_rack_heat(&sources))
             .map_err(|e| io_err(path, e))?;
     }
+    say_if_uncalibrated(&args);
     for (label, check) in labels.iter().zip(&checks) {
         say!("{}", inlet_line(label, check));
     }
@@ -527,6 +529,17 @@ pub fn run(args: SimulateArgs) -> CliResult {
     }
     print_servers_written(&args, &labels, &hall);
     Ok(())
+}
+
+/// Without `--params`, says that the intake figures to follow are the uncalibrated
+/// model's: they read as advice, and the hall's initial parameters can be degrees off.
+pub(super) fn say_if_uncalibrated(args: &SimulateArgs) {
+    if args.params.is_none() {
+        say!(
+            "at the hall's initial parameters, not calibrated (--params with a calibration's \
+             report.json gives the calibrated model's):"
+        );
+    }
 }
 
 /// Says where `--servers` wrote the servers' air, if asked for.

@@ -119,6 +119,7 @@ pub(super) fn run(
     if let Some(path) = &args.servers {
         std::fs::write(path, write_server_air(&air)).map_err(|e| io_err(path, e))?;
     }
+    super::simulate::say_if_uncalibrated(args);
     for (label, check) in labels.iter().zip(&checks) {
         say!("{}", inlet_line(label, check));
     }

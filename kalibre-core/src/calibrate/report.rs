@@ -294,6 +294,19 @@ pub enum StopReason {
     Converged,
 }
 
+/// In words, for summaries: `iteration budget used`, `converged (...)`.
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            StopReason::MaxIterations => "iteration budget used",
+            StopReason::TargetError => "target error reached",
+            StopReason::ModelRunBudget => "model-run budget reached",
+            StopReason::WallClockBudget => "wall-time budget passed",
+            StopReason::Converged => "converged (the search proposed a point already run)",
+        })
+    }
+}
+
 /// How many model runs were computed, replayed from the journal, and failed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -366,4 +379,28 @@ pub struct Report {
     /// older reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<serde_json::Value>,
+}
+
+impl Report {
+    /// Where the best point was found, in words: `iteration 9`, `the polish, after the
+    /// loop's 10 iterations` (polish records fit no surrogate, so they have no training
+    /// samples; their numbers count on past the loop's), or `the initial design`.
+    pub fn best_found_in(&self) -> String {
+        let loop_iterations = self
+            .history
+            .iter()
+            .filter(|h| h.training_samples > 0)
+            .count();
+        match self
+            .history
+            .iter()
+            .find(|h| h.iteration == self.best.iteration)
+        {
+            Some(h) if h.training_samples == 0 => {
+                format!("the polish, after the loop's {loop_iterations} iterations")
+            }
+            None if self.best.iteration == 0 => "the initial design".to_string(),
+            _ => format!("iteration {}", self.best.iteration),
+        }
+    }
 }

@@ -17,7 +17,7 @@
 use kalibre_core::Param;
 use serde_json::Value;
 
-use super::fields::{param_fields, spec, Fields};
+use super::fields::{param_fields, spec, unknown_id, Fields};
 use super::{check_values, Effect, EffectFactory};
 use crate::hall::{Aabb, EffectSpec, Hall, GEOMETRY_TOL_M};
 use crate::sim::{SimMods, SupplyOpening};
@@ -163,7 +163,10 @@ impl EffectFactory for BypassFactory {
                 }
                 (None, None, Some(id)) => {
                     let r = hall.racks.iter().find(|r| r.id == id).ok_or_else(|| {
-                        f.error("behind_rack", format!("no rack `{id}` in the hall"))
+                        f.error(
+                            "behind_rack",
+                            unknown_id("rack", id, hall.racks.iter().map(|r| r.id.as_str())),
+                        )
                     })?;
                     let d = depth.unwrap_or(0.4);
                     if !(d > 0.0 && d <= 5.0) {
@@ -251,6 +254,10 @@ impl EffectFactory for BypassFactory {
     /// supply at their upper bounds, the candidates' upper bound is lowered so that the
     /// tiles keep [`CANDIDATE_TILE_SHARE`] of it: a hall written with a candidate added
     /// (`kalibre diagnose --write-hall`) then calibrates over its whole box.
+    fn meaning(&self) -> &str {
+        "supply entering where no server draws it: a cable cut-out or a misplaced tile"
+    }
+
     fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {
         let taken: f64 = hall
             .effects

@@ -152,6 +152,10 @@ impl EffectFactory for ContainmentLeakageFactory {
         }))
     }
 
+    fn meaning(&self) -> &str {
+        "air crossing the aisle containment: a gap, an open door or a missing panel"
+    }
+
     fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {
         // Leaky panels everywhere (the common case: a containment kit of one make), each
         // containment as a whole, then each side of each containment (a door left open).

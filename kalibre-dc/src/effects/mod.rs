@@ -80,6 +80,12 @@ pub trait EffectFactory: Send + Sync {
     fn candidates(&self, _hall: &Hall) -> Vec<EffectSpec> {
         Vec::new()
     }
+
+    /// What the effect is in a hall, in a few plain words for a diagnosis's listing
+    /// (what to look for on the floor); the default says nothing.
+    fn meaning(&self) -> &str {
+        ""
+    }
 }
 
 /// The set of known effect kinds.

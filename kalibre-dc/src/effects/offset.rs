@@ -10,7 +10,7 @@
 use kalibre_core::Param;
 use serde_json::Value;
 
-use super::fields::{param_fields, spec, Fields};
+use super::fields::{param_fields, spec, unknown_id, Fields};
 use super::{check_values, Effect, EffectFactory};
 use crate::hall::{EffectSpec, Hall};
 use crate::sim::SimMods;
@@ -113,7 +113,12 @@ impl EffectFactory for CracSupplyOffsetFactory {
             None => None,
             Some(id) => match hall.cracs.iter().position(|c| c.id == id) {
                 Some(k) => Some((k, id.to_string())),
-                None => return Err(f.error("crac", format!("no CRAC `{id}` in the hall"))),
+                None => {
+                    return Err(f.error(
+                        "crac",
+                        unknown_id("CRAC", id, hall.cracs.iter().map(|c| c.id.as_str())),
+                    ))
+                }
             },
         };
         // The only CRAC is what "every CRAC" means: one placement however written.
@@ -121,6 +126,10 @@ impl EffectFactory for CracSupplyOffsetFactory {
         let param = f.param("offset_c", BOUNDS[0], BOUNDS[1], 0.0)?;
         f.finish()?;
         Ok(Box::new(CracSupplyOffset { crac, param }))
+    }
+
+    fn meaning(&self) -> &str {
+        "a CRAC supplying warmer or colder than its setpoint: a drifted sensor or a tired coil"
     }
 
     fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {

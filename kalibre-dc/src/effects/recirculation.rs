@@ -11,7 +11,7 @@
 use kalibre_core::{number, Param};
 use serde_json::Value;
 
-use super::fields::{param_fields, spec, Fields};
+use super::fields::{param_fields, spec, unknown_id, Fields};
 use super::{check_values, Effect, EffectFactory};
 use crate::hall::{EffectSpec, Hall};
 use crate::sim::{RackRecirculation, SimMods};
@@ -75,11 +75,12 @@ impl EffectFactory for RackRecirculationFactory {
     fn build(&self, s: &EffectSpec, hall: &Hall) -> Result<Box<dyn Effect>> {
         let mut f = Fields::new(s).expecting(&["rack", "z_m"], &["fraction"])?;
         let id = f.str("rack")?;
-        let rack = hall
-            .racks
-            .iter()
-            .position(|r| r.id == id)
-            .ok_or_else(|| f.error("rack", format!("no rack `{id}` in the hall")))?;
+        let rack = hall.racks.iter().position(|r| r.id == id).ok_or_else(|| {
+            f.error(
+                "rack",
+                unknown_id("rack", id, hall.racks.iter().map(|r| r.id.as_str())),
+            )
+        })?;
         let r = &hall.racks[rack];
         let z_m = f.opt_array::<2>("z_m")?;
         let (lo, hi) = (r.position_m[2], r.position_m[2] + r.size_m[2]);
@@ -107,6 +108,10 @@ impl EffectFactory for RackRecirculationFactory {
             z_m,
             param,
         }))
+    }
+
+    fn meaning(&self) -> &str {
+        "exhaust returning through the rack to its own intakes: a missing blanking panel or an empty slot"
     }
 
     fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {

@@ -124,6 +124,9 @@ fn structural_error(
     }
     let hint = if starts_non_finite(text_in, e.line(), e.column()) {
         "; numbers must be finite (NaN and Infinity are not JSON)"
+    } else if e.line() == 1 && looks_like_csv(text_in) {
+        // Most often the snapshots file given for the hall.
+        "; this file looks like CSV (a snapshots file?), not a hall's JSON description"
     } else {
         ""
     };
@@ -134,6 +137,12 @@ fn structural_error(
         text = without_place(text, e);
     }
     Error::format(file, pointer, format!("invalid JSON: {text}{hint}"))
+}
+
+/// A first line of comma-separated words rather than a JSON value.
+fn looks_like_csv(text: &str) -> bool {
+    let first = text.lines().next().unwrap_or("").trim();
+    !first.starts_with(['{', '[', '"']) && first.contains(',')
 }
 
 /// Where in the text a serde_json error is, for the field of an error no field can

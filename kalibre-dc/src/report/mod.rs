@@ -162,15 +162,15 @@ pub fn calibration_html(
         h,
         "<table><tr><th>measure</th><th>value</th></tr>\
          <tr><td>MAE of the uncalibrated model (C)</td><td>{}</td></tr>\
-         <tr><td>best MAE (C)</td><td>{:.3} (iteration {})</td></tr>\
+         <tr><td>best MAE (C)</td><td>{:.3} (found in {})</td></tr>\
          <tr><td>best RMSE / max abs (C)</td><td>{:.3} / {:.3}</td></tr>\
          <tr><td>model runs</td><td>{} ({} new, {} from the journal, {} failed)</td></tr>\
          <tr><td>snapshots x sensors</td><td>{} x {}</td></tr>\
-         <tr><td>stopped</td><td>{:?}</td></tr>\
+         <tr><td>stopped</td><td>{}</td></tr>\
          <tr><td>likelihood</td><td>{}</td></tr></table>",
         fmt(report.initial.mae_c),
         report.best.mae_c,
-        report.best.iteration,
+        esc(&report.best_found_in()),
         report.best.rmse_c,
         report.best.max_abs_c,
         report.runs.total,

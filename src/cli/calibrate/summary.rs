@@ -151,10 +151,10 @@ pub(super) fn print_summary(
     println!("calibration summary");
     println!("  {:<28} {}", "initial MAE", fmt_c(report.initial.mae_c));
     println!(
-        "  {:<28} {} (iteration {})",
+        "  {:<28} {} (found in {})",
         "best MAE",
         fmt_c(Some(report.best.mae_c)),
-        report.best.iteration
+        report.best_found_in()
     );
     println!("  {:<28} {}", "best RMSE", fmt_c(Some(report.best.rmse_c)));
     println!(
@@ -179,7 +179,7 @@ pub(super) fn print_summary(
         "  {:<28} {} ({} new, {} from the journal, {} failed)",
         "model runs", report.runs.total, report.runs.new, report.runs.cached, report.runs.failed
     );
-    println!("  {:<28} {:?}", "stopped", report.stop_reason);
+    println!("  {:<28} {}", "stopped", report.stop_reason);
     println!(
         "  {:<28} {}",
         "likelihood",
@@ -253,7 +253,7 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report) {
     };
     eprintln!(
         "kalibre: warning: {}: {} journaled run(s) of this model were not used by this \
-         calibration (it stopped: {:?}); among them, line {} has MAE {:.3} C, better than \
+         calibration (it stopped: {}); among them, line {} has MAE {:.3} C, better than \
          its best, {:.3} C. They are kept: the settings that made them (with a larger \
          budget, --max-runs, --iterations or --max-wall-s, where it stopped early) replay \
          them without running the model again",

@@ -129,10 +129,28 @@ const OPENFOAM_UNIT_STEP: f64 = 0.03;
 /// `--model openfoam`: step of a candidate's parameter (share of its range).
 const OPENFOAM_EFFECT_STEP: f64 = 0.2;
 
+/// What a built-in effect kind is, in plain words (`None` for a kind that says nothing).
+fn registry_meaning(kind: &str) -> Option<String> {
+    let registry = kalibre_dc::effects::EffectRegistry::builtin();
+    let meaning = registry.get(kind)?.meaning().to_string();
+    (!meaning.is_empty()).then_some(meaning)
+}
+
 /// Runs `kalibre diagnose`.
 pub fn run(args: DiagnoseArgs) -> CliResult {
     args.openfoam
         .refuse_unless(args.model == DiagnoseModel::Openfoam)?;
+    if args.calibration.is_file() {
+        let dir = match args.calibration.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.display().to_string(),
+            _ => ".".to_string(),
+        };
+        return Err(CliError::Input(format!(
+            "--calibration {}: is a file; give the directory `kalibre calibrate --out` wrote \
+             (the one holding report.json and runs.jsonl, here perhaps {dir})",
+            args.calibration.display()
+        )));
+    }
     if let Some(path) = &args.write_hall {
         // The refusal first: the writability check writes a probe file in the target's
         // directory, which is no business of an input's directory.
@@ -405,6 +423,9 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             );
         }
         if h.significant {
+            if let Some(meaning) = registry_meaning(&s.kind) {
+                println!("    that is {meaning}");
+            }
             println!("    add to hall.json \"effects\": {}", entry());
         } else if undecided.contains(&h.name.as_str()) {
             println!(
@@ -444,7 +465,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             print_close_alternatives(&d.diagnosis, h);
         }
     }
-    print_unexplained(&d.diagnosis);
+    print_unexplained(&d.diagnosis, report.settings.robust_nu);
     if !d.refits.is_empty() {
         println!(
             "\nrefit with the model (each run: the effect's value, the model's MAE there; \

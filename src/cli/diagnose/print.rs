@@ -43,13 +43,21 @@ pub(crate) fn print_close_alternatives(d: &Diagnosis, best: &HypothesisResult) {
 }
 
 /// The sensors no candidate explains: the model's own error there, or a faulty sensor.
-pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
+/// `robust_nu` is the calibration's Student-t likelihood, if it had one.
+pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis, robust_nu: Option<f64>) {
     if d.unexplained.is_empty() {
         return;
     }
+    // Their residuals are those left with the best significant hypothesis added (so they
+    // can differ from the worst sensors' above), else the calibrated model's own.
+    let best = d.significant().next().map(|h| h.name.as_str());
+    let after = match best {
+        Some(name) => format!("left with {name} added"),
+        None => "the calibrated model's".to_string(),
+    };
     println!(
         "\nsensors no candidate explains (the model's own physics there, or a faulty or misplaced sensor; \
-         the ranking above counts them little):"
+         the ranking above counts them little; residuals {after}):"
     );
     for u in &d.unexplained {
         // A candidate may explain it and still not count: one that rests on it alone.
@@ -80,10 +88,20 @@ pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis) {
             u.output, u.mean_residual, u.rms_scales
         );
     }
-    println!(
-        "  to calibrate again (with a suggested effect) weighing them down as this ranking does, \
-         add `--likelihood student-t` to `kalibre calibrate`"
-    );
+    match (robust_nu, best) {
+        (Some(nu), _) => println!(
+            "  the calibration already weighed them down (Student-t likelihood, {nu} degrees of \
+             freedom), as this ranking does"
+        ),
+        (None, Some(_)) => println!(
+            "  to calibrate again with the suggested effect, weighing them down as this ranking \
+             does, add `--likelihood student-t` to `kalibre calibrate`"
+        ),
+        (None, None) => println!(
+            "  to calibrate again weighing them down as this ranking does, add `--likelihood \
+             student-t` to `kalibre calibrate`"
+        ),
+    }
 }
 
 /// Mean residual (model minus measurement, C) per sensor over the snapshots, largest
