@@ -115,3 +115,47 @@ fn the_diagnosis_advises_the_student_t_likelihood_only_where_it_was_not_used() {
         assert!(stdout.contains(advice), "{likelihood}: {stdout}");
     }
 }
+
+/// A prior that binds at the best parameters names the alpha, its servers, the rise it
+/// gives and the range, not only a count (the CRAC-offset data, calibrated without the
+/// offset, push the gpu servers past 20 K).
+#[test]
+fn a_binding_rise_prior_names_the_alpha_and_the_rise() {
+    let o = run(on_dataset("calibrate", "of-dev-crac-offset")
+        .args(["--threads", "1", "--out"])
+        .arg(tmp("mistakes-prior").join("cal")));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let note = stdout
+        .lines()
+        .find(|l| l.contains("the temperature-rise prior binds"))
+        .unwrap_or_else(|| panic!("no prior note in {stdout}"));
+    assert!(note.contains("alpha/gpu = "), "{note}");
+    assert!(note.contains("above the 5-20 K range"), "{note}");
+    assert!(note.contains("widen --rise-range"), "{note}");
+}
+
+/// A calibration into an `--out` that holds the report of one against other
+/// measurements says it replaces that report; a repeated one (the same measurements)
+/// says nothing.
+#[test]
+fn a_calibration_replacing_one_of_other_measurements_says_so() {
+    let out = tmp("mistakes-replaced").join("cal");
+    let note = "is a calibration against other measurements";
+    let mut stderrs = Vec::new();
+    for dataset in ["of-dev-clean", "of-dev-blanking", "of-dev-blanking"] {
+        let o = run(on_dataset("calibrate", dataset)
+            .args(["--threads", "1", "--quiet", "--out"])
+            .arg(&out));
+        assert!(o.status.success(), "{}", stderr(&o));
+        stderrs.push(stderr(&o));
+    }
+    assert!(!stderrs[0].contains(note), "{}", stderrs[0]);
+    assert!(stderrs[1].contains(note), "{}", stderrs[1]);
+    assert!(
+        stderrs[1].contains("snapshot `t0`, sensor `"),
+        "{}",
+        stderrs[1]
+    );
+    assert!(!stderrs[2].contains(note), "{}", stderrs[2]);
+}

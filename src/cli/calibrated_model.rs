@@ -122,17 +122,44 @@ pub fn check_same_measurements(
     hall: &Hall,
     snaps: &[HallSnapshot],
 ) -> CliResult {
-    if residuals.is_empty() {
-        return Ok(());
-    }
-    let differ = |what: String| {
-        Err(CliError::Input(format!(
+    match measurement_difference(residuals, hall, snaps) {
+        MeasurementDifference::Same => Ok(()),
+        MeasurementDifference::Readings(what) => Err(CliError::Input(format!(
             "{}: not the measurements {} was calibrated on: {what}; diagnose with the \
              calibration's snapshots, or calibrate again",
             snapshots_path.display(),
             report_path.display()
-        )))
-    };
+        ))),
+        MeasurementDifference::Sensor(sensor) => Err(CliError::Input(format!(
+            "{}: /residuals: sensor `{sensor}` is not in hall `{}`; this calibration is of \
+             another hall",
+            report_path.display(),
+            hall.name
+        ))),
+    }
+}
+
+/// How a calibration's residual rows compare with `snaps`' readings.
+pub enum MeasurementDifference {
+    /// The same readings (or no rows to compare).
+    Same,
+    /// Other readings: the first difference, in words.
+    Readings(String),
+    /// A sensor the hall does not have: a calibration of another hall.
+    Sensor(String),
+}
+
+/// The first difference between the readings a calibration fitted (`residuals`) and
+/// `snaps`' readings.
+pub fn measurement_difference(
+    residuals: &[kalibre_core::calibrate::Residual],
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+) -> MeasurementDifference {
+    use MeasurementDifference::{Readings, Same, Sensor};
+    if residuals.is_empty() {
+        return Same;
+    }
     let snapshot_at: HashMap<&str, &HallSnapshot> =
         snaps.iter().map(|s| (s.state.label.as_str(), s)).collect();
     let sensor_at: HashMap<&str, usize> = hall
@@ -144,29 +171,22 @@ pub fn check_same_measurements(
     let mut fitted = HashSet::with_capacity(residuals.len());
     for r in residuals {
         let Some(snap) = snapshot_at.get(r.snapshot.as_str()) else {
-            return differ(format!("snapshot `{}` is not there", r.snapshot));
+            return Readings(format!("snapshot `{}` is not there", r.snapshot));
         };
         let Some(&i) = sensor_at.get(r.sensor.as_str()) else {
             // Not a reading the snapshots lack: a sensor the hall does not have.
-            return Err(CliError::Input(format!(
-                "{}: /residuals: sensor `{}` is not in hall `{}`; this calibration is of \
-                 another hall",
-                report_path.display(),
-                r.sensor,
-                hall.name
-            )));
+            return Sensor(r.sensor.clone());
         };
-        let reading = snap.sensor_c[i];
-        match reading {
+        match snap.sensor_c[i] {
             None => {
-                return differ(format!(
+                return Readings(format!(
                     "snapshot `{}` has no reading of sensor `{}`",
                     r.snapshot, r.sensor
                 ))
             }
             // The report's decimal form parses back to within an ulp or so.
             Some(c) if (c - r.measured_c).abs() > 1e-9 * c.abs().max(1.0) => {
-                return differ(format!(
+                return Readings(format!(
                     "snapshot `{}`, sensor `{}` reads {c} C, the calibration's {} C",
                     r.snapshot, r.sensor, r.measured_c
                 ))
@@ -178,14 +198,14 @@ pub fn check_same_measurements(
     for s in snaps {
         for (sensor, c) in hall.sensors.iter().zip(&s.sensor_c) {
             if c.is_some() && !fitted.contains(&(s.state.label.as_str(), sensor.id.as_str())) {
-                return differ(format!(
+                return Readings(format!(
                     "snapshot `{}`, sensor `{}` has a reading the calibration did not have",
                     s.state.label, sensor.id
                 ));
             }
         }
     }
-    Ok(())
+    Same
 }
 
 /// The conditions each snapshot of a hall calibration ran at, for

@@ -324,6 +324,31 @@ fn calibrated_hall(hall: &Hall, settings: &HallCalibrationSettings) -> Hall {
     hall
 }
 
+/// Says when `--out` holds the report of a calibration against other measurements:
+/// this one replaces it when it ends, while the journal's runs (which do not depend on
+/// the measurements) are reused. A report of these measurements (a resumed or repeated
+/// calibration) is replaced without a word.
+fn note_replaced_report(out: &Path, hall: &Hall, snaps: &[snapshots::HallSnapshot]) {
+    let path = out.join("report.json");
+    let Some(report) = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<kalibre_core::calibrate::Report>(&t).ok())
+    else {
+        return;
+    };
+    use super::calibrated_model::{measurement_difference, MeasurementDifference};
+    let what = match measurement_difference(&report.residuals, hall, snaps) {
+        MeasurementDifference::Same => return,
+        MeasurementDifference::Readings(what) => what,
+        MeasurementDifference::Sensor(s) => format!("sensor `{s}` is not in this hall"),
+    };
+    eprintln!(
+        "kalibre: note: {} is a calibration against other measurements ({what}); this \
+         calibration replaces it when it ends (move it away to keep it)",
+        path.display()
+    );
+}
+
 /// What `report.json` records of the model, for `diagnose` and `simulate` to repeat.
 fn model_record(
     args: &CalibrateArgs,
@@ -431,6 +456,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
             );
         }
     }
+    note_replaced_report(&args.out, &hall, &snaps);
     let journal = args.out.join("runs.jsonl");
     let total_runs = ((4 + args.iterations) * snaps.len()) as u64;
     let progress = Progress::new(total_runs, args.quiet);

@@ -191,10 +191,28 @@ pub(super) fn print_summary(
     }
     println!("  {:<28} {wall_s:.1} s", "wall time");
     if !penalty.violations.is_empty() {
+        // Which alpha, the rise it gives and the bound: what to check, and the range that
+        // would hold it.
+        let worst: Vec<String> = penalty
+            .violations
+            .iter()
+            .take(3)
+            .map(|v| {
+                let side = match v.bound {
+                    kalibre_dc::surrogate::RiseBound::Below => "below",
+                    kalibre_dc::surrogate::RiseBound::Above => "above",
+                };
+                format!(
+                    "{} = {:.4} cfm/W gives {} server(s) a rise of {:.1} K, {side} the {}-{} K range",
+                    v.source, v.alpha_cfm_per_w, v.servers, v.rise_c, penalty.range_c[0], penalty.range_c[1]
+                )
+            })
+            .collect();
+        let servers: usize = penalty.violations.iter().map(|v| v.servers).sum();
         println!(
-            "  note: the temperature-rise prior binds at the best parameters for {} server(s): \
-             a prior-data conflict; check --rise-range",
-            penalty.violations.len()
+            "  note: the temperature-rise prior binds at the best parameters for {servers} \
+             server(s): a prior-data conflict ({}); if that rise is real, widen --rise-range",
+            worst.join("; ")
         );
     }
     if let Some(text) = kalibre_dc::report::passed_over_text(report) {
