@@ -260,9 +260,16 @@ fn print_event(
     let n = || counter.fetch_add(1, Ordering::Relaxed) + 1;
     match e {
         StoryEvent::CalibrationStarted { name, .. } => println!("\nstep {}: {name}", n()),
-        StoryEvent::CalibrationDone { step, .. } => {
+        StoryEvent::CalibrationDone { step, index } => {
+            // After a diagnosis the start is the model run with the entry added (the
+            // diagnosis's predicted MAE was a linear estimate of it).
+            let start = if *index > 0 {
+                " with the entry added, before recalibrating,"
+            } else {
+                ""
+            };
             println!(
-                "  MAE {} -> {:.3} C ({} model runs, {:.1} s)",
+                "  MAE {}{start} -> {:.3} C ({} model runs, {:.1} s)",
                 step.mae_before_c
                     .map_or("-".into(), |m| format!("{m:.3} C")),
                 step.mae_after_c,
@@ -275,6 +282,8 @@ fn print_event(
                     step.mae_after_c / f,
                     if step.mae_after_c > 2.0 * f {
                         ": the fit stalls, something is missing"
+                    } else if step.mae_after_c < f {
+                        " (below it: fitted parameters also take in some of the noise)"
                     } else {
                         ""
                     }

@@ -145,7 +145,7 @@ pub(crate) fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> Str
                 "{none}: the measured warmth takes a path the model lacks, or the sensor is off"
             )
         } else {
-            none.into()
+            format!("{none}: the model's supply air reaching it is warmer than measured, or the sensor is off")
         };
     };
     let racks: Vec<String> = warming
@@ -153,8 +153,14 @@ pub(crate) fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> Str
         .iter()
         .map(|r| format!("{} {:.0} %", r.rack, 100.0 * r.share))
         .collect();
+    // Too warm by more than the exhausts add: the excess is in the supply air itself.
+    let supply = if mean_c > 0.0 && warming.warming_k < 0.5 * mean_c {
+        "; less than the excess: the model's supply air reaching it is warmer than measured"
+    } else {
+        ""
+    };
     format!(
-        "in the model, exhausts warm it by {:.2} K in {}: {}",
+        "in the model, exhausts warm it by {:.2} K in {}: {}{supply}",
         warming.warming_k,
         warming.snapshot,
         if racks.is_empty() {
