@@ -369,14 +369,17 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     }
     print_where_it_fails(&hall, &report, heat.as_deref());
     println!(
-        "\nmissing effects, best first (MAE now {:.3} C):",
+        "\nmissing effects, best first (MAE now {:.3} C; `explains`: the share of the residual, \
+         as the ranking weighs the sensors, that the effect removes; `predicted MAE`: over \
+         every sensor, linearised):",
         d.diagnosis.mae
     );
     // Said only when it weighs: on data the model reproduces the share is about 0.
     if let Some(share) = d.diagnosis.model_form_share.filter(|c| *c >= 0.01) {
         println!(
-            "  (the residuals bear out {:.0} % of the variance of the model's tile-jet variant: \
-             the sensors that variant moves weigh less in this ranking)",
+            "  (the residuals match {:.0} % of what tile jets, which the built-in model's air \
+             flow lacks, would change: the sensors the jets move, often the row-end inlets, \
+             weigh less in this ranking)",
             100.0 * share
         );
     }

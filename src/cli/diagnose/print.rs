@@ -75,7 +75,7 @@ pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis, robust_nu
         // is of the residual's size, the model's own physics there is the likely cause.
         if let Some(form) = u.model_form_c {
             notes.push(format!(
-                "the model's tile-jet variant moves it by {form:.2} C"
+                "tile jets, which the model lacks, would move it by {form:.2} C"
             ));
         }
         let note = if notes.is_empty() {
