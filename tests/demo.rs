@@ -35,6 +35,8 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
         "suggested entry for hall.json \"effects\"",
         "summary",
         "report.html",
+        // The folders count calibrations; the printed steps count diagnoses too.
+        "each calibration's report.json in step-1/ (step 1), step-2/ (step 3)",
     ] {
         assert!(stdout.contains(needle), "`{needle}` not in:\n{stdout}");
     }

@@ -188,6 +188,9 @@ pub fn run(args: DemoArgs) -> CliResult {
     };
     let floor = settings.reference_mae_c;
     let counter = AtomicUsize::new(0);
+    // The printed step number of each calibration: its report goes to step-K/, K
+    // counting calibrations only.
+    let calibration_steps = Mutex::new(Vec::new());
     // The hall as calibrated so far: effects join it as the story adds them.
     let current = Mutex::new(hall.clone());
     let sim = settings.calibration.sim.clone();
@@ -203,6 +206,13 @@ pub fn run(args: DemoArgs) -> CliResult {
             }
             _ => None,
         };
+        if let StoryEvent::CalibrationStarted { .. } = e {
+            let next = counter.load(Ordering::Relaxed) + 1;
+            calibration_steps
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .push(next);
+        }
         print_event(hall, floor, &counter, e, warming.as_ref());
     };
     let story = with_threads(args.threads, || {
@@ -225,10 +235,18 @@ pub fn run(args: DemoArgs) -> CliResult {
             );
         }
     }
+    let dirs: Vec<String> = calibration_steps
+        .into_inner()
+        .unwrap_or_else(|p| p.into_inner())
+        .iter()
+        .enumerate()
+        .map(|(k, step)| format!("step-{}/ (step {step})", k + 1))
+        .collect();
     println!(
-        "wrote {}, {}",
+        "wrote {}, {}; each calibration's report.json in {}",
         args.out.join("story.json").display(),
-        args.out.join("report.html").display()
+        args.out.join("report.html").display(),
+        dirs.join(", ")
     );
     Ok(())
 }
