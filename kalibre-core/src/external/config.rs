@@ -249,9 +249,13 @@ impl CommandModelConfig {
             Some(p) if !p.as_os_str().is_empty() => p,
             _ => Path::new("."),
         };
+        // Absolute, so that the paths made from it (the program, `runs_root`, hence
+        // `{{run_dir}}` and `KALIBRE_RUN_DIR`) mean the same inside a run directory, where
+        // the program runs, as here.
+        let config_dir = std::path::absolute(base).map_err(|e| ExternalError::io(base, e))?;
         let cx = Ctx {
             file: &file_name,
-            base,
+            base: &config_dir,
         };
         let top: Table = text.parse().map_err(|e: toml::de::Error| {
             let key = match e.span() {
@@ -276,10 +280,9 @@ impl CommandModelConfig {
             &cx.str(&top, "", "runs_root")?
                 .unwrap_or_else(|| "runs".into()),
         );
-        let config_dir = std::path::absolute(base).map_err(|e| ExternalError::io(base, e))?;
         let mut b = ExternalCommand::<NamedScenario>::builder(program, runs_root)
             .with_args(cx.strings(&top, "", "args")?)
-            .with_config_dir(config_dir);
+            .with_config_dir(config_dir.clone());
 
         let timeout = cx.req_num(&top, "", "timeout_s")?;
         if timeout <= 0.0 || timeout > 1e9 {
