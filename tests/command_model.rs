@@ -214,3 +214,54 @@ fn a_config_that_does_not_fit_the_hall_is_refused_for_its_real_fault() {
     assert!(stderr(&o).contains(" in all)]"), "{}", stderr(&o));
     assert!(!dir.join("out/runs.jsonl").exists());
 }
+
+/// Runs that fail (here the design's upper bounds, 2.9999999999999996 on the log scale:
+/// the command exits with 3 there) are
+/// journaled as failed, the loop goes on without them, and the summary says how many
+/// failed and that a poor fit may be their doing.
+#[test]
+fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
+    let dir = tmp("command-failing");
+    let hall: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
+            .unwrap();
+    write_command_model(&dir, &hall, 0.25);
+    let toml = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+    let kalibre = env!("CARGO_BIN_EXE_kalibre");
+    let wrapped = toml.replacen(
+        &format!("program = \"{kalibre}\"\nargs = ["),
+        &format!(
+            r#"program = "sh"
+args = ["-c", "case \"$(cat params.json)\" in *'gpu\": 2.99'*) exit 3;; esac; exec \"$0\" \"$@\"", "{kalibre}", "#
+        ),
+        1,
+    );
+    assert_ne!(wrapped, toml, "the program line moved");
+    std::fs::write(dir.join("model.toml"), wrapped).unwrap();
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args([
+            "--iterations",
+            "1",
+            "--polish",
+            "0",
+            "--quiet",
+            "--model",
+            "command",
+        ])
+        .arg("--config")
+        .arg(dir.join("model.toml"))
+        .arg("--out")
+        .arg(dir.join("cal")));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let (_, _, runs) = best(&dir.join("cal"));
+    let failed = runs["failed"].as_u64().unwrap();
+    assert_eq!(failed, 3, "the upper bounds at each of 3 snapshots: {runs}");
+    assert!(
+        stdout.contains(&format!(
+            "note: 3 of {} model runs failed (their reasons are in runs.jsonl)",
+            runs["total"]
+        )),
+        "{stdout}"
+    );
+}

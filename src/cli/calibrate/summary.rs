@@ -149,7 +149,14 @@ pub(super) fn print_summary(
 ) {
     println!();
     println!("calibration summary");
-    println!("  {:<28} {}", "initial MAE", fmt_c(report.initial.mae_c));
+    println!(
+        "  {:<28} {}",
+        "initial MAE",
+        match report.initial.mae_c {
+            Some(m) => fmt_c(Some(m)),
+            None => "- (a run at the initial parameters failed)".to_string(),
+        }
+    );
     println!(
         "  {:<28} {} (found in {})",
         "best MAE",
@@ -213,6 +220,17 @@ pub(super) fn print_summary(
             "  note: the temperature-rise prior binds at the best parameters for {servers} \
              server(s): a prior-data conflict ({}); if that rise is real, widen --rise-range",
             worst.join("; ")
+        );
+    }
+    if report.runs.failed > 0 {
+        // A failed run teaches the surrogate nothing: where failures cluster (often near
+        // a corner of the box, or the truth) the loop searches blind, and the fit can be
+        // poor for that reason, not the model's form.
+        println!(
+            "  note: {} of {} model runs failed (their reasons are in runs.jsonl); the loop \
+             learned from the rest, so a poor fit may be the failures' doing. Fix what failed \
+             and calibrate again into this --out: failed runs run again, the rest are replayed",
+            report.runs.failed, report.runs.total
         );
     }
     if let Some(text) = kalibre_dc::report::passed_over_text(report) {
