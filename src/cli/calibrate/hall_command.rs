@@ -96,7 +96,7 @@ fn first_difference((list, what): (&str, &str), given: &[String], want: &[String
                 None if want.contains(&given[i]) => {
                     ", which the hall has earlier (given twice?)".into()
                 }
-                None => format!(", which is not one of the hall's {what}"),
+                None => format!(" (`{}` is not one of the hall's {what})", given[i]),
             };
             format!(
                 "{list}[{i}] is `{}` where the hall has `{}`{where_}",
@@ -158,5 +158,32 @@ impl Model for HallCommand {
 
     fn check_plausible(&self, outputs: &Outputs) -> Result<(), ModelError> {
         kalibre_dc::check_sensor_c(&outputs.values, self.command.output_names())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::first_difference;
+
+    fn names(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    /// Each way a list parts from the hall's is named by the entry at fault.
+    #[test]
+    fn the_first_difference_names_the_entry_at_fault() {
+        let hall = names(&["alpha/web", "alpha/db", "alpha/gpu"]);
+        let list = ("params", "parameters");
+        let said = |given: &[&str]| first_difference(list, &names(given), &hall);
+        assert_eq!(
+            said(&["alpha/WEB", "alpha/db", "alpha/gpu"]),
+            "params[0] is `alpha/WEB` where the hall has `alpha/web` (`alpha/WEB` is not one \
+             of the hall's parameters)"
+        );
+        assert!(said(&["alpha/db", "alpha/web", "alpha/gpu"])
+            .ends_with("which comes at index 1 in the hall's order"));
+        assert!(said(&["alpha/web", "alpha/web", "alpha/gpu"])
+            .ends_with("which the hall has earlier (given twice?)"));
+        assert!(said(&["alpha/web"]).contains("the first missing: `alpha/db`"));
     }
 }
