@@ -361,7 +361,7 @@ fn main() {
         o.runs_after_design
     );
     println!(
-        "MAE: {:.3} K at the initial values, {:.3} K calibrated (noise level {:.3} K); stop: {:?}",
+        "MAE: {:.3} K at the initial values, {:.3} K calibrated (the noise's own MAE {:.3} K, sigma x sqrt(2/pi)); stop: {}",
         o.initial_mae_c,
         o.mae_c,
         NOISE_C * (2.0 / std::f64::consts::PI).sqrt(),
