@@ -93,25 +93,33 @@ fn the_diagnosis_advises_the_student_t_likelihood_only_where_it_was_not_used() {
         assert!(o.status.success(), "{}", stderr(&o));
         // The summary in words: the polish's records number on past the loop's 10
         // iterations (this best is the polish's), and why it stopped.
-        let summary = String::from_utf8_lossy(&o.stdout);
-        assert!(
-            summary.contains("(found in the polish, after the loop's 10 iterations)"),
-            "{summary}"
-        );
-        assert!(summary.contains("iteration budget used"), "{summary}");
+        let summary = String::from_utf8_lossy(&o.stdout).into_owned();
         let o = run(diagnose_cmd(&hall, &snaps, &cal).args(["--threads", "1"]));
         assert!(o.status.success(), "{}", stderr(&o));
         let stdout = String::from_utf8_lossy(&o.stdout);
-        // The kind's name is the model's; the line under it says what to look for.
-        assert!(
-            stdout.contains("that is exhaust returning through the rack to its own intakes: a missing blanking panel"),
-            "{stdout}"
-        );
-        assert!(stdout.contains("sensors no candidate explains"), "{stdout}");
-        assert!(
-            stdout.contains("residuals left with rack_recirculation(rack=B4) added"),
-            "{stdout}"
-        );
+        for (text, needle) in [
+            (
+                &summary[..],
+                "(found in the polish, after the loop's 10 iterations)",
+            ),
+            (&summary[..], "iteration budget used"),
+            // The kind's name is the model's; the line under it says what to look for.
+            (
+                &stdout[..],
+                "that is exhaust returning through the rack to its own intakes: a missing \
+                 blanking panel",
+            ),
+            (&stdout[..], "sensors no candidate explains"),
+            (
+                &stdout[..],
+                "residuals left with rack_recirculation(rack=B4) added",
+            ),
+        ] {
+            assert!(
+                text.contains(needle),
+                "{likelihood}: `{needle}` not in {text}"
+            );
+        }
         assert!(stdout.contains(advice), "{likelihood}: {stdout}");
     }
 }

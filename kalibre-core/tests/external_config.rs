@@ -55,76 +55,53 @@ fn config_errors_name_the_key() {
         Err(e) => panic!("not a config error: {e}"),
         Ok(_) => panic!("accepted a bad config"),
     };
-    assert_eq!(
-        key_of(text.replace("timeout_s = 30", "timout_s = 30")),
-        "timout_s"
-    );
-    assert_eq!(key_of(text.replace("timeout_s = 30\n", "")), "timeout_s");
-    assert_eq!(
-        key_of(text.replace("timeout_s = 30", "timeout_s = -1")),
-        "timeout_s"
-    );
-    assert_eq!(
-        key_of(text.replace("upper = 100.0", "upper = \"high\"")),
-        "params[1].upper"
-    );
-    assert_eq!(
-        key_of(text.replace("initial = 10.0", "initial = 1000.0")),
-        "params[1]"
-    );
-    assert_eq!(
-        key_of(text.replace("scale = \"log\"", "scale = \"ln\"")),
-        "params[0].scale"
-    );
-    assert_eq!(
-        key_of(text.replace("parser = \"csv\" ", "parser = \"json\"")),
-        "output.parser"
-    );
-    assert_eq!(
-        key_of(text.replace(
+    // Each edit of the example and the key its error names.
+    let edits: [(&str, &str, &str); 15] = [
+        ("timeout_s = 30", "timout_s = 30", "timout_s"),
+        ("timeout_s = 30\n", "", "timeout_s"),
+        ("timeout_s = 30", "timeout_s = -1", "timeout_s"),
+        ("upper = 100.0", "upper = \"high\"", "params[1].upper"),
+        ("initial = 10.0", "initial = 1000.0", "params[1]"),
+        ("scale = \"log\"", "scale = \"ln\"", "params[0].scale"),
+        ("parser = \"csv\" ", "parser = \"json\"", "output.parser"),
+        (
             "retry_on = [\"timeout\", \"exit\"]",
-            "retry_on = [\"timeout\", \"segfault\"]"
-        )),
-        "retry_on[1]"
-    );
-    assert_eq!(
-        key_of(text.replace(
+            "retry_on = [\"timeout\", \"segfault\"]",
+            "retry_on[1]",
+        ),
+        (
             "destination = \"params.in\"",
-            "destination = \"../escape.in\""
-        )),
-        "templates[0].destination"
-    );
-    assert_eq!(
-        key_of(text.replace("source = \"params.in.tmpl\"", "source = \"missing.tmpl\"")),
-        "templates[0].source"
-    );
-    assert_eq!(
-        key_of(text.replace(
+            "destination = \"../escape.in\"",
+            "templates[0].destination",
+        ),
+        (
+            "source = \"params.in.tmpl\"",
+            "source = \"missing.tmpl\"",
+            "templates[0].source",
+        ),
+        (
             "parser = \"csv\" ",
-            "parser = \"regex\"\nregex = { t_in = 'a(b)(c)', t_out = 'x(y)' }\n"
-        )),
-        "output.regex.t_in"
-    );
-    assert_eq!(
-        key_of(text.replace(
+            "parser = \"regex\"\nregex = { t_in = 'a(b)(c)', t_out = 'x(y)' }\n",
+            "output.regex.t_in",
+        ),
+        (
             "variables = { ambient_c = 5.0 }",
-            "variables = { ambient_c = 5.0, k = 1.0 }"
-        )),
-        "scenarios[0].variables"
-    );
-    assert_eq!(
-        key_of(text.replace("label = \"summer\"", "label = \"winter\"")),
-        "scenarios[1].label"
-    );
-    assert_eq!(
-        key_of(text.replace("timeout_s = 30", "timeout_s = 30 30")),
-        "line 6"
-    );
-    // A failure that repeats every time would be retried without end.
-    assert_eq!(
-        key_of(text.replace("retries = 1 ", "retries = 1000000000 ")),
-        "retries"
-    );
+            "variables = { ambient_c = 5.0, k = 1.0 }",
+            "scenarios[0].variables",
+        ),
+        (
+            "label = \"summer\"",
+            "label = \"winter\"",
+            "scenarios[1].label",
+        ),
+        ("timeout_s = 30", "timeout_s = 30 30", "line 6"),
+        // A failure that repeats every time would be retried without end.
+        ("retries = 1 ", "retries = 1000000000 ", "retries"),
+    ];
+    for (from, to, key) in edits {
+        assert!(text.contains(from), "the example lacks `{from}`");
+        assert_eq!(key_of(text.replace(from, to)), key, "{from} -> {to}");
+    }
     // A placeholder no scenario provides names its template.
     std::fs::write(dir.join("params.in.tmpl"), "k = {{k}}\nx = {{ambient}}\n").unwrap();
     match CommandModelConfig::load(&file).unwrap_err() {
