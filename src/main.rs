@@ -86,6 +86,9 @@ fn main() {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let args = cli::Cli::try_parse().unwrap_or_else(|e| usage_error(e));
+    // Model runs have process groups of their own, which Ctrl-C does not reach: end
+    // them with kalibre rather than leave solvers running.
+    kalibre_core::external::end_runs_with_kalibre();
     // Output that cannot be written is an error of this run, not a bug: no panic report
     // for it (every other panic keeps the default one).
     let default_hook = std::panic::take_hook();

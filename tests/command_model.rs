@@ -265,3 +265,93 @@ args = ["-c", "case \"$(cat params.json)\" in *'gpu\": 2.99'*) exit 3;; esac; ex
         "{stdout}"
     );
 }
+
+/// Ctrl-C (SIGINT) or a kill (SIGTERM) of `kalibre calibrate` ends the model runs in
+/// progress with it, down to the processes a run's script started: each run has its own
+/// process group, which the terminal's signal does not reach, and the kernel's
+/// parent-death signal reaches only the script (a solver it started ran on).
+#[cfg(target_os = "linux")]
+#[test]
+fn ending_kalibre_ends_the_runs_in_progress() {
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        let dir = tmp(&format!("command-interrupted-{signal}"));
+        let hall: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
+                .unwrap();
+        write_command_model(&dir, &hall, 0.25);
+        let pids = dir.join("pids");
+        let toml = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+        let bin = env!("CARGO_BIN_EXE_kalibre");
+        // Each run: a "solver" in the background, then wait for it.
+        let wrapped = toml.replacen(
+            &format!("program = \"{bin}\"\nargs = ["),
+            &format!(
+                "program = \"sh\"\nargs = [\"-c\", \"sleep 60 & echo $! >> {}; wait\", ",
+                pids.display()
+            ),
+            1,
+        );
+        assert_ne!(wrapped, toml, "the program line moved");
+        std::fs::write(dir.join("model.toml"), wrapped).unwrap();
+        let child = kalibre()
+            .args(["calibrate", "--hall"])
+            .arg(data("of-dev-clean/hall.json"))
+            .arg("--snapshots")
+            .arg(data("of-dev-clean/snapshots.csv"))
+            .args([
+                "--quiet",
+                "--threads",
+                "2",
+                "--model",
+                "command",
+                "--config",
+            ])
+            .arg(dir.join("model.toml"))
+            .arg("--out")
+            .arg(dir.join("cal"))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let started = std::time::Instant::now();
+        let running = || -> Vec<i32> {
+            std::fs::read_to_string(&pids)
+                .unwrap_or_default()
+                .lines()
+                .filter_map(|l| l.trim().parse().ok())
+                .collect()
+        };
+        while running().is_empty() {
+            assert!(started.elapsed().as_secs() < 60, "no run started");
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        // SAFETY: signalling the child we started.
+        unsafe {
+            libc::kill(child.id() as i32, signal);
+        }
+        let out = child.wait_with_output().unwrap();
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(out.status.signal(), Some(signal), "{out:?}");
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            said.contains("the model runs in progress were ended with it"),
+            "{said}"
+        );
+        // Every "solver" started is gone (killed, or reaped by init once killed).
+        let alive = |pid: i32| {
+            std::path::Path::new(&format!("/proc/{pid}")).exists()
+                && !std::fs::read_to_string(format!("/proc/{pid}/stat"))
+                    .unwrap_or_default()
+                    .contains(") Z ")
+        };
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while running().into_iter().any(alive) && std::time::Instant::now() < until {
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let left: Vec<i32> = running().into_iter().filter(|p| alive(*p)).collect();
+        assert!(
+            left.is_empty(),
+            "signal {signal}: solvers still running: {left:?}"
+        );
+    }
+}

@@ -16,6 +16,7 @@
 
 mod command;
 mod config;
+mod groups;
 mod parse;
 mod process;
 mod run;
@@ -32,6 +33,7 @@ pub use command::{
     TemplateFile,
 };
 pub use config::CommandModelConfig;
+pub use groups::{end_runs_with_kalibre, signal_runs};
 pub use parse::OutputParser;
 pub use process::{log_tail, run_process, ProcessEnd, ProcessOutcome, ProcessSpec};
 pub use rundir::RunDirs;

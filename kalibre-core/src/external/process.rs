@@ -137,6 +137,8 @@ pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
     let start = Instant::now();
     let mut child = cmd.spawn()?;
     let pid = child.id() as libc::pid_t;
+    // Untracked (below) before the leader is reaped, while its id cannot be reused.
+    let tracked = super::groups::track(pid);
     let (tx, rx) = mpsc::channel();
     let waiter = std::thread::Builder::new()
         .name(format!("kalibre-wait-{pid}"))
@@ -147,6 +149,7 @@ pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
         Ok(w) => w,
         Err(e) => {
             signal_group(pid, libc::SIGKILL);
+            drop(tracked);
             let _ = child.wait();
             return Err(e);
         }
@@ -169,6 +172,7 @@ pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
                         Ok(r) => r,
                         Err(_) => {
                             // Unkillable for now: reap it whenever it goes, off this thread.
+                            drop(tracked);
                             std::thread::spawn(move || {
                                 let _ = child.wait();
                             });
@@ -189,6 +193,7 @@ pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
     if exited.is_ok() {
         signal_group(pid, libc::SIGKILL);
     }
+    drop(tracked);
     let status = child.wait()?;
     let _ = waiter.join();
     let elapsed = start.elapsed();

@@ -1,0 +1,80 @@
+//! The process groups of the model runs in progress, so that kalibre's own end (Ctrl-C,
+//! `kill`, a closed terminal) ends them with it. Each run has its own process group
+//! ([`super::run_process`]), which a terminal's Ctrl-C does not reach; the kernel's
+//! parent-death signal reaches only a run's first process, not the solver a script
+//! starts. [`end_runs_with_kalibre`] installs handlers that signal every group here.
+
+use std::sync::atomic::{AtomicI32, Ordering};
+
+/// Runs tracked at once; beyond this a run is not tracked (its first process still gets
+/// the parent-death signal).
+const SLOTS: usize = 256;
+
+static GROUPS: [AtomicI32; SLOTS] = [const { AtomicI32::new(0) }; SLOTS];
+
+/// A tracked group; dropping it stops the tracking. Dropped before the group's leader
+/// is reaped, while its id cannot yet be reused.
+pub(crate) struct Tracked(Option<usize>);
+
+/// Tracks the process group `pgid` until the returned guard is dropped.
+pub(crate) fn track(pgid: libc::pid_t) -> Tracked {
+    Tracked(GROUPS.iter().position(|g| {
+        g.compare_exchange(0, pgid, Ordering::AcqRel, Ordering::Relaxed)
+            .is_ok()
+    }))
+}
+
+impl Drop for Tracked {
+    fn drop(&mut self) {
+        if let Some(i) = self.0 {
+            GROUPS[i].store(0, Ordering::Release);
+        }
+    }
+}
+
+/// Sends `signal` to every tracked run's process group; returns how many there were.
+/// Async-signal-safe (atomic loads and `kill(2)` only), so a signal handler may call it.
+pub fn signal_runs(signal: libc::c_int) -> usize {
+    let mut n = 0;
+    for g in &GROUPS {
+        let pgid = g.load(Ordering::Acquire);
+        if pgid > 0 {
+            // SAFETY: kill has no memory effects; a group already gone gives ESRCH.
+            unsafe {
+                libc::kill(-pgid, signal);
+            }
+            n += 1;
+        }
+    }
+    n
+}
+
+extern "C" fn on_end_signal(signal: libc::c_int) {
+    if signal_runs(libc::SIGTERM) > 0 {
+        const SAID: &[u8] = b"kalibre: stopped; the model runs in progress were ended with it \
+(finished runs are kept: the same command resumes where a journal is kept)\n";
+        // SAFETY: write(2) is async-signal-safe; the buffer is static.
+        unsafe {
+            libc::write(2, SAID.as_ptr().cast(), SAID.len());
+        }
+    }
+    // End as the signal would have, with its exit status.
+    // SAFETY: signal(2) and raise(3) are async-signal-safe.
+    unsafe {
+        libc::signal(signal, libc::SIG_DFL);
+        libc::raise(signal);
+    }
+}
+
+/// Installs handlers for SIGINT, SIGTERM and SIGHUP that send SIGTERM to every model
+/// run in progress, then end the process as the signal would have. For programs (the
+/// `kalibre` CLI) that start model runs; a library leaves signals to its program.
+pub fn end_runs_with_kalibre() {
+    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        // SAFETY: the handler makes only async-signal-safe calls; installed before any
+        // run starts.
+        unsafe {
+            libc::signal(signal, on_end_signal as *const () as libc::sighandler_t);
+        }
+    }
+}
