@@ -293,11 +293,7 @@ fn ending_kalibre_ends_the_runs_in_progress() {
         );
         assert_ne!(wrapped, toml, "the program line moved");
         std::fs::write(dir.join("model.toml"), wrapped).unwrap();
-        let child = kalibre()
-            .args(["calibrate", "--hall"])
-            .arg(data("of-dev-clean/hall.json"))
-            .arg("--snapshots")
-            .arg(data("of-dev-clean/snapshots.csv"))
+        let child = on_dataset("calibrate", "of-dev-clean")
             .args([
                 "--quiet",
                 "--threads",
