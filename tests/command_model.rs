@@ -98,6 +98,25 @@ fn write_command_model(dir: &Path, hall: &serde_json::Value, initial_alpha: f64)
     std::fs::write(dir.join("model.toml"), toml).unwrap();
 }
 
+/// The development hall's `hall.json`.
+fn dev_hall() -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap()).unwrap()
+}
+
+/// Has `dir/model.toml` run its program through `sh -c script` (the program and its
+/// arguments follow as `$0 "$@"`); `script` is written as in a TOML string.
+fn run_under_sh(dir: &Path, script: &str) {
+    let toml = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+    let bin = env!("CARGO_BIN_EXE_kalibre");
+    let wrapped = toml.replacen(
+        &format!("program = \"{bin}\"\nargs = ["),
+        &format!("program = \"sh\"\nargs = [\"-c\", \"{script}\", \"{bin}\", "),
+        1,
+    );
+    assert_ne!(wrapped, toml, "the program line moved");
+    std::fs::write(dir.join("model.toml"), wrapped).unwrap();
+}
+
 /// The best MAE and parameters of a calibration's `report.json`.
 fn best(out: &Path) -> (f64, serde_json::Value, serde_json::Value) {
     let text = std::fs::read_to_string(out.join("report.json")).unwrap();
@@ -112,9 +131,7 @@ fn best(out: &Path) -> (f64, serde_json::Value, serde_json::Value) {
 #[test]
 fn a_command_running_the_builtin_simulator_calibrates_as_the_builtin_model() {
     let dir = tmp("command-model");
-    let hall_path = data("of-dev-clean/hall.json");
-    let hall: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&hall_path).unwrap()).unwrap();
+    let hall = dev_hall();
     // Initial values other than the hall's: the search starts from the hall's, and says so.
     write_command_model(&dir, &hall, 0.3);
     let calibrate = |extra: &[&str], out: &str| {
@@ -169,9 +186,7 @@ fn a_command_running_the_builtin_simulator_calibrates_as_the_builtin_model() {
 #[test]
 fn a_config_that_does_not_fit_the_hall_is_refused_for_its_real_fault() {
     let dir = tmp("command-misfit");
-    let hall: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
-            .unwrap();
+    let hall = dev_hall();
     write_command_model(&dir, &hall, 0.3);
     let good = std::fs::read_to_string(dir.join("model.toml")).unwrap();
     let calibrate = |toml: &str, extra: &[&str]| {
@@ -222,22 +237,12 @@ fn a_config_that_does_not_fit_the_hall_is_refused_for_its_real_fault() {
 #[test]
 fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
     let dir = tmp("command-failing");
-    let hall: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
-            .unwrap();
+    let hall = dev_hall();
     write_command_model(&dir, &hall, 0.25);
-    let toml = std::fs::read_to_string(dir.join("model.toml")).unwrap();
-    let kalibre = env!("CARGO_BIN_EXE_kalibre");
-    let wrapped = toml.replacen(
-        &format!("program = \"{kalibre}\"\nargs = ["),
-        &format!(
-            r#"program = "sh"
-args = ["-c", "case \"$(cat params.json)\" in *'gpu\": 2.99'*) exit 3;; esac; exec \"$0\" \"$@\"", "{kalibre}", "#
-        ),
-        1,
+    run_under_sh(
+        &dir,
+        r#"case \"$(cat params.json)\" in *'gpu\": 2.99'*) exit 3;; esac; exec \"$0\" \"$@\""#,
     );
-    assert_ne!(wrapped, toml, "the program line moved");
-    std::fs::write(dir.join("model.toml"), wrapped).unwrap();
     let o = run(on_dataset("calibrate", "of-dev-clean")
         .args([
             "--iterations",
@@ -275,24 +280,14 @@ args = ["-c", "case \"$(cat params.json)\" in *'gpu\": 2.99'*) exit 3;; esac; ex
 fn ending_kalibre_ends_the_runs_in_progress() {
     for signal in [libc::SIGINT, libc::SIGTERM] {
         let dir = tmp(&format!("command-interrupted-{signal}"));
-        let hall: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
-                .unwrap();
+        let hall = dev_hall();
         write_command_model(&dir, &hall, 0.25);
         let pids = dir.join("pids");
-        let toml = std::fs::read_to_string(dir.join("model.toml")).unwrap();
-        let bin = env!("CARGO_BIN_EXE_kalibre");
         // Each run: a "solver" in the background, then wait for it.
-        let wrapped = toml.replacen(
-            &format!("program = \"{bin}\"\nargs = ["),
-            &format!(
-                "program = \"sh\"\nargs = [\"-c\", \"sleep 60 & echo $! >> {}; wait\", ",
-                pids.display()
-            ),
-            1,
+        run_under_sh(
+            &dir,
+            &format!("sleep 60 & echo $! >> {}; wait", pids.display()),
         );
-        assert_ne!(wrapped, toml, "the program line moved");
-        std::fs::write(dir.join("model.toml"), wrapped).unwrap();
         let child = on_dataset("calibrate", "of-dev-clean")
             .args([
                 "--quiet",

@@ -67,7 +67,7 @@ fn a_misspelt_rack_lists_the_halls_racks() {
         .arg(tmp("mistakes-rack").join("s")));
     assert_input_error(
         &o,
-        "no rack `A3` in the hall (its racks: A01, A02, A03, A04, ...",
+        "no rack `A3` in the hall (its racks: A01, A02, A03, A04, A05, A06, ... (24 in all))",
     );
 }
 

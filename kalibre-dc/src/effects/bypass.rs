@@ -250,14 +250,14 @@ impl EffectFactory for BypassFactory {
         }))
     }
 
-    /// A strip behind each rack. When the hall's own openings could take much of the
-    /// supply at their upper bounds, the candidates' upper bound is lowered so that the
-    /// tiles keep [`CANDIDATE_TILE_SHARE`] of it: a hall written with a candidate added
-    /// (`kalibre diagnose --write-hall`) then calibrates over its whole box.
     fn meaning(&self) -> &str {
         "supply entering where no server draws it: a cable cut-out or a misplaced tile"
     }
 
+    /// A strip behind each rack. When the hall's own openings could take much of the
+    /// supply at their upper bounds, the candidates' upper bound is lowered so that the
+    /// tiles keep [`CANDIDATE_TILE_SHARE`] of it: a hall written with a candidate added
+    /// (`kalibre diagnose --write-hall`) then calibrates over its whole box.
     fn candidates(&self, hall: &Hall) -> Vec<EffectSpec> {
         let taken: f64 = hall
             .effects

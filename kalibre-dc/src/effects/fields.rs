@@ -185,25 +185,17 @@ pub(crate) fn split_field(message: &str) -> (Option<&str>, &str) {
         .map_or((None, message), |(f, rest)| (Some(f), rest))
 }
 
-/// An `effects` entry from a kind and fields.
-/// `no rack `A3` in the hall (its racks: A01, A02, ... B12, 24 in all)`: an id the
-/// hall lacks, with the ones it has (the first and last few), so that a misspelling
-/// shows.
+/// `no rack `A3` in the hall (its racks: A01, A02, ...)`: an id the hall lacks, with
+/// the ones it has ([`kalibre_core::some_names`]), so that a misspelling shows.
 pub(crate) fn unknown_id<'a>(what: &str, id: &str, known: impl Iterator<Item = &'a str>) -> String {
-    let known: Vec<&str> = known.collect();
-    let list = if known.len() <= 8 {
-        known.join(", ")
-    } else {
-        format!(
-            "{}, ... {}, {} in all",
-            known[..4].join(", "),
-            known[known.len() - 2..].join(", "),
-            known.len()
-        )
-    };
-    format!("no {what} `{id}` in the hall (its {what}s: {list})")
+    let known: Vec<String> = known.map(str::to_string).collect();
+    format!(
+        "no {what} `{id}` in the hall (its {what}s: {})",
+        kalibre_core::some_names(&known)
+    )
 }
 
+/// An `effects` entry from a kind and fields.
 pub(crate) fn spec(kind: &str, fields: Vec<(&str, Value)>) -> EffectSpec {
     EffectSpec {
         kind: kind.to_string(),

@@ -152,10 +152,10 @@ pub(super) fn print_summary(
     println!(
         "  {:<28} {}",
         "initial MAE",
-        match report.initial.mae_c {
-            Some(m) => fmt_c(Some(m)),
-            None => "- (a run at the initial parameters failed)".to_string(),
-        }
+        report.initial.mae_c.map_or_else(
+            || "- (a run at the initial parameters failed)".to_string(),
+            |m| fmt_c(Some(m))
+        )
     );
     println!(
         "  {:<28} {} (found in {})",

@@ -129,13 +129,6 @@ const OPENFOAM_UNIT_STEP: f64 = 0.03;
 /// `--model openfoam`: step of a candidate's parameter (share of its range).
 const OPENFOAM_EFFECT_STEP: f64 = 0.2;
 
-/// What a built-in effect kind is, in plain words (`None` for a kind that says nothing).
-fn registry_meaning(kind: &str) -> Option<String> {
-    let registry = kalibre_dc::effects::EffectRegistry::builtin();
-    let meaning = registry.get(kind)?.meaning().to_string();
-    (!meaning.is_empty()).then_some(meaning)
-}
-
 /// Runs `kalibre diagnose`.
 pub fn run(args: DiagnoseArgs) -> CliResult {
     args.openfoam
@@ -170,8 +163,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         check_writable_file(path)?;
     }
     let hall = Hall::load(&args.hall)?;
-    kalibre_dc::effects::EffectRegistry::builtin()
-        .check_hall(&hall, &args.hall.display().to_string())?;
+    let registry = EffectRegistry::builtin();
+    registry.check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
@@ -317,7 +310,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         // supply for a bypass), so the linearisation is a secant where it matters.
         settings.unit_step = OPENFOAM_UNIT_STEP;
         settings.effect_step = OPENFOAM_EFFECT_STEP;
-        let candidates = candidates_tried(&hall, &EffectRegistry::builtin(), solver.as_ref());
+        let candidates = candidates_tried(&hall, &registry, solver.as_ref());
         eprintln!(
             "diagnosing with OpenFOAM: {} solves ({} snapshots x (1 base + {} calibrated parameters + {} candidates)); finished solves are kept in {} and reused",
             snaps.len() * (1 + space.dim() + candidates),
@@ -332,7 +325,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             &hall,
             &snaps,
             &params,
-            &EffectRegistry::builtin(),
+            &registry,
             &settings,
             solver.as_ref(),
         )
@@ -426,8 +419,10 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             );
         }
         if h.significant {
-            if let Some(meaning) = registry_meaning(&s.kind) {
-                println!("    that is {meaning}");
+            // What the kind is on the floor: its name is the model's.
+            match registry.get(&s.kind).map(|f| f.meaning()) {
+                Some(meaning) if !meaning.is_empty() => println!("    that is {meaning}"),
+                _ => {}
             }
             println!("    add to hall.json \"effects\": {}", entry());
         } else if undecided.contains(&h.name.as_str()) {
