@@ -164,6 +164,41 @@ fn a_command_running_the_builtin_simulator_calibrates_as_the_builtin_model() {
     let journal = std::fs::read_to_string(dir.join("command/runs.jsonl")).unwrap();
     assert!(!journal.contains(r#""status":"failed""#), "{journal}");
 
+    // The calibrated command predicts as the calibrated built-in model; a command other
+    // than the calibration's is said to be one.
+    let simulate = |report: &str, config: &Path, out: &str| {
+        let mut c = on_dataset("simulate", "of-dev-clean");
+        c.arg("--params")
+            .arg(dir.join(report))
+            .arg("--out")
+            .arg(dir.join(out));
+        if out != "builtin.csv" {
+            c.args(["--model", "command", "--config"]).arg(config);
+        }
+        run(&mut c)
+    };
+    let o = simulate("command/report.json", &config, "command.csv");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("note:"), "{}", stderr(&o));
+    let o = simulate("builtin/report.json", &config, "builtin.csv");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
+    assert_eq!(read("command.csv"), read("builtin.csv"));
+    let other = dir.join("other.toml");
+    let toml = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &other,
+        toml.replacen("timeout_s = 120", "timeout_s = 120\nenv = { X = \"1\" }", 1),
+    )
+    .unwrap();
+    let o = simulate("command/report.json", &other, "other.csv");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("describes another command than the one the calibration ran"),
+        "{}",
+        stderr(&o)
+    );
+
     // The grid check runs the built-in simulator on finer grids: not for a command.
     let o = calibrate(
         &[
@@ -345,4 +380,58 @@ fn ending_kalibre_ends_the_runs_in_progress() {
             "signal {signal}: solvers still running: {left:?}"
         );
     }
+}
+
+/// `kalibre simulate --model command` runs the command once per snapshot: with `kalibre
+/// simulate` itself as the command its predictions are the built-in model's, digit for
+/// digit; a failed run ends it with the reason and the kept directory; the built-in
+/// simulator's extras are refused, as is `--config` without `--model command`.
+#[test]
+fn simulate_runs_the_command_at_the_given_parameters() {
+    let dir = tmp("command-simulate");
+    let hall = dev_hall();
+    write_command_model(&dir, &hall, 0.25);
+    let params = dir.join("params.json");
+    std::fs::write(
+        &params,
+        r#"{"alpha/web": 0.14, "alpha/db": 0.19, "alpha/gpu": 0.11}"#,
+    )
+    .unwrap();
+    let config = dir.join("model.toml");
+    let simulate = |extra: &[&str], out: &str| {
+        run(on_dataset("simulate", "of-dev-clean")
+            .arg("--params")
+            .arg(&params)
+            .arg("--out")
+            .arg(dir.join(out))
+            .args(extra))
+    };
+    let builtin = simulate(&[], "builtin.csv");
+    assert_eq!(builtin.status.code(), Some(0), "{}", stderr(&builtin));
+    let with_command = ["--model", "command", "--config", config.to_str().unwrap()];
+    let command = simulate(&with_command, "command.csv");
+    assert_eq!(command.status.code(), Some(0), "{}", stderr(&command));
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
+    assert_eq!(read("command.csv"), read("builtin.csv"));
+    let said = String::from_utf8_lossy(&command.stdout);
+    assert!(said.contains(": the command ran in "), "{said}");
+
+    let o = simulate(&[&with_command[..], &["--vtk", "vtk"]].concat(), "x.csv");
+    assert_input_error(&o, "--vtk is not available with --model command");
+    let o = simulate(&["--config", config.to_str().unwrap()], "x.csv");
+    assert_input_error(&o, "--config is for --model command");
+    let o = simulate(&["--model", "command"], "x.csv");
+    assert_input_error(&o, "--model command needs --config model.toml");
+
+    run_under_sh(&dir, "echo no licence >&2; exit 3");
+    let o = simulate(&with_command, "failed.csv");
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("exited with code 3")
+            && err.contains("its log: `no licence`")
+            && err.contains("its directory is kept: "),
+        "{err}"
+    );
+    assert!(!dir.join("failed.csv").exists());
 }

@@ -5,6 +5,7 @@ mod calibrated_model;
 mod demo;
 mod diagnose;
 mod error;
+mod hall_command;
 mod inlets;
 mod likelihood;
 mod openfoam_args;
@@ -12,6 +13,7 @@ mod out_dir;
 mod plausible;
 mod same_file;
 mod simulate;
+mod simulate_command;
 mod simulate_openfoam;
 mod synth;
 mod what_if;
@@ -33,8 +35,8 @@ pub struct Cli {
 enum Command {
     /// Generate a synthetic hall with a hidden truth (hall.json, snapshots.csv, truth.json).
     Synth(synth::SynthArgs),
-    /// Run the built-in simulator (or OpenFOAM) on a hall's snapshots and write the predicted
-    /// sensor readings.
+    /// Run the built-in simulator (or OpenFOAM, or your own through `--config`) on a hall's
+    /// snapshots and write the predicted sensor readings.
     Simulate(simulate::SimulateArgs),
     /// Calibrate a hall's parameters (server air flow rates, effects) against its measurements.
     Calibrate(Box<calibrate::CalibrateArgs>),

@@ -1,5 +1,5 @@
 //! `kalibre simulate`: the built-in simulator on a hall's snapshots (OpenFOAM:
-//! `simulate_openfoam`).
+//! `simulate_openfoam`; an external command: `simulate_command`).
 
 use std::path::{Path, PathBuf};
 
@@ -69,11 +69,16 @@ pub struct SimulateArgs {
     pub(super) grid_check: Vec<f64>,
     #[command(flatten)]
     pub(super) what_if: WhatIfArgs,
-    /// The model: `builtin` (the built-in simulator) or `openfoam` (a case generated from
-    /// hall.json, meshed once into `--of-dir`, one solve per snapshot; predicted sensor
+    /// The model: `builtin` (the built-in simulator), `openfoam` (a case generated from
+    /// hall.json, meshed once into `--of-dir`, one solve per snapshot) or `command` (the
+    /// external simulator of `--config model.toml`, one run per snapshot; predicted sensor
     /// readings only).
     #[arg(long, value_enum, default_value_t = SimulateModel::Builtin)]
     pub(super) model: SimulateModel,
+    /// With `--model command`: the `model.toml` describing the external simulator, as for
+    /// `kalibre calibrate --model command` (docs/models.md).
+    #[arg(long)]
+    pub(super) config: Option<PathBuf>,
     /// OpenFOAM: where the case is meshed and solved; default: the calibration's
     /// `openfoam` directory when `--params` is its `report.json` (its mesh is reused), else
     /// `openfoam` beside `--out`.
@@ -90,6 +95,8 @@ pub enum SimulateModel {
     Builtin,
     /// OpenFOAM (`buoyantBoussinesqSimpleFoam`).
     Openfoam,
+    /// Any simulator driven through files, described by `--config model.toml`.
+    Command,
 }
 
 /// How far the calibration's own misfit says to trust the headrooms: with a report as
@@ -323,6 +330,7 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
             ("the --hall file", Some(args.hall.as_path())),
             ("the --snapshots file", Some(args.snapshots.as_path())),
             ("the --params file", args.params.as_deref()),
+            ("the --config file", args.config.as_deref()),
             ("the run journal beside --params", journal.as_deref()),
         ],
     )
@@ -330,6 +338,17 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
 
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
+    match (args.model, &args.config) {
+        (SimulateModel::Command, None) => {
+            return Err(CliError::Input(
+                "--model command needs --config model.toml (see docs/models.md)".into(),
+            ))
+        }
+        (SimulateModel::Builtin | SimulateModel::Openfoam, Some(_)) => {
+            return Err(CliError::Input("--config is for --model command".into()))
+        }
+        _ => {}
+    }
     refuse_overwriting_inputs(&args, &[])?;
     super::say_to_stderr_if_stdout(&args.out);
     // Before anything is written, so a bad factor never replaces a good `--out`.
@@ -373,8 +392,14 @@ pub fn run(args: SimulateArgs) -> CliResult {
     let file = args.params.as_deref().map(read_params_file).transpose()?;
     args.openfoam
         .refuse_unless(args.model == SimulateModel::Openfoam)?;
-    if args.model == SimulateModel::Openfoam {
-        return super::simulate_openfoam::run(&args, &hall, &snaps, file.as_ref());
+    match args.model {
+        SimulateModel::Openfoam => {
+            return super::simulate_openfoam::run(&args, &hall, &snaps, file.as_ref())
+        }
+        SimulateModel::Command => {
+            return super::simulate_command::run(&args, &hall, &snaps, file.as_ref())
+        }
+        SimulateModel::Builtin => {}
     }
     if args.of_dir.is_some() {
         return Err(CliError::Input(

@@ -2,7 +2,6 @@
 //! OpenFOAM or any external command as the model.
 
 mod findings;
-mod hall_command;
 mod journal_mismatch;
 mod progress;
 mod settings;
@@ -22,11 +21,11 @@ use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::PenaltyReport;
 
 use super::calibrated_model::{scenario_keys, CalibratedModel};
+use super::hall_command::{self, HallCommand};
 use super::likelihood::Likelihood;
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::{io_err, with_threads, CliError, CliResult};
 use findings::{builtin_findings, openfoam_intakes};
-use hall_command::HallCommand;
 use progress::Progress;
 pub(super) use settings::{check_finer_grids, check_grid_factors};
 use settings::{flag_error, settings};

@@ -17,25 +17,29 @@ const NO_SCENARIOS_WITH_A_HALL: &str =
 
 /// Loads `model.toml` for a hall, whose snapshots are the scenarios: a `[[scenarios]]`
 /// list is refused as such, not for a variable its entries lack.
-pub(super) fn load_config(path: &Path) -> CliResult<CommandModelConfig> {
+pub(in crate::cli) fn load_config(path: &Path) -> CliResult<CommandModelConfig> {
     CommandModelConfig::load_without_scenarios(path, NO_SCENARIOS_WITH_A_HALL)
         .map_err(|e| CliError::Input(e.to_string()))
 }
 
 /// An external command as a hall's model: each snapshot becomes the template variables
 /// `setpoint_c/<crac>`, `fan_speed/<crac>` and `power_w/<server>`.
-pub(super) struct HallCommand {
-    pub(super) command: ExternalCommand<NamedScenario>,
-    pub(super) layout: ParamLayout,
+pub(in crate::cli) struct HallCommand {
+    pub(in crate::cli) command: ExternalCommand<NamedScenario>,
+    pub(in crate::cli) layout: ParamLayout,
     crac_ids: Vec<String>,
     server_ids: Vec<String>,
     /// The `[[params]]` whose bounds, initial value or scale differ from the hall's, which
     /// the search uses: said once, so an edit of `model.toml` is not taken to count.
-    pub(super) unused_param_settings: Vec<String>,
+    pub(in crate::cli) unused_param_settings: Vec<String>,
 }
 
 impl HallCommand {
-    pub(super) fn new(hall: &Hall, config: CommandModelConfig, path: &Path) -> CliResult<Self> {
+    pub(in crate::cli) fn new(
+        hall: &Hall,
+        config: CommandModelConfig,
+        path: &Path,
+    ) -> CliResult<Self> {
         let bad = |what: String| CliError::Input(format!("{}: {what}", path.display()));
         let effects = EffectRegistry::builtin().build_all(hall)?;
         let layout = ParamLayout::new(hall, &effects)?;
@@ -71,7 +75,7 @@ impl HallCommand {
         Ok(model)
     }
 
-    pub(super) fn scenario(&self, state: &OperatingState) -> NamedScenario {
+    pub(in crate::cli) fn scenario(&self, state: &OperatingState) -> NamedScenario {
         let mut s = NamedScenario::new(state.label.clone());
         for (i, id) in self.crac_ids.iter().enumerate() {
             s = s

@@ -1,0 +1,132 @@
+//! `kalibre simulate --model command`: the hall's own simulator, driven through files as
+//! `kalibre calibrate --model command` drives it (`--config model.toml`), on every
+//! snapshot at a calibration's parameters or any others, what-ifs included: the
+//! predicted sensor readings.
+
+use std::time::Instant;
+
+use kalibre_core::Model;
+use kalibre_dc::hall::Hall;
+use kalibre_dc::snapshots::{self, HallSnapshot};
+
+use super::calibrated_model::CalibratedModel;
+use super::hall_command::{self, HallCommand};
+use super::simulate::{load_params, SimulateArgs};
+use super::{io_err, say, CliError, CliResult};
+
+/// The built-in simulator's options that a command's runs do not have, by flag: a
+/// command returns its sensors only, not the air of every server nor the fields.
+fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {
+    let given = [
+        ("--vtk", args.vtk.is_some()),
+        ("--heat-sources", args.heat_sources.is_some()),
+        ("--grid-check", !args.grid_check.is_empty()),
+        ("--servers", args.servers.is_some()),
+        ("--inlet-limit-c", args.inlet_limit_c.is_some()),
+        ("--grid-m", args.grid_m.is_some()),
+        ("--of-dir", args.of_dir.is_some()),
+    ];
+    match given.iter().find(|(_, g)| *g) {
+        Some((flag, _)) => Err(CliError::Input(format!(
+            "{flag} is not available with --model command: the command returns the sensors' \
+             readings only (the built-in simulator and OpenFOAM give the servers' air and \
+             fields)"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// Runs the command of `--config` on every snapshot of `snaps` (what-ifs applied) at the
+/// parameters of `file` (a JSON object or a calibration's report, as read by `--params`)
+/// and writes the predicted readings. A failed run ends the command with its reason, its
+/// log's gist and where its directory was kept.
+pub(super) fn run(
+    args: &SimulateArgs,
+    hall: &Hall,
+    snaps: &[HallSnapshot],
+    file: Option<&(serde_json::Value, Option<CalibratedModel>)>,
+) -> CliResult {
+    refuse_builtin_only(args)?;
+    let path = args
+        .config
+        .as_deref()
+        .ok_or_else(|| CliError::Input("--model command needs --config model.toml".into()))?;
+    let recorded = file.and_then(|(_, m)| m.as_ref());
+    // A report's alpha mode decides the parameters' names, as it did for its calibration.
+    let hall = match recorded {
+        Some(m) => m.calibrated_hall(hall),
+        None => hall.clone(),
+    };
+    let model = HallCommand::new(&hall, hall_command::load_config(path)?, path)?;
+    match recorded {
+        Some(m) if m.kind != "command" => eprintln!(
+            "note: the calibration ran the {} model; simulate runs the command of {} at its \
+             parameters",
+            m.kind,
+            path.display()
+        ),
+        Some(CalibratedModel {
+            fingerprint: Some(f),
+            ..
+        }) if *f != model.fingerprint() => eprintln!(
+            "note: {} describes another command than the one the calibration ran (its \
+             program, arguments, templates or parser differ): the predictions are this \
+             command's",
+            path.display()
+        ),
+        _ => {}
+    }
+    // Every placeholder is checked before the first run, as calibrate checks them.
+    for s in snaps {
+        model
+            .command
+            .check_scenario(&model.scenario(&s.state))
+            .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
+    }
+    let space = model.layout.space();
+    let params = match (&args.params, file) {
+        (Some(p), Some((json, _))) => load_params(p, json, space)?,
+        _ => space.initial(),
+    };
+    let mut labels = Vec::with_capacity(snaps.len());
+    let mut predicted = Vec::with_capacity(snaps.len());
+    for snap in snaps {
+        let label = &snap.state.label;
+        let started = Instant::now();
+        let report = model.command.run(&model.scenario(&snap.state), &params);
+        let outputs = report
+            .outcome
+            .and_then(|o| model.check_plausible(&o).map(|()| o))
+            .map_err(|e| {
+                let gist = e
+                    .log_gist()
+                    .map(|g| format!("; its log: {g}"))
+                    .unwrap_or_default();
+                let kept = report
+                    .attempts
+                    .last()
+                    .filter(|a| a.kept)
+                    .and_then(|a| a.run_dir.as_ref())
+                    .map(|d| format!(" (its directory is kept: {})", d.display()))
+                    .unwrap_or_default();
+                CliError::Run(format!("snapshot `{label}`: {e}{gist}{kept}"))
+            })?;
+        say!(
+            "{label}: the command ran in {:.1} s",
+            started.elapsed().as_secs_f64()
+        );
+        labels.push(label.clone());
+        predicted.push(outputs.values);
+    }
+    let csv = snapshots::write_predictions(&hall, &labels, &predicted);
+    kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
+    super::simulate::say_if_uncalibrated(args);
+    say!(
+        "wrote {} ({} snapshots x {} sensors, from the command of {})",
+        args.out.display(),
+        labels.len(),
+        hall.sensors.len(),
+        path.display()
+    );
+    Ok(())
+}
