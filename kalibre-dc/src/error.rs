@@ -106,6 +106,19 @@ impl Error {
     /// [`Self::in_hall_file`], pointing at the entry's `no_field` when the message names
     /// no field.
     pub(crate) fn in_hall_file_at(self, file: &str, no_field: Option<&str>) -> Self {
+        // A placement the grid cannot hold, led by the entry's JSON pointer.
+        if let Error::Geometry(message) = &self {
+            if let Some((pointer, rest)) = message
+                .split_once(": ")
+                .filter(|(p, _)| p.starts_with('/') && !p.contains(' '))
+            {
+                return Error::format(
+                    file,
+                    pointer,
+                    format!("the built-in simulator cannot place it: {rest}"),
+                );
+            }
+        }
         let Error::Effect { kind, message } = self else {
             return self;
         };

@@ -48,6 +48,7 @@ pub(crate) fn warn_implausible_rises<'a>(
     hall: &Hall,
     states: impl IntoIterator<Item = &'a OperatingState>,
 ) {
+    warn_alpha_units(hall_path, hall);
     let slips = snapshots::implausible_rises(hall, states);
     let Some(first) = slips.first() else {
         return;
@@ -126,4 +127,76 @@ mod tests {
         assert_eq!(super::significant(3.15), "3.15");
         assert_eq!(super::significant(12.34), "12.3");
     }
+}
+
+/// Warns when the built-in simulator's grid of `cell_m` moves equipment of the hall at
+/// `hall_path` (racks, CRACs, tiles, containment) to its cell faces: a rack a quarter
+/// cell off moves the air of its aisle, and the readings by tenths of a degree, without a
+/// word otherwise. Names the first such edge, how far the farthest moves, and a finer
+/// grid that places them all when one of up to 8 times finer does.
+pub(crate) fn warn_off_grid(hall_path: &Path, hall: &Hall, cell_m: f64) {
+    let moved = kalibre_dc::sim::off_grid_edges(hall, cell_m);
+    let Some(first) = moved.first() else {
+        return;
+    };
+    let farthest_m = moved
+        .iter()
+        .map(|e| (e.given_m - e.placed_m).abs())
+        .fold(0.0, f64::max);
+    let n = snapshots::number;
+    let rounded = |x: f64| n((x * 1e6).round() / 1e6);
+    let cure = match kalibre_dc::sim::grid_placing_all(hall, cell_m) {
+        Some(c) => format!("--grid-m {} places them as written", rounded(c)),
+        None => "a --grid-m that divides their positions places them as written".into(),
+    };
+    eprintln!(
+        "kalibre: warning: {}: {} edge{} of racks, CRACs, tiles or containment lie between \
+         the built-in simulator's cells of {} m and are moved to the nearest cell face, by \
+         up to {} m (the first: {}, {} = {} m taken as {} m); {cure}",
+        hall_path.display(),
+        moved.len(),
+        if moved.len() == 1 { "" } else { "s" },
+        rounded(cell_m),
+        rounded(farthest_m),
+        first.pointer,
+        ["x", "y", "z"][first.axis],
+        rounded(first.given_m),
+        rounded(first.placed_m),
+    );
+}
+
+/// A server's air warms by `1 / (1206 J/(m3 K) x alpha x 4.71947e-4 m3/s per cfm)` K, so
+/// the initial alpha of each server type says what rise the hall starts from. Outside
+/// these, alpha is in another unit: m3/s per W (2,119 times smaller) gives thousands of
+/// kelvin, and no server moves air enough for less than half a kelvin.
+const ALPHA_RISE_K: std::ops::RangeInclusive<f64> = 0.5..=100.0;
+
+/// Warns of a server type whose initial `alpha_cfm_per_w` gives a temperature rise
+/// through its servers outside [`ALPHA_RISE_K`] (a unit slip that validation, which only
+/// asks `0 < min <= initial <= max`, lets through), naming the file and the field.
+fn warn_alpha_units(hall_path: &Path, hall: &Hall) {
+    // The built-in simulator's air: 1.2 kg/m3 x 1005 J/(kg K).
+    const AIR_RHO_CP_J_M3_K: f64 = 1206.0;
+    let rise_k = |alpha: f64| 1.0 / (AIR_RHO_CP_J_M3_K * alpha * kalibre_dc::sim::M3_S_PER_CFM);
+    let Some((i, t)) = hall
+        .server_types
+        .iter()
+        .enumerate()
+        .find(|(_, t)| !ALPHA_RISE_K.contains(&rise_k(t.alpha_cfm_per_w.initial)))
+    else {
+        return;
+    };
+    let alpha = t.alpha_cfm_per_w.initial;
+    eprintln!(
+        "kalibre: warning: {}: /server_types/{i}/alpha_cfm_per_w/initial: {} cfm/W warms \
+         the air of a `{}` server by {:.3e} K; servers warm theirs by {}-{} K (about \
+         0.02-3.5 cfm/W): is it in another unit (m3/s per W is 2,119 times smaller than \
+         cfm/W)?",
+        hall_path.display(),
+        snapshots::number(alpha),
+        t.id,
+        rise_k(alpha),
+        ALPHA_RISE_K.start(),
+        ALPHA_RISE_K.end(),
+    );
 }

@@ -287,19 +287,37 @@ pub fn sim_config(grid_m: Option<f64>) -> CliResult<SimConfig> {
     Ok(config)
 }
 
-/// The built-in model's cells for `hall` at `cell_m` (from `--grid-m`, a calibration's
-/// record or the default): a room too fine to build is refused as the flag's error before
-/// anything runs, rather than failing as the model's (exit 1) when it is built.
-pub(super) fn check_model_cells(hall: &Hall, cell_m: f64) -> CliResult {
-    match kalibre_dc::sim::cells_beyond_cap(hall.room.size_m, cell_m) {
-        Some(cells) => Err(CliError::Input(format!(
+/// The built-in model's cells for `hall` (read from `hall_path`) at `cell_m` (from
+/// `--grid-m` when `grid_given`, else a calibration's record or the default): a room too
+/// fine to build is refused before anything runs, rather than failing as the model's
+/// (exit 1) when it is built. Without `--grid-m` the room is blamed, not a flag never
+/// given: a hall written in millimetres is a thousand times too large.
+pub(super) fn check_model_cells(
+    hall: &Hall,
+    hall_path: &Path,
+    cell_m: f64,
+    grid_given: bool,
+) -> CliResult {
+    let Some(cells) = kalibre_dc::sim::cells_beyond_cap(hall.room.size_m, cell_m) else {
+        return Ok(());
+    };
+    let cap = kalibre_dc::sim::MAX_CELLS;
+    Err(CliError::Input(if grid_given {
+        format!(
             "--grid-m: cells of {} m give {cells:.3e} cells in this room, above the built-in \
-             simulator's {}: use coarser cells",
+             simulator's {cap}: use coarser cells",
             number(cell_m),
-            kalibre_dc::sim::MAX_CELLS
-        ))),
-        None => Ok(()),
-    }
+        )
+    } else {
+        let [x, y, z] = hall.room.size_m.map(number);
+        format!(
+            "{}: /room/size_m: a room of {x} x {y} x {z} m needs {cells:.3e} cells of {} m, \
+             above the built-in simulator's {cap}: are its lengths in metres? (a hall this \
+             large needs coarser cells: --grid-m)",
+            hall_path.display(),
+            number(cell_m),
+        )
+    }))
 }
 
 /// An output path that names an input file would replace the measurements (or the hall)
@@ -434,7 +452,8 @@ pub fn run(args: SimulateArgs) -> CliResult {
         None => args.grid_m,
     };
     let config = sim_config(grid_m)?;
-    check_model_cells(&hall, config.cell_m)?;
+    check_model_cells(&hall, &args.hall, config.cell_m, args.grid_m.is_some())?;
+    super::plausible::warn_off_grid(&args.hall, &hall, config.cell_m);
     // Before any solve: a factor whose grid is the model's own in this room, or too
     // fine to build, would otherwise fail (or check nothing) after the predictions.
     super::calibrate::check_finer_grids(&hall, config.cell_m, &args.grid_check)?;

@@ -397,10 +397,32 @@ impl Report {
             .find(|h| h.iteration == self.best.iteration)
         {
             Some(h) if h.training_samples == 0 => {
-                format!("the polish, after the loop's {loop_iterations} iterations")
+                let s = if loop_iterations == 1 { "" } else { "s" };
+                format!("the polish, after the loop's {loop_iterations} iteration{s}")
             }
             None if self.best.iteration == 0 => "the initial design".to_string(),
             _ => format!("iteration {}", self.best.iteration),
         }
+    }
+
+    /// What the residual's repetition over the snapshots (`residual_icc`, when above
+    /// [`super::REPEATED_RESIDUAL_ICC`]) says, in words, for the summary and
+    /// `report.html`: a model error the parameters cannot absorb, or a fit not finished.
+    pub fn repeated_residual_note(&self) -> Option<String> {
+        let icc = self
+            .residual_icc
+            .filter(|r| *r > super::REPEATED_RESIDUAL_ICC)?;
+        let share = format!(
+            "{:.0}% of the residual repeats at the same sensors in every snapshot",
+            100.0 * icc
+        );
+        // A fit stopped short of the data's optimum repeats too (its parameters are off
+        // the same way in every snapshot): a per-server alpha or a few iterations.
+        Some(format!(
+            "{share}: the model misses something the parameters cannot absorb, or the fit \
+             has not finished, and the values may be off by more than their spreads (kalibre \
+             diagnose looks for what is missing; when it finds nothing, more iterations or \
+             the polish may be what is)"
+        ))
     }
 }

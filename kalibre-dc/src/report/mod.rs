@@ -276,17 +276,11 @@ pub fn calibration_html(
             src.describe()
         );
     }
-    if let Some(icc) = report
-        .residual_icc
-        .filter(|r| *r > kalibre_core::calibrate::REPEATED_RESIDUAL_ICC)
-    {
+    if let Some(note) = report.repeated_residual_note() {
         let _ = write!(
             h,
-            "<p><b>Model error:</b> {:.0}% of the residual repeats at the same sensors in every \
-             snapshot. The model misses something the parameters cannot absorb, and the values \
-             may be off by more than their spreads; <code>kalibre diagnose</code> looks for \
-             what is missing.</p>",
-            100.0 * icc
+            "<p><b>Model error:</b> {}.</p>",
+            esc(&note)
         );
     }
     if let Some(checks) = intakes {

@@ -36,6 +36,7 @@ mod multigrid;
 mod panel;
 mod placement;
 mod run;
+mod snapping;
 mod solution;
 mod supply;
 mod topology;
@@ -54,6 +55,7 @@ pub use inlets::{
 };
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
+pub use snapping::{grid_placing_all, off_grid_edges, SnappedEdge};
 pub use solution::Solution;
 pub use supply::tile_flows_m3_s;
 pub use topology::{cells_beyond_cap, MAX_CELLS};

@@ -216,21 +216,21 @@ impl Topology {
             let b = s.bounds();
             let z = [b.min[2], b.max[2]];
             let rb = Aabb::from_position_size(s.rack.position_m, s.rack.size_m);
-            let inl = face_stencil(&grid, &solid, &rb, s.rack.inlet, z).ok_or_else(|| {
+            // The JSON pointer first, so the CLI can name the hall file's field.
+            let blocked = |face: &str| {
+                let rack = hall.racks.iter().position(|r| r.id == s.rack.id);
                 Error::Geometry(format!(
-                    "server `{}`: no open cell at its intake{}",
+                    "/racks/{}/inlet: server `{}` of rack `{}`: no open cell at its {face}{}",
+                    rack.unwrap_or_default(),
                     s.server.id,
+                    s.rack.id,
                     face_hint(&grid, s.rack.size_m)
                 ))
-            })?;
-            let exh =
-                face_stencil(&grid, &solid, &rb, s.rack.inlet.opposite(), z).ok_or_else(|| {
-                    Error::Geometry(format!(
-                        "server `{}`: no open cell at its exhaust{}",
-                        s.server.id,
-                        face_hint(&grid, s.rack.size_m)
-                    ))
-                })?;
+            };
+            let inl = face_stencil(&grid, &solid, &rb, s.rack.inlet, z)
+                .ok_or_else(|| blocked("intake"))?;
+            let exh = face_stencil(&grid, &solid, &rb, s.rack.inlet.opposite(), z)
+                .ok_or_else(|| blocked("exhaust"))?;
             server_intake.push(inl);
             server_exhaust.push(exh);
         }

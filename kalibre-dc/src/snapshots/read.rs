@@ -99,6 +99,19 @@ fn parse(hall: &Hall, bytes: &[u8], file: &str, need_readings: bool) -> Result<V
         if let Some(why) = crate::hall::unprintable_name(label) {
             return Err(row.err(Some(0), format!("snapshot label {why}")));
         }
+        // An export's padding would make `night ` another snapshot than `night`, whose
+        // rows would then each look incomplete.
+        if label.trim() != label {
+            return Err(row.err(
+                Some(0),
+                format!(
+                    "snapshot label `{}` starts or ends with a space; labels are taken as \
+                     written, so it would be another snapshot than `{}`",
+                    show(label),
+                    show(label.trim())
+                ),
+            ));
+        }
         let slot = match by_label.get(label) {
             Some(&k) => k,
             None => {
@@ -490,7 +503,7 @@ impl Acc {
                     "every CRAC's fan_speed is 0 (the servers draw {} kW): no air enters the \
                      hall, so no model of it has a steady state; expected at least one fan \
                      running",
-                    super::number(power_total_w / 1000.0)
+                    super::number(power_total_w.round() / 1000.0)
                 ),
             ));
         }

@@ -408,7 +408,13 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     if args.model == ModelArg::Builtin {
-        super::simulate::check_model_cells(&hall, settings.sim.cell_m)?;
+        super::simulate::check_model_cells(
+            &hall,
+            &args.hall,
+            settings.sim.cell_m,
+            args.grid_m.is_some(),
+        )?;
+        super::plausible::warn_off_grid(&args.hall, &hall, settings.sim.cell_m);
     }
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.

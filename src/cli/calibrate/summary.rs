@@ -66,17 +66,8 @@ fn print_uncertainty(report: &Report) {
     if let Some(src) = report.uncertainty_slopes {
         println!("  {:<28} {}", "slopes of the spreads", src.describe());
     }
-    if let Some(icc) = report
-        .residual_icc
-        .filter(|r| *r > kalibre_core::calibrate::REPEATED_RESIDUAL_ICC)
-    {
-        println!(
-            "  {:<28} {:.0}% of the residual repeats at the same sensors in every snapshot: \
-             the model misses something the parameters cannot absorb, and the values may be \
-             off by more than their spreads (kalibre diagnose looks for what is missing)",
-            "model error",
-            100.0 * icc
-        );
+    if let Some(note) = report.repeated_residual_note() {
+        println!("  {:<28} {note}", "model error");
     }
     if !poor.is_empty() {
         const SHOWN: usize = 8;

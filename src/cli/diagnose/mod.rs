@@ -226,7 +226,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     }
     let sim = sim_config(grid_m)?;
     if args.model == DiagnoseModel::Builtin {
-        check_model_cells(&hall, sim.cell_m)?;
+        check_model_cells(&hall, &args.hall, sim.cell_m, args.grid_m.is_some())?;
+        super::plausible::warn_off_grid(&args.hall, &hall, sim.cell_m);
     }
     let model = HallModel::new(&hall, sim.clone())
         .map_err(|e| e.in_hall_file(&args.hall.display().to_string()))?;
@@ -370,9 +371,10 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     // Said only when it weighs: on data the model reproduces the share is about 0.
     if let Some(share) = d.diagnosis.model_form_share.filter(|c| *c >= 0.01) {
         println!(
-            "  (the residuals match {:.0} % of what tile jets, which the built-in model's air \
-             flow lacks, would change: the sensors the jets move, often the row-end inlets, \
-             weigh less in this ranking)",
+            "  (model uncertainty: tile jets, which the built-in model's air flow lacks, would \
+             move some sensors; the residuals are large enough to allow {:.0} % of that \
+             movement's variance, so those sensors, often the row-end inlets, weigh less in \
+             this ranking)",
             100.0 * share
         );
     }
@@ -387,6 +389,14 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         );
     } else if significant.is_empty() {
         println!("  no significant missing effect");
+    } else if significant.len() > 1 {
+        // Several places or kinds can each take up the same residual: the first is the
+        // best-supported reading, the rest are often it read another way.
+        println!(
+            "  {} are significant, often one residual read several ways: add the first, \
+             recalibrate and diagnose again; the others fall away if they were the same",
+            significant.len()
+        );
     }
     for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
         let flags = hypothesis_flags(

@@ -1,0 +1,157 @@
+//! What an export script that writes `hall.json` and `snapshots.csv` for kalibre gets
+//! wrong, and what kalibre says (a walkthrough of `docs/formats.md` by an engineer
+//! writing a hall by hand): lengths in millimetres, padded labels, a rack facing a wall,
+//! equipment off the simulator's grid, alpha in another unit, and a sum of powers.
+
+mod cli_support;
+use cli_support::*;
+
+use std::path::{Path, PathBuf};
+
+/// The clean development hall with `edit` applied, written to `dir/name`.
+fn edited_hall(dir: &Path, name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> PathBuf {
+    let text = std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap();
+    let mut hall: serde_json::Value = serde_json::from_str(&text).unwrap();
+    edit(&mut hall);
+    let path = dir.join(name);
+    std::fs::write(&path, serde_json::to_string_pretty(&hall).unwrap()).unwrap();
+    path
+}
+
+/// `kalibre simulate` of `hall` on the development snapshots (or `snapshots`).
+fn simulate(dir: &Path, hall: &Path, snapshots: Option<&Path>) -> std::process::Output {
+    let default = data("of-dev-clean/snapshots.csv");
+    run(on_files("simulate", hall, snapshots.unwrap_or(&default))
+        .arg("--out")
+        .arg(dir.join("pred.csv")))
+}
+
+/// A hall in millimetres is blamed on its room size, not on a `--grid-m` never given.
+#[test]
+fn a_hall_in_millimetres_names_the_room_not_the_grid_flag() {
+    let dir = tmp("export-mm");
+    let hall = edited_hall(&dir, "hall.json", |h| {
+        for v in h["room"]["size_m"].as_array_mut().unwrap() {
+            *v = serde_json::json!(v.as_f64().unwrap() * 1000.0);
+        }
+    });
+    let o = simulate(&dir, &hall, None);
+    assert_input_error(&o, "hall.json: /room/size_m: a room of 7200 x 4800 x 3000 m");
+    assert!(stderr(&o).contains("are its lengths in metres?"));
+    let o = run(on_files("simulate", &hall, &data("of-dev-clean/snapshots.csv"))
+        .args(["--grid-m", "0.2", "--out"])
+        .arg(dir.join("pred.csv")));
+    assert_input_error(&o, "--grid-m: cells of 0.2 m give");
+}
+
+/// A label padded with a space would be another snapshot, each then incomplete: it is
+/// refused at its line.
+#[test]
+fn a_padded_snapshot_label_is_refused_at_its_line() {
+    let dir = tmp("export-label");
+    let text = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    lines[5] = lines[5].replacen("t0,", "t0 ,", 1);
+    let csv = dir.join("snapshots.csv");
+    std::fs::write(&csv, lines.join("\n")).unwrap();
+    let o = simulate(&dir, &data("of-dev-clean/hall.json"), Some(&csv));
+    assert_input_error(
+        &o,
+        "snapshots.csv: line 6, column snapshot: snapshot label `t0 ` starts or ends with a space",
+    );
+}
+
+/// A rack turned to draw its air from the wall it stands against: the simulator's
+/// refusal names the hall file and the rack's field.
+#[test]
+fn a_rack_facing_a_wall_is_named_in_the_hall_file() {
+    let dir = tmp("export-wall");
+    let hall = edited_hall(&dir, "hall.json", |h| {
+        let rack = &mut h["racks"][0];
+        rack["position_m"][1] = serde_json::json!(0.0);
+        rack["inlet"] = serde_json::json!("-y");
+        // Its hot-aisle sensor would now be inside it.
+        let sensors = h["sensors"].as_array_mut().unwrap();
+        sensors.retain(|s| s["id"] != "h-A1");
+    });
+    let text = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
+    let kept: Vec<&str> = text.lines().filter(|l| !l.contains(",h-A1,")).collect();
+    let csv = dir.join("snapshots.csv");
+    std::fs::write(&csv, kept.join("\n")).unwrap();
+    let o = simulate(&dir, &hall, Some(&csv));
+    assert_input_error(
+        &o,
+        "hall.json: /racks/0/inlet: the built-in simulator cannot place it: server `A1-01` \
+         of rack `A1`: no open cell at its intake",
+    );
+}
+
+/// Racks a quarter cell off the grid are moved to it, and the user hears of it with a
+/// grid that places them; the development hall, on the grid, gives no warning.
+#[test]
+fn equipment_off_the_grid_is_warned_of_with_a_grid_that_places_it() {
+    let dir = tmp("export-grid");
+    let hall = edited_hall(&dir, "hall.json", |h| {
+        for r in h["racks"].as_array_mut().unwrap() {
+            let x = r["position_m"][0].as_f64().unwrap();
+            r["position_m"][0] = serde_json::json!(x + 0.05);
+        }
+    });
+    let o = simulate(&dir, &hall, None);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("kalibre: warning: ")
+            && err.contains("20 edges of racks, CRACs, tiles or containment lie between")
+            && err.contains("(the first: /racks/0/position_m, x = 2.45 m taken as 2.4 m)")
+            && err.contains("--grid-m 0.05 places them as written"),
+        "{err}"
+    );
+    let o = simulate(&dir, &data("of-dev-clean/hall.json"), None);
+    assert!(o.status.success() && stderr(&o).is_empty(), "{}", stderr(&o));
+}
+
+/// Alpha in m3/s per W passes `0 < min <= initial <= max`; the rise it implies is warned of.
+#[test]
+fn alpha_in_another_unit_is_warned_of() {
+    let dir = tmp("export-alpha");
+    let hall = edited_hall(&dir, "hall.json", |h| {
+        h["server_types"][1]["alpha_cfm_per_w"] =
+            serde_json::json!({ "initial": 7e-5, "min": 1e-5, "max": 1e-4 });
+    });
+    let o = simulate(&dir, &hall, None);
+    let err = stderr(&o);
+    assert!(
+        err.contains("/server_types/1/alpha_cfm_per_w/initial: 7e-5 cfm/W warms the air")
+            && err.contains("is it in another unit"),
+        "{err}"
+    );
+}
+
+/// A snapshot with every fan off says what the servers draw in readable kilowatts, not
+/// with the sum's floating-point noise.
+#[test]
+fn the_power_of_a_snapshot_without_air_is_given_in_whole_watts() {
+    let dir = tmp("export-fans");
+    let text = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
+    let mut servers = 0;
+    let edited: Vec<String> = text
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            match (f[0], f[1]) {
+                ("t0", "fan_speed") => format!("t0,fan_speed,{},0", f[2]),
+                ("t0", "power_w") => {
+                    servers += 1;
+                    format!("t0,power_w,{},100.1", f[2])
+                }
+                _ => l.to_string(),
+            }
+        })
+        .collect();
+    let csv = dir.join("snapshots.csv");
+    std::fs::write(&csv, edited.join("\n")).unwrap();
+    let o = simulate(&dir, &data("of-dev-clean/hall.json"), Some(&csv));
+    let kw = (servers as f64 * 100.1).round() / 1000.0;
+    assert_input_error(&o, &format!("(the servers draw {kw} kW)"));
+}
