@@ -36,11 +36,16 @@ fn a_hall_in_millimetres_names_the_room_not_the_grid_flag() {
         }
     });
     let o = simulate(&dir, &hall, None);
-    assert_input_error(&o, "hall.json: /room/size_m: a room of 7200 x 4800 x 3000 m");
+    assert_input_error(
+        &o,
+        "hall.json: /room/size_m: a room of 7200 x 4800 x 3000 m",
+    );
     assert!(stderr(&o).contains("are its lengths in metres?"));
-    let o = run(on_files("simulate", &hall, &data("of-dev-clean/snapshots.csv"))
-        .args(["--grid-m", "0.2", "--out"])
-        .arg(dir.join("pred.csv")));
+    let o = run(
+        on_files("simulate", &hall, &data("of-dev-clean/snapshots.csv"))
+            .args(["--grid-m", "0.2", "--out"])
+            .arg(dir.join("pred.csv")),
+    );
     assert_input_error(&o, "--grid-m: cells of 0.2 m give");
 }
 
@@ -108,7 +113,11 @@ fn equipment_off_the_grid_is_warned_of_with_a_grid_that_places_it() {
         "{err}"
     );
     let o = simulate(&dir, &data("of-dev-clean/hall.json"), None);
-    assert!(o.status.success() && stderr(&o).is_empty(), "{}", stderr(&o));
+    assert!(
+        o.status.success() && stderr(&o).is_empty(),
+        "{}",
+        stderr(&o)
+    );
 }
 
 /// Alpha in m3/s per W passes `0 < min <= initial <= max`; the rise it implies is warned of.

@@ -13,7 +13,13 @@
 //! Every model run is journaled in a [`RunStore`] (`runs.jsonl`) as it finishes, so a
 //! restarted calibration replays what it already ran and ends bit-identical to an
 //! uninterrupted one. Progress goes to [`Observe`]rs; the result is a serialisable
-//! [`Report`] (`report.json`).
+//! [`Report`] (`report.json`). The journal is in memory unless one is given:
+//! `.with_store(RunStore::open("runs.jsonl", model.fingerprint())?)`.
+//!
+//! [`Settings::default`] is the paper's plain loop; with a model and surrogate of your
+//! own, start from [`Settings::recommended`] (the surrogate corrected to the model's runs,
+//! a trust region, a polish on the model's own slopes), as `kalibre calibrate` does:
+//! `.with_settings(Settings::recommended())` before the other `with_*` calls.
 //!
 //! # Example
 //!

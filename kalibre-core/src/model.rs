@@ -157,12 +157,29 @@ pub trait Model: Sync {
     /// another fingerprint are never reused.
     fn fingerprint(&self) -> String;
 
-    /// Runs the model. Failure is a value, never a panic.
+    /// Runs the model. Failure is a value: return a [`ModelError`] (the loop also catches
+    /// a panic and journals it as a failed run, but a panic may leave the model's own
+    /// state half-updated).
     fn evaluate(
         &self,
         scenario: &Self::Scenario,
         params: &[f64],
     ) -> std::result::Result<Outputs, ModelError>;
+
+    /// The names of the parameters the model reads, in the order it reads them, when it
+    /// knows them (an [`crate::external::ExternalCommand`] does): the loop then refuses a
+    /// [`crate::ParamSpace`] that names them otherwise, whose values would reach the
+    /// model swapped without a word. The default, `None`, trusts the order.
+    fn param_names(&self) -> Option<Vec<String>> {
+        None
+    }
+
+    /// The names of the outputs the model returns, in order, when it knows them: the
+    /// loop refuses observations that name them otherwise. The default, `None`, trusts
+    /// the order.
+    fn output_names(&self) -> Option<Vec<String>> {
+        None
+    }
 
     /// Checks a successful run's outputs against what the model can physically give
     /// (for a data hall: air above absolute zero). The loop applies it to every run,

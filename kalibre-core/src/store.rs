@@ -287,6 +287,17 @@ impl RunStore {
             .create(true)
             .open(&path)
             .map_err(|e| Error::io(&path, e))?;
+        // Two calibrations appending to one journal would each run what the other ran
+        // (each reads the file once). The lock lives as long as the store; a file system
+        // without locks is let through, as before.
+        if let Err(std::fs::TryLockError::WouldBlock) = file.try_lock() {
+            return Err(Error::Journal {
+                path: path.display().to_string(),
+                reason: "another calibration has it open (it holds the journal's lock); wait \
+                         for it to finish, or give this one another journal"
+                    .into(),
+            });
+        }
         let mut bytes = Vec::new();
         file.read_to_end(&mut bytes)
             .map_err(|e| Error::io(&path, e))?;

@@ -271,6 +271,93 @@ fn a_journal_of_another_model_is_refused() {
     assert_eq!(model.calls(), 0);
 }
 
+/// Equal bounds everywhere leave nothing to calibrate: refused before any run, where
+/// the loop used to run one point over and over from its store.
+#[test]
+fn a_space_with_every_parameter_fixed_is_refused() {
+    let (model, obs) = (Poly::new(), observations());
+    let space = kalibre_core::ParamSpace::new()
+        .with("a", 1.0, 1.0, 1.0, kalibre_core::Scale::Linear)
+        .unwrap()
+        .with("b", 2.0, 2.0, 2.0, kalibre_core::Scale::Linear)
+        .unwrap();
+    let err = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .run()
+        .unwrap_err();
+    assert!(
+        matches!(err, Error::Mismatch(ref m) if m == "every parameter has equal bounds (a, b): nothing to calibrate"),
+        "{err}"
+    );
+    assert_eq!(model.calls(), 0);
+}
+
+/// Poly, naming its parameters and outputs as an external command does.
+struct NamedPoly {
+    params: [&'static str; 2],
+    outputs: Vec<String>,
+}
+
+impl kalibre_core::Model for NamedPoly {
+    type Scenario = Scen;
+
+    fn fingerprint(&self) -> String {
+        "poly-v1".into()
+    }
+
+    fn evaluate(
+        &self,
+        scenario: &Scen,
+        params: &[f64],
+    ) -> Result<kalibre_core::Outputs, kalibre_core::ModelError> {
+        Poly::new().evaluate(scenario, params)
+    }
+
+    fn param_names(&self) -> Option<Vec<String>> {
+        Some(self.params.iter().map(|s| s.to_string()).collect())
+    }
+
+    fn output_names(&self) -> Option<Vec<String>> {
+        Some(self.outputs.clone())
+    }
+}
+
+/// A model that names its parameters or outputs in another order than the space or the
+/// observations is refused before any run: the values would reach it swapped.
+#[test]
+fn a_model_naming_its_parameters_or_outputs_otherwise_is_refused() {
+    let (obs, space) = (observations(), space());
+    let outputs = obs.output_names();
+    let refusal = |model: NamedPoly| {
+        Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+            .with_max_iterations(1)
+            .run()
+            .map(|_| ())
+    };
+    let swapped = NamedPoly {
+        params: ["b", "a"],
+        outputs: outputs.clone(),
+    };
+    let err = refusal(swapped).unwrap_err().to_string();
+    assert!(
+        err.contains("the model's parameters are [b, a], the parameter space's [a, b]"),
+        "{err}"
+    );
+    let mut reversed = outputs.clone();
+    reversed.reverse();
+    let err = refusal(NamedPoly {
+        params: ["a", "b"],
+        outputs: reversed,
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("the model's outputs are ["), "{err}");
+    assert!(refusal(NamedPoly {
+        params: ["a", "b"],
+        outputs
+    })
+    .is_ok());
+}
+
 #[test]
 fn stops_on_the_wall_clock_budget_and_on_convergence() {
     let (model, obs, space) = (Poly::new(), observations(), space());

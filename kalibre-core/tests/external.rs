@@ -36,6 +36,22 @@ fn python_model(runs: &Path) -> kalibre_core::external::CommandBuilder {
         .with_timeout(Duration::from_secs(20))
 }
 
+/// The command names its parameters and outputs to the loop, which checks them against
+/// the parameter space and the observations.
+#[test]
+fn the_command_names_its_parameters_and_outputs_to_the_loop() {
+    let root = scratch("names");
+    let cmd = python_model(&root).build::<NamedScenario>().unwrap();
+    assert_eq!(
+        Model::param_names(&cmd),
+        Some(vec!["k".to_string(), "h".to_string()])
+    );
+    assert_eq!(
+        Model::output_names(&cmd),
+        Some(vec!["t_in".to_string(), "t_out".to_string()])
+    );
+}
+
 fn log_tail(e: &ModelError) -> &str {
     match e {
         ModelError::Failed { log_tail, .. } | ModelError::Timeout { log_tail, .. } => {

@@ -119,6 +119,11 @@ fn a_design_that_fails_everywhere_says_why() {
         e.contains("the first: model run failed: diverged at a ="),
         "{e}"
     );
+    // Without a journal there is none to look in: said so, with how to keep one.
+    assert!(
+        e.contains("a journal, `with_store(RunStore::open(..))`, keeps each run's reason"),
+        "{e}"
+    );
 }
 
 /// Poly, except that every run at the second snapshot fails (as a hall snapshot with
@@ -188,4 +193,95 @@ fn a_negative_spread_fails_the_run_and_says_so() {
     let e = failure_of(&WithSpread(sound, -0.1));
     assert!(e.contains("runs of the initial design failed"), "{e}");
     assert!(e.contains("a negative or non-finite value"), "{e}");
+}
+
+/// Proposes the failing upper corner give or take 1e-7, as a search re-finding one
+/// optimum does: each proposal is a new point to the duplicate check, but not a new
+/// chance for the model.
+struct NearlyStuckOnFailure;
+
+impl Searcher for NearlyStuckOnFailure {
+    fn search(
+        &self,
+        _objective: &dyn Objective,
+        _start: &[f64],
+        seed: u64,
+    ) -> kalibre_core::Result<SearchOutcome> {
+        let jitter = 1e-7 * (seed % 5) as f64;
+        Ok(SearchOutcome {
+            timed_out: false,
+            best_unit: vec![0.99 - jitter, 0.99],
+            best_cost: 0.0,
+            evaluations: 0,
+            trace: Vec::new(),
+        })
+    }
+}
+
+#[test]
+fn a_proposal_beside_a_failed_point_is_moved_too() {
+    let (model, obs, space) = (Poly::failing(ZONE), observations(), space());
+    let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_searcher(NearlyStuckOnFailure)
+        .with_max_iterations(5)
+        .run()
+        .unwrap();
+    // The first proposal fails (a > 3); every later one lands beside it and is moved.
+    assert!(!r.history[0].perturbed);
+    assert!(
+        r.history[1..].iter().all(|h| h.perturbed),
+        "{:?}",
+        r.history
+    );
+    let first = r.history[0].params.values();
+    for h in &r.history[1..] {
+        let moved = h.params.values()[0] - first[0];
+        assert!(moved.abs() > 1e-3, "{:?}", h.params);
+    }
+}
+
+/// Poly, except that it panics (as an `unwrap` in a user's simulator would) for `a > 3`.
+struct PanickingPoly(Poly);
+
+impl kalibre_core::Model for PanickingPoly {
+    type Scenario = Scen;
+
+    fn fingerprint(&self) -> String {
+        "poly-v1".into()
+    }
+
+    fn evaluate(
+        &self,
+        scenario: &Scen,
+        params: &[f64],
+    ) -> Result<kalibre_core::Outputs, ModelError> {
+        assert!(params[0] <= 3.0, "index out of range at a = {}", params[0]);
+        self.0.evaluate(scenario, params)
+    }
+}
+
+/// A panicking run is a failed run, journaled with the panic's message, and the
+/// calibration goes on to the truth.
+#[test]
+fn a_model_that_panics_fails_the_run_not_the_calibration() {
+    let dir = temp_dir("panics");
+    let path = dir.join("runs.jsonl");
+    let model = PanickingPoly(Poly::new());
+    let r = Calibrator::new(&model, QuadSurface::default(), &observations(), &space())
+        .with_seed(1)
+        .with_max_iterations(12)
+        .with_target_score(1e-3)
+        .with_store(RunStore::open(&path, "poly-v1").unwrap())
+        .run()
+        .unwrap();
+    assert!(r.initial.failed_runs >= 2, "{:?}", r.initial);
+    for (name, truth) in ["a", "b"].iter().zip(TRUTH) {
+        let got = r.best.params.get(name).unwrap();
+        assert!((got - truth).abs() < 2e-3, "{name}: {got} vs {truth}");
+    }
+    let journal = fs::read_to_string(&path).unwrap();
+    assert!(
+        journal.contains("the model panicked: index out of range at a = 4"),
+        "{journal}"
+    );
 }

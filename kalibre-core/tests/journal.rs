@@ -444,3 +444,19 @@ fn a_run_no_reader_could_take_back_is_refused_before_it_is_written() {
     let store = RunStore::open(&path, "m1").unwrap();
     assert_eq!(store.len(), 1);
 }
+
+/// A journal open in one store cannot be opened by a second until the first is gone:
+/// two calibrations appending to one file would each run what the other ran.
+#[test]
+fn a_journal_in_use_is_refused_until_it_is_closed() {
+    let path = journal_of("in-use", &[1.0]);
+    let first = RunStore::open(&path, "m1").unwrap();
+    let err = RunStore::open(&path, "m1").unwrap_err().to_string();
+    assert!(
+        err.contains("runs.jsonl: another calibration has it open"),
+        "{err}"
+    );
+    drop(first);
+    let again = RunStore::open(&path, "m1").unwrap();
+    assert!(again.get("t0", &names(), &[1.0, 1.0]).is_some());
+}

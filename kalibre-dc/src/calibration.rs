@@ -85,20 +85,7 @@ impl HallCalibrationSettings {
     /// become the trust region's centre (on OpenFOAM data it held a calibration at half
     /// the true alphas; docs/experiments.md, session 25).
     pub fn loop_defaults() -> Settings {
-        Settings {
-            seed: 1,
-            max_iterations: 10,
-            focus: Some(1.0),
-            explore_on_repeat: Some(0.015),
-            output_correction: true,
-            linear_correction: true,
-            stall_step: Some(0.03),
-            trust_region: Some(0.1),
-            polish_iterations: 8,
-            numerical_weighting: true,
-            prior_in_best: true,
-            ..Settings::default()
-        }
+        Settings::recommended()
     }
 }
 

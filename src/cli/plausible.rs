@@ -118,16 +118,6 @@ fn significant(v: f64) -> String {
     format!("{v:.decimals$}")
 }
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn three_significant_figures() {
-        assert_eq!(super::significant(0.003555), "0.00356");
-        assert_eq!(super::significant(51730.0), "51730");
-        assert_eq!(super::significant(3.15), "3.15");
-        assert_eq!(super::significant(12.34), "12.3");
-    }
-}
 
 /// Warns when the built-in simulator's grid of `cell_m` moves equipment of the hall at
 /// `hall_path` (racks, CRACs, tiles, containment) to its cell faces: a rack a quarter
@@ -199,4 +189,15 @@ fn warn_alpha_units(hall_path: &Path, hall: &Hall) {
         ALPHA_RISE_K.start(),
         ALPHA_RISE_K.end(),
     );
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn three_significant_figures() {
+        assert_eq!(super::significant(0.003555), "0.00356");
+        assert_eq!(super::significant(51730.0), "51730");
+        assert_eq!(super::significant(3.15), "3.15");
+        assert_eq!(super::significant(12.34), "12.3");
+    }
 }

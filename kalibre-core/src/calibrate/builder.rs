@@ -45,7 +45,8 @@ where
     Su: Surrogate<Scenario = M::Scenario> + Sync,
     V: Validator,
 {
-    /// Replaces every setting at once.
+    /// Replaces every setting at once, those of earlier `with_*` calls included: call
+    /// it first (`.with_settings(Settings::recommended()).with_seed(7)`).
     pub fn with_settings(mut self, settings: Settings) -> Self {
         self.settings = settings;
         self

@@ -49,6 +49,9 @@ use state::State;
 /// A proposal whose corrected-surrogate loss is less than this fraction below the best
 /// run's counts as a stall: the surrogate promises too little to spend a model run on (see `Settings::stall_step`).
 const STALL_GAIN: f64 = 0.1;
+/// A proposal within this max-norm distance (unit box) of a failed run is moved off it
+/// with `perturb_sigma`'s noise: a model that fails at a point fails beside it too.
+pub const FAILED_NEIGHBOURHOOD_UNIT: f64 = 1e-3;
 
 /// The calibration loop over a model, a surrogate, a searcher and a validator.
 ///
@@ -92,6 +95,35 @@ where
         *unit = moved;
     }
 
+    /// Refuses a parameter space or observations whose names differ from those the model
+    /// gives ([`Model::param_names`], [`Model::output_names`]): values in another order
+    /// would calibrate the wrong parameters against the wrong outputs.
+    fn check_names(&self) -> Result<()> {
+        let differ = |what: &str, model: Vec<String>, ours: Vec<String>, where_: &str| {
+            (model != ours).then(|| {
+                Error::Mismatch(format!(
+                    "the model's {what} are [{}], {where_} [{}]: they must be the same names \
+                     in the same order",
+                    crate::some_names(&model),
+                    crate::some_names(&ours)
+                ))
+            })
+        };
+        let params = self
+            .model
+            .param_names()
+            .and_then(|m| differ("parameters", m, self.space.names(), "the parameter space's"));
+        let outputs = self.model.output_names().and_then(|m| {
+            differ(
+                "outputs",
+                m,
+                self.observations.output_names(),
+                "the observations'",
+            )
+        });
+        params.or(outputs).map_or(Ok(()), Err)
+    }
+
     /// Runs the loop: initial design, then fit, search, run, validate until a stop rule fires.
     pub fn run(&mut self) -> Result<Report> {
         let t_start = Instant::now();
@@ -100,6 +132,15 @@ where
         if self.space.is_empty() {
             return Err(Error::Mismatch("the parameter space is empty".into()));
         }
+        // Every design point would be the same point, run once and answered from the
+        // store ever after.
+        if self.space.params().iter().all(|p| p.is_fixed()) {
+            return Err(Error::Mismatch(format!(
+                "every parameter has equal bounds ({}): nothing to calibrate",
+                crate::some_names(&self.space.names())
+            )));
+        }
+        self.check_names()?;
         let fingerprint = self.model.fingerprint();
         let store = self
             .store
@@ -209,9 +250,18 @@ where
                 Some(gist) => format!("; the first: {e}; its log: {gist}"),
                 None => format!("; the first: {e}"),
             });
+            // An in-memory store keeps the reasons with the calibrator, not in a file.
+            let where_ = match store.path() {
+                Some(p) => format!(
+                    " (each run's reason is in the run journal, {})",
+                    p.display()
+                ),
+                None => " (a journal, `with_store(RunStore::open(..))`, keeps each run's \
+                          reason)"
+                    .to_string(),
+            };
             return Err(Error::NoSuccessfulRun(format!(
-                "all {design_runs} runs of the initial design failed{why} (each run's reason \
-                 is in the run journal)"
+                "all {design_runs} runs of the initial design failed{why}{where_}"
             )));
         }
         let augmented = design::augment(
@@ -400,11 +450,19 @@ where
                     geometry_step = true;
                 }
             }
-            if near(&state.failed_units, &unit) {
+            // Within a neighbourhood of a failed run, not only on it: a search's repeats
+            // of one optimum differ by 1e-7 or so, and a failure there was paid again
+            // every iteration.
+            let failed_tol = st.duplicate_tol.max(FAILED_NEIGHBOURHOOD_UNIT);
+            if state
+                .failed_units
+                .iter()
+                .any(|p| design::distance(p, &unit) <= failed_tol)
+            {
                 let moved = design::perturb(
                     &unit,
                     &state.failed_units,
-                    st.duplicate_tol,
+                    failed_tol,
                     st.perturb_sigma,
                     derive_seed(st.seed, iteration, Stream::Perturb),
                 );

@@ -122,10 +122,21 @@ impl<M: Model> Runner<'_, M> {
             cached: false,
         });
         let t0 = Instant::now();
-        let result = self
-            .model
-            .evaluate(&snap.scenario, params)
-            .and_then(|o| self.checked(o));
+        // A model that panics (an `unwrap`, an index out of range) fails this run, which
+        // is journaled like any other, instead of ending the calibration and the runs
+        // in flight beside it.
+        let evaluated = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            self.model.evaluate(&snap.scenario, params)
+        }))
+        .unwrap_or_else(|payload| {
+            let what = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "no message".into());
+            Err(ModelError::failed(format!("the model panicked: {what}")))
+        });
+        let result = evaluated.and_then(|o| self.checked(o));
         let wall_s = t0.elapsed().as_secs_f64();
         self.store
             .record_keyed(label, inputs, self.param_names, params, &result, wall_s)?;

@@ -18,7 +18,7 @@ use crate::{Error, Result};
 /// | `augment_sigma` | 0.05 | standard deviation of the augmentation noise, unit box | finite, >= 0 |
 /// | `regularizer_weight` | 1 | weight of the regulariser in the search loss (when one is given) | finite, >= 0 |
 /// | `duplicate_tol` | 1e-9 | max-norm distance in the unit box under which two points are the same | [0, 1) |
-/// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point, unit box | finite, > 0 |
+/// | `perturb_sigma` | 0.05 | noise that moves a proposal off an earlier failed point (one within [`super::FAILED_NEIGHBOURHOOD_UNIT`], 1e-3, of it), unit box | finite, > 0 |
 /// | `explore_on_repeat` | none | when the search proposes a point already run: none stops (converged); a sigma moves the proposal with that much seeded noise (unit box) and goes on | (0, 1] |
 /// | `output_correction` | false | search the surrogate plus, per snapshot and output, the model's outputs minus the surrogate's at the best run (the corrected surrogate matches the model there) | bool |
 /// | `linear_correction` | false | with `output_correction`: add a linear term in the unit box fitted to the model-minus-surrogate discrepancy at the other runs (weighted by distance, minimum norm), so the search also follows the model's slopes along explored directions | bool |
@@ -114,6 +114,41 @@ impl Default for Settings {
             robust_nu: None,
             numerical_weighting: false,
             prior_in_best: false,
+        }
+    }
+}
+
+impl Settings {
+    /// The loop `kalibre calibrate` runs (`kalibre_dc`'s hall calibrations start from
+    /// it): the surrogate corrected to the model's runs near the best one and along the
+    /// directions they explored, a trust region, a step off a stall, sampling beside a
+    /// repeated proposal, a focus of the fit on runs near the measurements, and 8 polish
+    /// steps on the model's own finite differences. [`Settings::default`] is the paper's
+    /// plain loop, kept for its experiments; this one is what to start from with a model
+    /// of your own, whose surrogate is rarely right far from its runs. (A library user's
+    /// damped oscillator with a ridge-quadratic surrogate: 0.0092-0.0095 MAE on all of 5
+    /// seeds, at the noise, where the default reached it on 1.)
+    ///
+    /// ```
+    /// use kalibre_core::Settings;
+    /// let s = Settings { seed: 7, ..Settings::recommended() };
+    /// assert!(s.output_correction && s.trust_region.is_some());
+    /// assert!(s.check().is_ok());
+    /// ```
+    pub fn recommended() -> Self {
+        Settings {
+            seed: 1,
+            max_iterations: 10,
+            focus: Some(1.0),
+            explore_on_repeat: Some(0.015),
+            output_correction: true,
+            linear_correction: true,
+            stall_step: Some(0.03),
+            trust_region: Some(0.1),
+            polish_iterations: 8,
+            numerical_weighting: true,
+            prior_in_best: true,
+            ..Settings::default()
         }
     }
 }

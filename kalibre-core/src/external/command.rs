@@ -522,6 +522,14 @@ impl CommandBuilder {
 impl<S: TemplateScenario + Sync> Model for ExternalCommand<S> {
     type Scenario = S;
 
+    fn param_names(&self) -> Option<Vec<String>> {
+        Some(self.param_names.clone())
+    }
+
+    fn output_names(&self) -> Option<Vec<String>> {
+        Some(self.output_names.clone())
+    }
+
     /// Hash of program (and its contents when named by path), arguments, environment,
     /// template contents and destinations, output file, parser, output and parameter
     /// names, and the fingerprint files. Not of timeout, retries or runs root.

@@ -277,11 +277,7 @@ pub fn calibration_html(
         );
     }
     if let Some(note) = report.repeated_residual_note() {
-        let _ = write!(
-            h,
-            "<p><b>Model error:</b> {}.</p>",
-            esc(&note)
-        );
+        let _ = write!(h, "<p><b>Model error:</b> {}.</p>", esc(&note));
     }
     if let Some(checks) = intakes {
         let under = coldest_under_read(hall, &report.residuals);

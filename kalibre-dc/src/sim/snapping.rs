@@ -81,7 +81,11 @@ pub fn off_grid_edges(hall: &Hall, cell_m: f64) -> Vec<SnappedEdge> {
     }
     for (i, c) in hall.containment.iter().enumerate() {
         for a in 0..3 {
-            check(format!("/containment/{i}/min_m"), a, [c.min_m[a], c.max_m[a]]);
+            check(
+                format!("/containment/{i}/min_m"),
+                a,
+                [c.min_m[a], c.max_m[a]],
+            );
         }
     }
     out
@@ -110,7 +114,9 @@ mod tests {
         hall.racks[1].position_m[0] = x + 0.05;
         let moved = off_grid_edges(&hall, 0.2);
         assert_eq!(moved.len(), 2, "{moved:?}");
-        assert!(moved.iter().all(|e| e.pointer == "/racks/1/position_m" && e.axis == 0));
+        assert!(moved
+            .iter()
+            .all(|e| e.pointer == "/racks/1/position_m" && e.axis == 0));
         assert!((moved[0].given_m - (x + 0.05)).abs() < 1e-12);
         assert!((moved[0].placed_m - x).abs() < 1e-9, "{moved:?}");
         assert_eq!(grid_placing_all(&hall, 0.2), Some(0.05));
