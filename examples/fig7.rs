@@ -3,7 +3,7 @@
 //! the training set (213 model runs at uniformly random alpha, 8:2 split).
 //!
 //! ```sh
-//! cargo run --release --example fig7 -- [--quick] [--out-dir docs/results] [--seeds 3]
+//! cargo run --release --example fig7 -- [--quick] [--out-dir target/experiments] [--seeds 3]
 //! ```
 //!
 //! Alpha is drawn uniformly in cfm/W; `--log-box` draws it uniformly on the log scale;
@@ -27,8 +27,29 @@ mod experiments;
 use experiments::fig7::{markdown, run_fig7, svg, AlphaDraw, AlphaGrain, Fig7Config, Fig7Result};
 use experiments::{parse_args, write_file, write_json};
 
+const USAGE: &str = "
+fig7: the paper's Fig. 7 (test MAE of the thermal graph with fixed and trainable
+adjacency and of the MLP, trained on 5-50 % of the runs) on one synthetic hall; writes
+fig7.json, fig7.md and fig7.svg (the draw's and options' names appended).
+
+usage: fig7 [--quick] [--out-dir DIR] [--seeds N] [--presets HALL]
+            [--log-box | --rise-box] [--per-rack | --per-server]
+            [--sharp-adjacency] [--local-recirculation] [--influence-adjacency]
+       fig7 --render DIR/fig7.json      (redraw the figure and table of an earlier run)
+
+--presets takes one hall (hall-a by default), without a seed count (--seeds sets it).
+--out-dir defaults to target/experiments (give docs/results to replace the stored
+results). Threads: RAYON_NUM_THREADS. docs/experiments.md explains each option.";
+
 fn main() {
     let raw: Vec<String> = std::env::args().skip(1).collect();
+    experiments::exit_with_help_if_asked(&raw, USAGE);
+    for pair in [["--log-box", "--rise-box"], ["--per-rack", "--per-server"]] {
+        if pair.iter().all(|f| raw.iter().any(|a| a == f)) {
+            eprintln!("{} and {}: give one of the two", pair[0], pair[1]);
+            std::process::exit(2);
+        }
+    }
     // `--render FILE.json`: redraw the figure and table of an earlier run beside it.
     if let Some(code) = experiments::render_if_asked::<Fig7Result>(&raw, "fig7", svg, markdown) {
         std::process::exit(code);
@@ -63,6 +84,11 @@ fn main() {
         )
     }))
     .unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
+    experiments::one_hall(&args, "fig7");
+    experiments::prepare_out_dir(&args.out_dir).unwrap_or_else(|e| {
         eprintln!("{e}");
         std::process::exit(2)
     });

@@ -135,6 +135,13 @@ fn main() {
     let preset = experiments::preset_flag(&args, Preset::HallA);
     let per_rack = args.iter().any(|a| a == "--per-rack");
     let out = experiments::flag_value(&args, "--out").map(std::path::PathBuf::from);
+    let usage = "usage: fig7_edges [--preset hall-a|hall-b|demo] [--per-rack] [--out FILE.json]\n(without --out nothing is written; threads: RAYON_NUM_THREADS)";
+    experiments::exit_with_help_if_asked(&args, usage);
+    experiments::refuse_unknown_flags(&args, &["--preset", "--per-rack", "--out"], usage);
+    if let Some(Err(e)) = out.as_deref().map(experiments::prepare_out_file) {
+        eprintln!("{e}");
+        std::process::exit(2);
+    }
 
     let mode = per_rack.then_some(AlphaMode::PerServer);
     let s = experiments::setup_with_alpha(preset, false, mode).expect("the synthetic hall");

@@ -91,6 +91,13 @@ fn main() {
         .position(|a| a == "--out")
         .and_then(|i| args.get(i + 1))
         .map(std::path::PathBuf::from);
+    let usage = "usage: fig7_features [--log-box] [--out FILE.json]\n(without --out nothing is written; threads: RAYON_NUM_THREADS)";
+    experiments::exit_with_help_if_asked(&args, usage);
+    experiments::refuse_unknown_flags(&args, &["--log-box", "--out"], usage);
+    if let Some(Err(e)) = out.as_deref().map(experiments::prepare_out_file) {
+        eprintln!("{e}");
+        std::process::exit(2);
+    }
     let s = experiments::setup(Preset::HallA, false).expect("hall-a");
     let layout = s.model.layout().clone();
     let dim = layout.space().dim();

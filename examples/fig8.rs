@@ -3,7 +3,7 @@
 //! alone, over 10 iterations and 3 seeds.
 //!
 //! ```sh
-//! cargo run --release --example fig8 -- [--quick] [--out-dir docs/results] [--seeds 3]
+//! cargo run --release --example fig8 -- [--quick] [--out-dir target/experiments] [--seeds 3]
 //! ```
 //!
 //! `--paper-loop` runs the paper's Algorithm 1 (no trust region, output correction or fit
@@ -16,14 +16,31 @@ mod experiments;
 use experiments::fig8::{markdown, run_fig8, svg, Fig8Config, Fig8Result};
 use experiments::{parse_args, write_file, write_json};
 
+const USAGE: &str = "
+fig8: the paper's Fig. 8 (search loss and gradient norm per loop iteration, DE then Adam
+against Adam alone) on one synthetic hall; writes fig8.json, fig8.md and fig8.svg.
+
+usage: fig8 [--quick] [--out-dir DIR] [--seeds N] [--presets HALL] [--paper-loop]
+       fig8 --render DIR/fig8.json      (redraw the figure and table of an earlier run)
+
+--presets takes one hall (hall-a by default), without a seed count (--seeds sets it).
+--out-dir defaults to target/experiments (give docs/results to replace the stored
+results). Threads: RAYON_NUM_THREADS.";
+
 fn main() {
     let raw: Vec<String> = std::env::args().skip(1).collect();
+    experiments::exit_with_help_if_asked(&raw, USAGE);
     // `--render FILE.json`: redraw the figure and table of an earlier run beside it.
     if let Some(code) = experiments::render_if_asked::<Fig8Result>(&raw, "fig8", svg, markdown) {
         std::process::exit(code);
     }
     let paper_loop = raw.iter().any(|a| a == "--paper-loop");
     let args = parse_args(raw.into_iter().filter(|a| a != "--paper-loop")).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(2)
+    });
+    experiments::one_hall(&args, "fig8");
+    experiments::prepare_out_dir(&args.out_dir).unwrap_or_else(|e| {
         eprintln!("{e}");
         std::process::exit(2)
     });

@@ -72,6 +72,13 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let preset = experiments::preset_flag(&args, Preset::HallB);
     let out = experiments::flag_value(&args, "--out").map(std::path::PathBuf::from);
+    let usage = "usage: jacobian_alignment [--preset hall-a|hall-b|demo] [--out FILE.json]\n(without --out nothing is written; threads: RAYON_NUM_THREADS)";
+    experiments::exit_with_help_if_asked(&args, usage);
+    experiments::refuse_unknown_flags(&args, &["--preset", "--out"], usage);
+    if let Some(Err(e)) = out.as_deref().map(experiments::prepare_out_file) {
+        eprintln!("{e}");
+        std::process::exit(2);
+    }
     let s = experiments::setup(preset, false).expect("synthetic hall");
     let layout = s.model.layout().clone();
     let space = layout.space();

@@ -4,7 +4,7 @@
 //! noise 0.2 C) and the same model.
 //!
 //! ```sh
-//! cargo run --release --example table4 -- [--quick] [--out-dir docs/results] \
+//! cargo run --release --example table4 -- [--quick] [--out-dir target/experiments] \
 //!     [--seeds 3] [--presets hall-a:3,hall-b:1] [--approaches kalibre,mlp,es,manual] \
 //!     [--mlp-seeds 1] [--budgets mlp=60,es=150] [--paper-loop]
 //! cargo run --release --example table4 -- --out-dir DIR --combine a/table4.json b/table4.json
@@ -30,8 +30,21 @@ use experiments::{parse_args, write_file, write_json};
 use kalibre::dc::synth::Preset;
 use serde_json::json;
 
+const USAGE: &str = "
+table4: the paper's Table 4 (Kalibre, the MLP in the same loop, the (1+1)-ES, the manual
+heuristic) on the synthetic halls; writes table4.json and table4.md.
+
+usage: table4 [--quick] [--out-dir DIR] [--seeds N] [--presets hall-a[:N],hall-b[:N]]
+              [--approaches kalibre,mlp,es,manual] [--mlp-seeds N]
+              [--budgets kalibre=20,mlp=60,es=150,manual=30] [--paper-loop]
+       table4 [--out-dir DIR] --combine A/table4.json B/table4.json ...   (last)
+
+--out-dir defaults to target/experiments (give docs/results to replace the stored
+results). Threads: RAYON_NUM_THREADS. docs/experiments.md explains each flag.";
+
 fn main() {
     let mut raw: Vec<String> = std::env::args().skip(1).collect();
+    experiments::exit_with_help_if_asked(&raw, USAGE);
     // `--combine A.json B.json ...`: merge the halls of earlier runs into one table.
     let mut combine_files = Vec::new();
     if let Some(i) = raw.iter().position(|a| a == "--combine") {
@@ -58,6 +71,7 @@ fn main() {
     // `--paper-loop`: the loop rows run the paper's Algorithm 1 instead of kalibre's loop.
     let paper_loop = take_switch(&mut raw, "--paper-loop");
     let args = parse_args(raw).unwrap_or_else(|e| fail(2, &e));
+    experiments::prepare_out_dir(&args.out_dir).unwrap_or_else(|e| fail(2, &e.to_string()));
     if !combine_files.is_empty() {
         let tables = combine(&combine_files).unwrap_or_else(|e| fail(1, &e.to_string()));
         write_tables(&args.out_dir, &tables, args.quick);

@@ -504,5 +504,7 @@ fn ratio_interval_is_a_seeded_percentile_bootstrap() {
     assert!(lo < point && point < hi, "{lo} {point} {hi}");
     assert_eq!(ratio_interval(&mlp, &kalibre), Some((lo, hi)));
     assert_eq!(ratio_interval(&[], &kalibre), None);
+    // One seed resamples to itself: no interval.
+    assert_eq!(ratio_interval(&[30.0], &kalibre), None);
     assert_eq!(ratio_interval(&mlp, &[0.0]), None);
 }

@@ -339,11 +339,12 @@ const BOOTSTRAP_SEED: u64 = 2020;
 /// A 95 % percentile bootstrap interval for `mean(num) / mean(den)` over seeds: each
 /// sample is resampled on its own, with replacement ([`BOOTSTRAP_RESAMPLES`] times, seeded,
 /// so the same values give the same interval). The two are independent runs of two
-/// approaches, so seeds are not paired. `None` when a sample is empty or a resampled
-/// denominator is not positive.
+/// approaches, so seeds are not paired. `None` when a sample has fewer than 2 values or a
+/// resampled denominator is not positive.
 pub fn ratio_interval(num: &[f64], den: &[f64]) -> Option<(f64, f64)> {
     use rand::{Rng, SeedableRng};
-    if num.is_empty() || den.is_empty() {
+    // One seed resamples to itself: an interval of one point says nothing.
+    if num.len() < 2 || den.len() < 2 {
         return None;
     }
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(BOOTSTRAP_SEED);
@@ -385,11 +386,74 @@ pub struct Args {
     pub presets: Option<Vec<(Preset, Option<usize>)>>,
 }
 
+/// Where the experiments write without `--out-dir`: a scratch directory, so that a
+/// reproduction (or a `--quick` try) never replaces the stored `docs/results` (give
+/// `--out-dir docs/results` to update those).
+pub const DEFAULT_OUT_DIR: &str = "target/experiments";
+
+/// With `--help` or `-h` among `raw`, prints `usage` and exits 0: before anything runs
+/// (a program that ignored the flag ran its whole experiment).
+pub fn exit_with_help_if_asked(raw: &[String], usage: &str) {
+    if raw.iter().any(|a| a == "--help" || a == "-h") {
+        println!("{}", usage.trim());
+        std::process::exit(0);
+    }
+}
+
+/// Exits with code 2 naming the first of `raw` that is a flag (`--...`) not in `known`
+/// (flags taking a value are in `known` with their value skipped by the caller's own
+/// parse): a misspelt switch must not run another experiment than the one asked for.
+pub fn refuse_unknown_flags(raw: &[String], known: &[&str], usage: &str) {
+    if let Some(f) = raw
+        .iter()
+        .find(|a| a.starts_with("--") && !known.contains(&a.as_str()))
+    {
+        eprintln!("unknown argument `{f}`\n\n{}", usage.trim());
+        std::process::exit(2);
+    }
+}
+
+/// Makes `dir` (the results' directory) now, so that a path that cannot be one (a file)
+/// is refused before the experiment runs, not after.
+pub fn prepare_out_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| format!("--out-dir {}: {e}; expected a directory", dir.display()).into())
+}
+
+/// Makes the parent directory of `file` (an analysis program's `--out FILE`) now, and
+/// refuses a directory as the file, before the experiment runs.
+pub fn prepare_out_file(file: &Path) -> Result<()> {
+    if file.is_dir() {
+        return Err(format!("--out {}: is a directory; expected a file", file.display()).into());
+    }
+    match file.parent().filter(|p| !p.as_os_str().is_empty()) {
+        Some(dir) => std::fs::create_dir_all(dir)
+            .map_err(|e| format!("--out {}: {e}", file.display()).into()),
+        None => Ok(()),
+    }
+}
+
+/// Exits with code 2 unless `args.presets` is absent or one hall without a seed count:
+/// `program` (Fig. 7 or 8) runs one hall, and used to take the first of a list and drop
+/// the rest and the counts without a word.
+pub fn one_hall(args: &Args, program: &str) {
+    match args.presets.as_deref() {
+        None | Some([(_, None)]) => {}
+        Some(_) => {
+            eprintln!(
+                "--presets: {program} runs one hall: give one name without a seed count \
+                 (--seeds N sets the seeds)"
+            );
+            std::process::exit(2);
+        }
+    }
+}
+
 /// Parses `--quick`, `--out-dir DIR`, `--seeds N`, `--presets a[:n],b[:n]`.
 pub fn parse_args(args: impl IntoIterator<Item = String>) -> std::result::Result<Args, String> {
     let mut a = Args {
         quick: false,
-        out_dir: PathBuf::from("docs/results"),
+        out_dir: PathBuf::from(DEFAULT_OUT_DIR),
         seeds: None,
         presets: None,
     };

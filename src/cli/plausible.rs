@@ -118,13 +118,22 @@ fn significant(v: f64) -> String {
     format!("{v:.decimals$}")
 }
 
-
 /// Warns when the built-in simulator's grid of `cell_m` moves equipment of the hall at
 /// `hall_path` (racks, CRACs, tiles, containment) to its cell faces: a rack a quarter
 /// cell off moves the air of its aisle, and the readings by tenths of a degree, without a
 /// word otherwise. Names the first such edge, how far the farthest moves, and a finer
 /// grid that places them all when one of up to 8 times finer does.
 pub(crate) fn warn_off_grid(hall_path: &Path, hall: &Hall, cell_m: f64) {
+    // Cells wider than the equipment cannot hold it at all: the simulator's own refusal
+    // (or its hint) says so, and edge by edge placement is beside the point.
+    let smallest_m = (hall.racks.iter().map(|r| [r.size_m[0], r.size_m[1]]))
+        .chain(hall.cracs.iter().map(|c| [c.size_m[0], c.size_m[1]]))
+        .chain(hall.tiles.iter().map(|t| t.size_m))
+        .flatten()
+        .fold(f64::INFINITY, f64::min);
+    if smallest_m < cell_m {
+        return;
+    }
     let moved = kalibre_dc::sim::off_grid_edges(hall, cell_m);
     let Some(first) = moved.first() else {
         return;

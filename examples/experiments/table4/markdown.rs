@@ -50,7 +50,7 @@ pub fn markdown(tables: &[HallTable]) -> String {
                      need: f64| match (r, m) {
             (Some(r), Some(m)) => format!(
                 "{r:.1}x{} (need >= {need}x: {})",
-                interval.map_or(String::new(), |(lo, hi)| format!(
+                interval.map_or(", no interval (one seed)".to_string(), |(lo, hi)| format!(
                     ", 95 % bootstrap interval over seeds {lo:.1}-{hi:.1}x"
                 )),
                 if m { "met" } else { "NOT met" }
