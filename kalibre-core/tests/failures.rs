@@ -57,19 +57,19 @@ fn failed_runs_are_journaled_and_the_loop_still_finds_the_truth() {
         .any(|x| matches!(x.error, Some(ModelError::NonFinite { index: 2, .. }))));
 }
 
-/// Always proposes the design's upper corner, which fails: the loop must move off it.
-struct StuckOnFailure;
+/// Proposes `at(seed)` whatever the surrogate says: a search stuck where the model fails.
+struct Proposes(fn(u64) -> Vec<f64>);
 
-impl Searcher for StuckOnFailure {
+impl Searcher for Proposes {
     fn search(
         &self,
         _objective: &dyn Objective,
         _start: &[f64],
-        _seed: u64,
+        seed: u64,
     ) -> kalibre_core::Result<SearchOutcome> {
         Ok(SearchOutcome {
             timed_out: false,
-            best_unit: vec![1.0, 1.0],
+            best_unit: (self.0)(seed),
             best_cost: 0.0,
             evaluations: 0,
             trace: Vec::new(),
@@ -81,7 +81,8 @@ impl Searcher for StuckOnFailure {
 fn a_proposal_on_a_failed_point_is_moved_and_never_repeated() {
     let (model, obs, space) = (Poly::failing(ZONE), observations(), space());
     let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
-        .with_searcher(StuckOnFailure)
+        // The design's upper corner, which fails: the loop must move off it.
+        .with_searcher(Proposes(|_| vec![1.0, 1.0]))
         .with_max_iterations(5)
         .run()
         .unwrap();
@@ -195,34 +196,14 @@ fn a_negative_spread_fails_the_run_and_says_so() {
     assert!(e.contains("a negative or non-finite value"), "{e}");
 }
 
-/// Proposes the failing upper corner give or take 1e-7, as a search re-finding one
-/// optimum does: each proposal is a new point to the duplicate check, but not a new
-/// chance for the model.
-struct NearlyStuckOnFailure;
-
-impl Searcher for NearlyStuckOnFailure {
-    fn search(
-        &self,
-        _objective: &dyn Objective,
-        _start: &[f64],
-        seed: u64,
-    ) -> kalibre_core::Result<SearchOutcome> {
-        let jitter = 1e-7 * (seed % 5) as f64;
-        Ok(SearchOutcome {
-            timed_out: false,
-            best_unit: vec![0.99 - jitter, 0.99],
-            best_cost: 0.0,
-            evaluations: 0,
-            trace: Vec::new(),
-        })
-    }
-}
-
 #[test]
 fn a_proposal_beside_a_failed_point_is_moved_too() {
     let (model, obs, space) = (Poly::failing(ZONE), observations(), space());
     let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
-        .with_searcher(NearlyStuckOnFailure)
+        // The failing corner give or take 1e-7, as a search re-finding one optimum does:
+        // each proposal is a new point to the duplicate check, but no new chance for the
+        // model.
+        .with_searcher(Proposes(|seed| vec![0.99 - 1e-7 * (seed % 5) as f64, 0.99]))
         .with_max_iterations(5)
         .run()
         .unwrap();

@@ -124,6 +124,15 @@ pub(super) fn print_under_read_note(
     Ok(())
 }
 
+/// The first of `given` (flag, whether given) that was given, refused with `why(flag)`:
+/// the options another model than the built-in simulator does not have.
+pub(super) fn refuse_given(given: &[(&str, bool)], why: impl Fn(&str) -> String) -> CliResult {
+    match given.iter().find(|(_, g)| *g) {
+        Some((flag, _)) => Err(CliError::Input(why(flag))),
+        None => Ok(()),
+    }
+}
+
 /// `--inlet-limit-c`, or ASHRAE's recommended bound.
 pub(super) fn inlet_limit_c(args: &SimulateArgs) -> CliResult<f64> {
     match args.inlet_limit_c {

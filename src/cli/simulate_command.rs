@@ -26,14 +26,13 @@ fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {
         ("--grid-m", args.grid_m.is_some()),
         ("--of-dir", args.of_dir.is_some()),
     ];
-    match given.iter().find(|(_, g)| *g) {
-        Some((flag, _)) => Err(CliError::Input(format!(
+    super::simulate::refuse_given(&given, |flag| {
+        format!(
             "{flag} is not available with --model command: the command returns the sensors' \
              readings only (the built-in simulator and OpenFOAM give the servers' air and \
              fields)"
-        ))),
-        None => Ok(()),
-    }
+        )
+    })
 }
 
 /// Runs the command of `--config` on every snapshot of `snaps` (what-ifs applied) at the

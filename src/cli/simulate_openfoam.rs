@@ -25,13 +25,12 @@ fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {
         ("--heat-sources", args.heat_sources.is_some()),
         ("--grid-check", !args.grid_check.is_empty()),
     ];
-    match given.iter().find(|(_, g)| *g) {
-        Some((flag, _)) => Err(CliError::Input(format!(
+    super::simulate::refuse_given(&given, |flag| {
+        format!(
             "{flag} needs the built-in simulator's fields; with --model openfoam, simulate \
              writes the sensor readings and the servers' air"
-        ))),
-        None => Ok(()),
-    }
+        )
+    })
 }
 
 /// Runs OpenFOAM on every snapshot of `snaps` (what-ifs applied) at the parameters of
