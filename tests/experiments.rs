@@ -70,6 +70,8 @@ fn table4_quick_every_approach_improves_and_files_are_written() {
     assert_eq!(back[0]["rows"].as_array().unwrap().len(), 4);
     let text = std::fs::read_to_string(md).unwrap();
     assert!(text.contains("Kalibre") && text.contains("(1+1)-ES") && text.contains("Manual"));
+    // The quick budgets stop before iteration 10: the column says where they stopped.
+    assert!(text.contains(" (ran 4 it.)"), "{text}");
     std::fs::remove_dir_all(dir).unwrap();
 }
 

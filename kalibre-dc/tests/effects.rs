@@ -436,6 +436,25 @@ fn a_floor_opening_partly_under_a_rack_is_refused_like_one_wholly_under_it() {
     }
 }
 
+/// A floor opening on a tile would deliver that floor's supply twice (the tile's share
+/// and the opening's): refused like overlapping tiles, touching allowed.
+#[test]
+fn a_floor_opening_over_a_tile_is_refused() {
+    let hall = demo_hall();
+    let t = &hall.tiles[0];
+    let [x, y] = t.position_m;
+    let [dx, dy] = t.size_m;
+    let over = json!({"kind": "bypass", "position_m": [x + 0.25 * dx, y + 0.25 * dy], "size_m": [0.5 * dx, 0.5 * dy]});
+    let e = effect_error(over, &hall);
+    assert!(e.contains("the opening overlaps tile 0 (/tiles/0)"), "{e}");
+    assert!(e.contains("position_m"), "{e}");
+    // Beside the tile, touching its edge.
+    let beside = spec(json!({"kind": "bypass", "position_m": [x - 0.2, y], "size_m": [0.2, dy]}));
+    if let Err(e) = from_spec(&beside, &hall) {
+        assert!(!e.to_string().contains("overlaps tile 0"), "{e}");
+    }
+}
+
 /// A whole-hall supply offset beside per-CRAC offsets for every CRAC sets each CRAC's
 /// offset twice (the whole-hall one is their sum's direction): refused, naming the
 /// entries. One CRAC short of every one, the two can be told apart and pass.

@@ -14,12 +14,24 @@ pub fn markdown(tables: &[HallTable]) -> String {
                 Some(st) => format!("{} ({}/{} seeds)", st.show(0), r.reached_1c, r.runs.len()),
                 None => format!("not reached (> {})", r.runs_to_1c_bound().0 as usize),
             };
+            // A budget under 10 iterations ends before the column's iteration 10: its
+            // value is the last one, and says so.
+            let ran = r
+                .runs
+                .iter()
+                .filter_map(|x| x.history.last().map(|p| p.0))
+                .max()
+                .unwrap_or(0);
+            let after_10 = match ran {
+                n if n < 10 => format!("{} (ran {n} it.)", r.mae_after_10_c.show(2)),
+                _ => r.mae_after_10_c.show(2),
+            };
             s.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 t.preset,
                 r.approach,
                 r.runs.len(),
-                r.mae_after_10_c.show(2),
+                after_10,
                 r.lowest_mae_c.show(2),
                 r.iterations_to_lowest.show(1),
                 r.model_runs_to_lowest.show(0),
