@@ -266,3 +266,51 @@ fn a_model_that_panics_fails_the_run_not_the_calibration() {
         "{journal}"
     );
 }
+
+/// Poly with one output too few: a model that does not fit the observations.
+struct ShortPoly;
+
+impl kalibre_core::Model for ShortPoly {
+    type Scenario = Scen;
+
+    fn fingerprint(&self) -> String {
+        "poly-short".into()
+    }
+
+    fn evaluate(
+        &self,
+        scenario: &Scen,
+        params: &[f64],
+    ) -> Result<kalibre_core::Outputs, ModelError> {
+        let mut out = Poly::new().evaluate(scenario, params)?;
+        out.values.pop();
+        Ok(out)
+    }
+}
+
+/// The wrong number of outputs stops the calibration at the first run that shows it,
+/// journaled, instead of failing every run of the design first.
+#[test]
+fn a_model_with_the_wrong_output_count_stops_at_its_first_run() {
+    let dir = temp_dir("short");
+    let path = dir.join("runs.jsonl");
+    let err = Calibrator::new(
+        &ShortPoly,
+        QuadSurface::default(),
+        &observations(),
+        &space(),
+    )
+    .with_max_iterations(2)
+    .with_max_parallel_runs(1)
+    .with_store(RunStore::open(&path, "poly-short").unwrap())
+    .run()
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("the model returned 3 outputs where the observations have 4"),
+        "{err}"
+    );
+    let journal = fs::read_to_string(&path).unwrap();
+    assert_eq!(journal.lines().count(), 1, "{journal}");
+    assert!(journal.contains(r#""status":"failed""#), "{journal}");
+}

@@ -148,6 +148,16 @@ impl<M: Model> Runner<'_, M> {
             error: result.as_ref().err(),
             wall_s,
         });
+        // A count that does not fit the observations is the model's make, not its
+        // parameters': every run would fail alike, so the first one stops the calibration
+        // (journaled, like the runs in flight beside it).
+        if let Err(ModelError::WrongOutputCount { expected, got }) = &result {
+            return Err(Error::Mismatch(format!(
+                "snapshot `{label}`: the model returned {got} outputs where the observations \
+                 have {expected}; every run would fail alike, so the calibration stops at \
+                 the first (the model and the observations must list the same outputs)"
+            )));
+        }
         Ok(RunResult {
             result,
             cached: false,
