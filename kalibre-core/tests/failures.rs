@@ -8,7 +8,8 @@ use std::fs;
 
 use common::*;
 use kalibre_core::{
-    Calibrator, ModelError, Objective, RunRecord, RunStatus, RunStore, SearchOutcome, Searcher,
+    Calibrator, Model, ModelError, Objective, RunRecord, RunStatus, RunStore, SearchOutcome,
+    Searcher,
 };
 
 /// Fails (`Err`) for `a > 3` and returns a NaN output for `b < 0.8`: the design's lower
@@ -127,33 +128,45 @@ fn a_design_that_fails_everywhere_says_why() {
     );
 }
 
-/// Poly, except that every run at the second snapshot fails (as a hall snapshot with
-/// every fan off does).
-struct DeadSecondSnapshot(Poly);
+/// Poly with its answer altered by `alter` (given the Poly, the scenario and the
+/// parameters), under its own fingerprint.
+struct Altered {
+    poly: Poly,
+    fingerprint: &'static str,
+    alter: fn(&Poly, &Scen, &[f64]) -> Result<kalibre_core::Outputs, ModelError>,
+}
 
-impl kalibre_core::Model for DeadSecondSnapshot {
+impl Model for Altered {
     type Scenario = Scen;
     fn fingerprint(&self) -> String {
-        "poly-dead-t1".into()
+        self.fingerprint.into()
     }
     fn evaluate(
         &self,
         scenario: &Scen,
         params: &[f64],
     ) -> Result<kalibre_core::Outputs, ModelError> {
-        if scenario.id == 1 {
-            return Err(ModelError::failed("no supply air (all fans off)"));
-        }
-        self.0.evaluate(scenario, params)
+        (self.alter)(&self.poly, scenario, params)
     }
 }
 
 #[test]
 fn a_snapshot_that_fails_everywhere_is_named_with_its_reason() {
-    let e = failure_of(&DeadSecondSnapshot(Poly::failing(FailZone {
-        a_err: 10.0,
-        b_nan: 0.0,
-    })));
+    // Poly, except that every run at the second snapshot fails (as a hall snapshot with
+    // every fan off does).
+    let e = failure_of(&Altered {
+        poly: Poly::failing(FailZone {
+            a_err: 10.0,
+            b_nan: 0.0,
+        }),
+        fingerprint: "poly-dead-t1",
+        alter: |poly, scenario, params| {
+            if scenario.id == 1 {
+                return Err(ModelError::failed("no supply air (all fans off)"));
+            }
+            poly.evaluate(scenario, params)
+        },
+    });
     assert!(
         e.contains("no parameter point ran successfully at every snapshot"),
         "{e}"
@@ -221,33 +234,21 @@ fn a_proposal_beside_a_failed_point_is_moved_too() {
     }
 }
 
-/// Poly, except that it panics (as an `unwrap` in a user's simulator would) for `a > 3`.
-struct PanickingPoly(Poly);
-
-impl kalibre_core::Model for PanickingPoly {
-    type Scenario = Scen;
-
-    fn fingerprint(&self) -> String {
-        "poly-v1".into()
-    }
-
-    fn evaluate(
-        &self,
-        scenario: &Scen,
-        params: &[f64],
-    ) -> Result<kalibre_core::Outputs, ModelError> {
-        assert!(params[0] <= 3.0, "index out of range at a = {}", params[0]);
-        self.0.evaluate(scenario, params)
-    }
-}
-
 /// A panicking run is a failed run, journaled with the panic's message, and the
 /// calibration goes on to the truth.
 #[test]
 fn a_model_that_panics_fails_the_run_not_the_calibration() {
     let dir = temp_dir("panics");
     let path = dir.join("runs.jsonl");
-    let model = PanickingPoly(Poly::new());
+    // Poly, except that it panics (as an `unwrap` in a user's simulator would) for a > 3.
+    let model = Altered {
+        poly: Poly::new(),
+        fingerprint: "poly-v1",
+        alter: |poly, scenario, params| {
+            assert!(params[0] <= 3.0, "index out of range at a = {}", params[0]);
+            poly.evaluate(scenario, params)
+        },
+    };
     let r = Calibrator::new(&model, QuadSurface::default(), &observations(), &space())
         .with_seed(1)
         .with_max_iterations(12)
@@ -267,45 +268,29 @@ fn a_model_that_panics_fails_the_run_not_the_calibration() {
     );
 }
 
-/// Poly with one output too few: a model that does not fit the observations.
-struct ShortPoly;
-
-impl kalibre_core::Model for ShortPoly {
-    type Scenario = Scen;
-
-    fn fingerprint(&self) -> String {
-        "poly-short".into()
-    }
-
-    fn evaluate(
-        &self,
-        scenario: &Scen,
-        params: &[f64],
-    ) -> Result<kalibre_core::Outputs, ModelError> {
-        let mut out = Poly::new().evaluate(scenario, params)?;
-        out.values.pop();
-        Ok(out)
-    }
-}
-
 /// The wrong number of outputs stops the calibration at the first run that shows it,
 /// journaled, instead of failing every run of the design first.
 #[test]
 fn a_model_with_the_wrong_output_count_stops_at_its_first_run() {
     let dir = temp_dir("short");
     let path = dir.join("runs.jsonl");
-    let err = Calibrator::new(
-        &ShortPoly,
-        QuadSurface::default(),
-        &observations(),
-        &space(),
-    )
-    .with_max_iterations(2)
-    .with_max_parallel_runs(1)
-    .with_store(RunStore::open(&path, "poly-short").unwrap())
-    .run()
-    .unwrap_err()
-    .to_string();
+    // Poly with one output too few: a model that does not fit the observations.
+    let short = Altered {
+        poly: Poly::new(),
+        fingerprint: "poly-short",
+        alter: |poly, scenario, params| {
+            let mut out = poly.evaluate(scenario, params)?;
+            out.values.pop();
+            Ok(out)
+        },
+    };
+    let err = Calibrator::new(&short, QuadSurface::default(), &observations(), &space())
+        .with_max_iterations(2)
+        .with_max_parallel_runs(1)
+        .with_store(RunStore::open(&path, "poly-short").unwrap())
+        .run()
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("the model returned 3 outputs where the observations have 4"),
         "{err}"

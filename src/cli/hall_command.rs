@@ -6,7 +6,7 @@ use kalibre_core::external::{CommandModelConfig, ExternalCommand, NamedScenario}
 use kalibre_core::{Model, ModelError, Outputs};
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::snapshots::OperatingState;
+use kalibre_dc::snapshots::{HallSnapshot, OperatingState};
 use kalibre_dc::ParamLayout;
 
 use crate::cli::{CliError, CliResult};
@@ -73,6 +73,17 @@ impl HallCommand {
             unused_param_settings,
         };
         Ok(model)
+    }
+
+    /// Renders every placeholder of the templates and arguments for each snapshot before
+    /// the first run, so that a bad template fails at once (naming `path`), not per run.
+    pub(in crate::cli) fn check_snapshots(&self, snaps: &[HallSnapshot], path: &Path) -> CliResult {
+        for s in snaps {
+            self.command
+                .check_scenario(&self.scenario(&s.state))
+                .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
+        }
+        Ok(())
     }
 
     pub(in crate::cli) fn scenario(&self, state: &OperatingState) -> NamedScenario {

@@ -48,7 +48,6 @@ pub(crate) fn warn_implausible_rises<'a>(
     hall: &Hall,
     states: impl IntoIterator<Item = &'a OperatingState>,
 ) {
-    warn_alpha_units(hall_path, hall);
     let slips = snapshots::implausible_rises(hall, states);
     let Some(first) = slips.first() else {
         return;
@@ -173,7 +172,7 @@ const ALPHA_RISE_K: std::ops::RangeInclusive<f64> = 0.5..=100.0;
 /// Warns of a server type whose initial `alpha_cfm_per_w` gives a temperature rise
 /// through its servers outside [`ALPHA_RISE_K`] (a unit slip that validation, which only
 /// asks `0 < min <= initial <= max`, lets through), naming the file and the field.
-fn warn_alpha_units(hall_path: &Path, hall: &Hall) {
+pub(crate) fn warn_alpha_units(hall_path: &Path, hall: &Hall) {
     // The built-in simulator's air: 1.2 kg/m3 x 1005 J/(kg K).
     const AIR_RHO_CP_J_M3_K: f64 = 1206.0;
     let rise_k = |alpha: f64| 1.0 / (AIR_RHO_CP_J_M3_K * alpha * kalibre_dc::sim::M3_S_PER_CFM);

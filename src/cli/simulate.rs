@@ -397,6 +397,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     }
     // Before any what-if: the warning is about the files.
     let states = snaps.iter().map(|s| &s.state);
+    super::plausible::warn_alpha_units(&args.hall, &hall);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     if let Some(dir) = &args.vtk {
         check_vtk_names(&snaps)?;

@@ -75,13 +75,7 @@ pub(super) fn run(
         ),
         _ => {}
     }
-    // Every placeholder is checked before the first run, as calibrate checks them.
-    for s in snaps {
-        model
-            .command
-            .check_scenario(&model.scenario(&s.state))
-            .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
-    }
+    model.check_snapshots(snaps, path)?;
     let space = model.layout.space();
     let params = match (&args.params, file) {
         (Some(p), Some((json, _))) => load_params(p, json, space)?,

@@ -425,9 +425,8 @@ where
                 .iter()
                 .map(|u| u.clamp(0.0, 1.0))
                 .collect();
-            let near = |pts: &[Vec<f64>], u: &[f64]| {
-                pts.iter()
-                    .any(|p| design::distance(p, u) <= st.duplicate_tol)
+            let near = |pts: &[Vec<f64>], u: &[f64], tol: f64| {
+                pts.iter().any(|p| design::distance(p, u) <= tol)
             };
             let mut perturbed = false;
             let mut geometry_step = false;
@@ -436,7 +435,7 @@ where
                 // there is the best run's loss (plus the regulariser's).
                 let anchor_cost = objective.cost(&best.unit);
                 let stalled = outcome.best_cost > anchor_cost - STALL_GAIN * anchor_cost.abs()
-                    || near(&state.ok_units, &unit);
+                    || near(&state.ok_units, &unit, st.duplicate_tol);
                 if stalled {
                     let moved = geometry::least_covered_step(
                         &best.unit,
@@ -454,11 +453,7 @@ where
             // of one optimum differ by 1e-7 or so, and a failure there was paid again
             // every iteration.
             let failed_tol = st.duplicate_tol.max(FAILED_NEIGHBOURHOOD_UNIT);
-            if state
-                .failed_units
-                .iter()
-                .any(|p| design::distance(p, &unit) <= failed_tol)
-            {
+            if near(&state.failed_units, &unit, failed_tol) {
                 let moved = design::perturb(
                     &unit,
                     &state.failed_units,
@@ -469,7 +464,7 @@ where
                 self.move_proposal(iteration, &mut unit, moved);
                 perturbed = true;
             }
-            if near(&state.ok_units, &unit) {
+            if near(&state.ok_units, &unit, st.duplicate_tol) {
                 // The surrogate has nothing new to say here: stop, or sample near the
                 // proposal so the next fit learns the neighbourhood.
                 let Some(sigma) = st.explore_on_repeat else {

@@ -406,6 +406,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     super::plausible::warn_cold_readings(&args.snapshots, &hall, &snaps);
     let states = snaps.iter().map(|s| &s.state);
+    super::plausible::warn_alpha_units(&args.hall, &hall);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     if args.model == ModelArg::Builtin {
         super::simulate::check_model_cells(
@@ -446,12 +447,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         // The hall as the loop will run it: `--alpha` decides the parameters' names.
         let calibrated = calibrated_hall(&hall, &settings);
         let model = HallCommand::new(&calibrated, hall_command::load_config(path)?, path)?;
-        for s in &snaps {
-            model
-                .command
-                .check_scenario(&model.scenario(&s.state))
-                .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
-        }
+        model.check_snapshots(&snaps, path)?;
         if !model.unused_param_settings.is_empty() {
             eprintln!(
                 "kalibre: warning: {}: the search uses the hall's bounds, initial values and \

@@ -167,6 +167,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     registry.check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     let states = snaps.iter().map(|s| &s.state);
+    super::plausible::warn_alpha_units(&args.hall, &hall);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
     let report_path = args.calibration.join("report.json");
     journal::check_regular_files(&args.calibration)?;
