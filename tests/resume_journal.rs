@@ -2,7 +2,8 @@
 //! the one that wrote the journal stops before some journaled runs: its `report.json`
 //! says which it left and the best point among them, and stderr warns when that point
 //! beats the new best (it used to replace a better answer without a word: 0.221 C by
-//! 1.115 C in the fuzz case). A journal of another model is refused naming what differs.
+//! 1.115 C in the fuzz case). A journal of another model is refused naming what differs,
+//! down to the hall's changed fields.
 
 mod cli_support;
 use cli_support::*;
@@ -93,4 +94,74 @@ fn a_journal_of_another_model_is_refused_naming_what_differs() {
     }
     let o = calibrate_output(&out, &["--iterations", "1", "--alpha", "per-server"]);
     assert_input_error(&o, "this calibration has parameters they lack: alpha/");
+}
+
+/// A hall edited after its runs were made: `calibrate` and `diagnose` name the fields
+/// that changed (against `--out`'s copy of the hall the runs were made on); a new name
+/// alone is not the model's and resumes.
+#[test]
+fn an_edited_hall_is_refused_naming_the_changed_fields() {
+    let out = tmp("journal-edited-hall");
+    calibrate(&out, &["--iterations", "1"]);
+    let kept: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("runs-hall.json")).unwrap())
+            .unwrap();
+    let given: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        kept, given,
+        "runs-hall.json is the hall the runs were made on"
+    );
+
+    let edited = tmp("journal-edited-hall-input").join("hall.json");
+    std::fs::create_dir_all(edited.parent().unwrap()).unwrap();
+    let write = |hall: &serde_json::Value| {
+        std::fs::write(&edited, serde_json::to_string_pretty(hall).unwrap()).unwrap()
+    };
+    let mut renamed = given.clone();
+    renamed["name"] = "another name".into();
+    write(&renamed);
+    let resumed = run(
+        on_files("calibrate", &edited, &data("of-dev-clean/snapshots.csv"))
+            .args([
+                "--iterations",
+                "1",
+                "--polish",
+                "0",
+                "--no-grid-check",
+                "--quiet",
+            ])
+            .args(["--threads", "1", "--out"])
+            .arg(&out),
+    );
+    assert_eq!(resumed.status.code(), Some(0), "{}", stderr(&resumed));
+
+    let mut moved = given.clone();
+    moved["cracs"][0]["rated_flow_m3_s"] = 3.25.into();
+    let sensor = moved["sensors"][2]["id"].as_str().unwrap().to_string();
+    moved["sensors"][2]["position_m"][2] = 0.55.into();
+    write(&moved);
+    let o = run(
+        on_files("calibrate", &edited, &data("of-dev-clean/snapshots.csv"))
+            .args([
+                "--iterations",
+                "1",
+                "--polish",
+                "0",
+                "--no-grid-check",
+                "--quiet",
+            ])
+            .args(["--threads", "1", "--out"])
+            .arg(&out),
+    );
+    assert_input_error(&o, "changed since its runs (they were made on ");
+    assert_input_error(&o, "/cracs/0/rated_flow_m3_s (crac-1): ");
+    assert_input_error(&o, &format!("/sensors/2/position_m ({sensor}): "));
+    assert_input_error(&o, ",0.55]");
+    let d = run(
+        diagnose_cmd(&edited, &data("of-dev-clean/snapshots.csv"), &out).args(["--threads", "1"]),
+    );
+    assert_input_error(&d, "/model/fingerprint: runs of another model");
+    assert_input_error(&d, "/cracs/0/rated_flow_m3_s (crac-1): ");
 }

@@ -5,6 +5,7 @@ mod calibrated_model;
 mod demo;
 mod diagnose;
 mod error;
+mod hall_changes;
 mod hall_command;
 mod inlets;
 mod likelihood;

@@ -10,7 +10,7 @@ use kalibre_dc::hall::Hall;
 use kalibre_dc::ParamLayout;
 
 use super::super::calibrated_model::CalibratedModel;
-use super::super::CliError;
+use super::super::{hall_changes, CliError};
 
 /// The refusal of a journal of `runs` runs of another model, with what differs between
 /// the calibration that wrote it and this one (`current`, over `hall`).
@@ -19,19 +19,35 @@ pub(super) fn explain(
     runs: usize,
     current: &CalibratedModel,
     hall: &Hall,
+    hall_file: &Path,
 ) -> CliError {
     let out = journal.parent().unwrap_or(Path::new("."));
     let mut differences = recorded_settings(&out.join("report.json"), current);
     if let Some(d) = parameters(journal, hall) {
         differences.push(d);
     }
-    let why = if differences.is_empty() {
-        "the same model settings and parameters, so hall.json (any field of it: its \
-         geometry, servers, effects, initial values, and also its name or `extra` notes) or \
-         the model's configuration changed since"
-            .to_string()
-    } else {
-        differences.join("; ")
+    // A command model's runs depend on its configuration, not on hall.json's fields.
+    let hall_changes = match current.kind.as_str() {
+        "command" => None,
+        _ => hall_changes::since_runs(out, hall_file),
+    };
+    let hall_unchanged = hall_changes.as_ref().is_some_and(|c| c.is_empty());
+    if let Some(changes) = hall_changes.filter(|c| !c.is_empty()) {
+        differences.push(hall_changes::describe(out, hall_file, &changes));
+    }
+    let why = match (differences.is_empty(), hall_unchanged) {
+        (false, _) => differences.join("; "),
+        (true, true) => format!(
+            "the same model settings, parameters and hall ({} reads as {}, on which they \
+             were made), so the model's configuration changed since (another --config, or \
+             another kalibre version made them)",
+            hall_file.display(),
+            out.join(hall_changes::RUNS_HALL).display()
+        ),
+        (true, false) => "the same model settings and parameters, so hall.json (its \
+                          geometry, servers, effects, initial values or bounds) or the \
+                          model's configuration changed since"
+            .to_string(),
     };
     CliError::Input(format!(
         "{}: holds {runs} runs of another model: {why}. Calibrate into another --out (or \

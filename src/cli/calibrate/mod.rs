@@ -62,8 +62,9 @@ pub struct CalibrateArgs {
     /// Operating conditions and measurements (`snapshots.csv`).
     #[arg(long)]
     snapshots: PathBuf,
-    /// Output directory: report.json, runs.jsonl (the run journal), report.html. Running
-    /// again on the same directory resumes from the journal without repeating a model run.
+    /// Output directory: report.json, runs.jsonl (the run journal), report.html, and
+    /// runs-hall.json (the hall the journal's runs were made on). Running again on the
+    /// same directory resumes from the journal without repeating a model run.
     #[arg(long)]
     out: PathBuf,
     /// Four-step iterations after the initial design (each runs the model once per snapshot).
@@ -262,7 +263,9 @@ fn calibrate_with_model<'o>(
     let refused = |e: kalibre_dc::Error| match e {
         kalibre_dc::Error::OtherModelJournal { path, runs } => {
             match model_record(args, &hall, settings, String::new()) {
-                Ok(current) => journal_mismatch::explain(Path::new(&path), runs, &current, &hall),
+                Ok(current) => {
+                    journal_mismatch::explain(Path::new(&path), runs, &current, &hall, &args.hall)
+                }
                 Err(e) => e,
             }
         }
@@ -421,6 +424,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     // Held until the report is written: a second calibration here would repeat the runs.
     let _lock = super::out_dir::lock(&args.out, "calibrate")?;
     super::out_dir::check_files(&args.out, &OUT_FILES)?;
+    super::out_dir::check_files(&args.out, &[super::hall_changes::RUNS_HALL])?;
     // An input kept in --out under an output's name would be replaced by it.
     let outputs: Vec<(String, PathBuf)> = OUT_FILES
         .iter()
@@ -459,6 +463,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     }
     note_replaced_report(&args.out, &hall, &snaps);
     let journal = args.out.join("runs.jsonl");
+    super::hall_changes::keep_runs_hall(&args.out, &args.hall, &journal)?;
     let total_runs = ((4 + args.iterations) * snaps.len()) as u64;
     let progress = Progress::new(total_runs, args.quiet);
     let started = Instant::now();

@@ -59,9 +59,10 @@ pub(super) fn scenario_keys(
     if other {
         return Err(CliError::Input(format!(
             "{}: runs of another model (a different hall.json, effects, --grid-m, --model or \
-             OpenFOAM option) than `{}` with --model {model_name}",
+             OpenFOAM option) than `{}` with --model {model_name}{}",
             journal.display(),
             hall.display(),
+            super::super::hall_changes::clause(journal.parent().unwrap_or(Path::new(".")), hall),
         )));
     }
     Ok(keys)

@@ -250,9 +250,11 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         if *recorded_fp != fp {
             return Err(CliError::Input(format!(
                 "{}: /model/fingerprint: runs of another model (a different hall.json, \
-                 effects, --grid-m, --model or OpenFOAM option) than `{}` with --model {chosen}",
+                 effects, --grid-m, --model or OpenFOAM option) than `{}` with --model \
+                 {chosen}{}",
                 report_path.display(),
                 args.hall.display(),
+                super::hall_changes::clause(&args.calibration, &args.hall),
             )));
         }
     }
