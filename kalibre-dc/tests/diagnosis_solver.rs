@@ -14,6 +14,7 @@ use kalibre_dc::diagnosis::{
     diagnose_hall, diagnose_hall_with, EffectSolver, HallDiagnosis, HallDiagnosisSettings,
 };
 use kalibre_dc::effects::{Effect, EffectRegistry};
+use kalibre_dc::hall::Side;
 use kalibre_dc::sim::Simulator;
 use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::synth::Synthesised;
@@ -246,4 +247,59 @@ fn a_failed_refit_run_is_recorded_and_the_ranking_stays_linearised() {
     );
     assert!(offset.steps.iter().any(|s| s.accepted), "{offset:?}");
     assert!(!top.refuted);
+}
+
+/// A bypass candidate whose strip would overlap a bypass the hall has (a deep strip
+/// behind the rack across the hot aisle) is no hypothesis, as a hall with both is
+/// refused: listed as not tried, naming it; the other candidates are tried.
+#[test]
+fn a_candidate_overlapping_the_halls_own_opening_is_listed_not_tried() {
+    let (mut s, params) = demo();
+    let exhausting = |inlet: Side| {
+        s.hall
+            .racks
+            .iter()
+            .filter(|r| r.inlet == inlet)
+            .map(|r| (r.id.clone(), r.position_m))
+            .collect::<Vec<_>>()
+    };
+    // A rack of the row facing +y and the rack across its hot aisle.
+    let (rack, at) = exhausting(Side::MinusY)[2].clone();
+    let across = exhausting(Side::PlusY)
+        .into_iter()
+        .filter(|(_, p)| (p[0] - at[0]).abs() < 1e-9 && p[1] > at[1])
+        .min_by(|a, b| a.1[1].total_cmp(&b.1[1]))
+        .expect("a rack across the hot aisle")
+        .0;
+    s.hall.effects.push(
+        serde_json::from_value(serde_json::json!({
+            "kind": "bypass", "behind_rack": rack, "depth_m": 1.0,
+            "fraction": 0.02, "fraction_bounds": [0.0, 0.2],
+        }))
+        .unwrap(),
+    );
+    EffectRegistry::builtin()
+        .check_hall(&s.hall, "hall.json")
+        .expect("one deep strip");
+    let mut p = params;
+    p.push(0.02);
+    let d = run(&s, &p, &restricted(&s)).unwrap();
+    // The rack's own default strip (0.4 m) lies within the hall's, and the strip across
+    // the aisle reaches into it; no other candidate does.
+    let overlapping: Vec<&str> = d
+        .not_tried
+        .iter()
+        .filter(|n| n.reason.contains("would overlap an opening the hall has"))
+        .map(|n| n.candidate.as_str())
+        .collect();
+    let names = [rack, across].map(|r| format!("bypass(behind_rack={r})"));
+    assert_eq!(overlapping, names, "{:?}", d.not_tried);
+    for name in &names {
+        assert!(d.diagnosis.hypotheses.iter().all(|h| h.name != *name));
+    }
+    let tried = d.diagnosis.hypotheses.iter();
+    assert_eq!(
+        tried.filter(|h| h.name.starts_with("bypass(")).count(),
+        s.hall.racks.len() - 2
+    );
 }

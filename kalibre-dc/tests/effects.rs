@@ -6,7 +6,7 @@ mod sim_halls;
 
 use kalibre_core::{Model, Param, Scale};
 use kalibre_dc::effects::{from_spec, Effect, EffectFactory, EffectRegistry};
-use kalibre_dc::hall::{EffectSpec, Hall};
+use kalibre_dc::hall::{EffectSpec, Hall, Side};
 use kalibre_dc::sim::{AirLink, SimConfig, SimMods, Simulator};
 use kalibre_dc::snapshots::OperatingState;
 use kalibre_dc::{Error, HallModel};
@@ -453,6 +453,57 @@ fn a_floor_opening_over_a_tile_is_refused() {
     if let Err(e) = from_spec(&beside, &hall) {
         assert!(!e.to_string().contains("overlaps tile 0"), "{e}");
     }
+}
+
+/// Two floor openings that overlap (two entries, or an opening on a strip behind a
+/// rack) could not be told apart where they do: refused naming both entries; openings
+/// that only touch pass.
+#[test]
+fn overlapping_openings_are_refused_touching_ones_pass() {
+    let registry = EffectRegistry::builtin();
+    let hall = demo_hall();
+    let r = &hall.racks[0];
+    let back = if r.inlet == Side::MinusY {
+        r.position_m[1] + r.size_m[1]
+    } else {
+        r.position_m[1]
+    };
+    let opening = |x: f64, y: f64| {
+        spec(
+            json!({"kind": "bypass", "position_m": [x, y], "size_m": [0.2, 0.2],
+                    "fraction_bounds": [0.0, 0.2]}),
+        )
+    };
+    let strip = spec(json!({"kind": "bypass", "behind_rack": r.id, "fraction_bounds": [0.0, 0.2]}));
+    let y = if r.inlet == Side::MinusY {
+        back + 0.1
+    } else {
+        back - 0.3
+    };
+    let x = r.position_m[0] + 0.1;
+    for (first, second, what) in [
+        (strip.clone(), opening(x, y), "on the strip"),
+        (opening(x, y), opening(x + 0.1, y + 0.1), "two openings"),
+    ] {
+        let mut both = hall.clone();
+        both.effects.extend([first, second]);
+        let e = registry
+            .check_hall(&both, "hall.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("hall.json: /effects/1"), "{what}: {e}");
+        assert!(
+            e.contains("its floor opening overlaps effects/0's"),
+            "{what}: {e}"
+        );
+    }
+    let mut touching = hall.clone();
+    touching
+        .effects
+        .extend([opening(x, y), opening(x + 0.2, y)]);
+    registry
+        .check_hall(&touching, "hall.json")
+        .expect("openings that touch");
 }
 
 /// A whole-hall supply offset beside per-CRAC offsets for every CRAC sets each CRAC's

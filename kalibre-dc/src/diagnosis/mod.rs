@@ -18,8 +18,8 @@ use serde_json::{json, Value};
 use kalibre_core::diagnose::{diagnose, Diagnosis, Hypothesis, HypothesisParam, Residuals};
 use kalibre_core::ParamSpace;
 
-use crate::effects::{placement, Effect, EffectRegistry};
-use crate::hall::{EffectSpec, Hall};
+use crate::effects::{openings_overlap, placement, supply_openings, Effect, EffectRegistry};
+use crate::hall::{Aabb, EffectSpec, Hall};
 use crate::sim::Simulator;
 use crate::snapshots::{self, HallSnapshot, OperatingState};
 use crate::{Error, ParamLayout, Result};
@@ -332,6 +332,22 @@ pub fn diagnose_hall_with(
         .into_iter()
         .filter(|(spec, e)| !present.contains(&placement(spec, e.as_ref())))
         .collect();
+    // A candidate whose opening overlaps one of the hall's could not be told from it (a
+    // hall with both is refused), so it is no hypothesis either.
+    let hall_openings: Vec<Aabb> = effects
+        .iter()
+        .flat_map(|e| supply_openings(e.as_ref(), hall))
+        .collect();
+    let (candidates, overlapping): (Vec<_>, Vec<_>) = candidates.into_iter().partition(|(_, e)| {
+        openings_overlap(&supply_openings(e.as_ref(), hall), &hall_openings).is_none()
+    });
+    for (spec, e) in &overlapping {
+        not_tried.push(NotTried {
+            candidate: hypothesis_name(spec, e.as_ref(), &space.names()),
+            count: 1,
+            reason: "its opening would overlap an opening the hall has".into(),
+        });
+    }
 
     let alpha0 = layout.alpha_per_server(params);
     let values0: Vec<Vec<f64>> = (0..effects.len())

@@ -29,7 +29,7 @@ pub use recirculation::{RackRecirculationEffect, RackRecirculationFactory};
 
 use kalibre_core::Param;
 
-use crate::hall::{EffectSpec, Hall};
+use crate::hall::{Aabb, EffectSpec, Hall, GEOMETRY_TOL_M};
 use crate::sim::SimMods;
 use crate::{Error, Result};
 
@@ -261,6 +261,45 @@ pub fn first_oversubscribed(
     None
 }
 
+/// The first two entries whose supply openings overlap on the floor, `(earlier, later)`,
+/// with the overlap's `[x0, x1, y0, y1]` (m). Air entering the overlap could be either's,
+/// as with overlapping tiles (refused when the hall is read), and the part of each
+/// opening over the other would be counted twice.
+pub fn first_overlapping_openings(
+    effects: &[Box<dyn Effect>],
+    hall: &Hall,
+) -> Option<(usize, usize, [f64; 4])> {
+    let regions: Vec<Vec<Aabb>> = effects
+        .iter()
+        .map(|e| supply_openings(e.as_ref(), hall))
+        .collect();
+    (1..effects.len()).find_map(|j| {
+        (0..j).find_map(|i| openings_overlap(&regions[i], &regions[j]).map(|o| (i, j, o)))
+    })
+}
+
+/// The floor regions where `effect` lets supply air in, at its upper bounds.
+pub fn supply_openings(effect: &dyn Effect, hall: &Hall) -> Vec<Aabb> {
+    mods_at_upper_bounds(effect, hall).map_or_else(
+        |_| Vec::new(),
+        |m| m.supply_openings.iter().map(|o| o.region).collect(),
+    )
+}
+
+/// Where two sets of floor openings first overlap, as `[x0, x1, y0, y1]` (m). Openings
+/// lie on the floor (no height), so they overlap where their plans do.
+pub fn openings_overlap(a: &[Aabb], b: &[Aabb]) -> Option<[f64; 4]> {
+    let overlap = |a: &Aabb, b: &Aabb| {
+        let x = [a.min[0].max(b.min[0]), a.max[0].min(b.max[0])];
+        let y = [a.min[1].max(b.min[1]), a.max[1].min(b.max[1])];
+        (x[1] - x[0] > GEOMETRY_TOL_M && y[1] - y[0] > GEOMETRY_TOL_M)
+            .then_some([x[0], x[1], y[0], y[1]])
+    };
+    a.iter()
+        .flat_map(|p| b.iter().map(move |q| (p, q)))
+        .find_map(|(p, q)| overlap(p, q))
+}
+
 /// The checks across the entries of a hall, each error naming the entry (and the field
 /// to change) as [`EffectRegistry::build_all`]'s entry errors do.
 fn check_together(effects: &[Box<dyn Effect>], hall: &Hall) -> Result<()> {
@@ -268,6 +307,21 @@ fn check_together(effects: &[Box<dyn Effect>], hall: &Hall) -> Result<()> {
         return Err(Error::Effect {
             kind: effects[again].kind().to_string(),
             message: format!("effects/{again}: {}", repeat_message(first)),
+        });
+    }
+    if let Some((first, again, [x0, x1, y0, y1])) = first_overlapping_openings(effects, hall) {
+        let n = crate::snapshots::number;
+        return Err(Error::Effect {
+            kind: effects[again].kind().to_string(),
+            message: format!(
+                "effects/{again}: its floor opening overlaps effects/{first}'s (x {}-{} m, \
+                 y {}-{} m): air entering there could be either's, so the two could not be \
+                 told apart; make the openings disjoint, or keep one entry",
+                n(x0),
+                n(x1),
+                n(y0),
+                n(y1)
+            ),
         });
     }
     if let Some((whole, at, per_crac)) = offset::offsets_set_twice(effects, hall) {

@@ -103,6 +103,15 @@ pub(crate) fn measure<R: Rng>(
             first + 1
         )));
     }
+    if let Some((first, again, _)) = effects::first_overlapping_openings(&built, hall) {
+        return Err(crate::Error::Mismatch(format!(
+            "synth options: hidden effect {} (`{}`) opens the floor where hidden effect {} \
+             does: the two could not be told apart there; give openings that do not overlap",
+            again + 1,
+            built[again].kind(),
+            first + 1
+        )));
+    }
     let values: Vec<Vec<f64>> = built
         .iter()
         .map(|e| e.parameters().iter().map(|p| p.initial).collect())
