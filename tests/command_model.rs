@@ -382,6 +382,89 @@ fn ending_kalibre_ends_the_runs_in_progress() {
     }
 }
 
+/// A stopped `kalibre simulate` says it keeps no journal. The directories of the runs
+/// its stop killed are removed, and counted on stderr, by the next command on that model;
+/// a failed run's directory is kept.
+#[cfg(target_os = "linux")]
+#[test]
+fn killed_runs_directories_are_removed_by_the_next_command() {
+    let dir = tmp("command-killed-dirs");
+    let hall = dev_hall();
+    write_command_model(&dir, &hall, 0.25);
+    let (fail, started) = (dir.join("fail"), dir.join("started"));
+    run_under_sh(
+        &dir,
+        &format!(
+            "test -e {} && exit 3; touch partial {}; sleep 60",
+            fail.display(),
+            started.display()
+        ),
+    );
+    let simulate = || {
+        let mut c = on_dataset("simulate", "of-dev-clean");
+        c.args(["--model", "command", "--config"])
+            .arg(dir.join("model.toml"))
+            .arg("--out")
+            .arg(dir.join("pred.csv"))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        c
+    };
+    let child = simulate().spawn().unwrap();
+    let t0 = std::time::Instant::now();
+    while !started.exists() {
+        assert!(t0.elapsed().as_secs() < 60, "no run started");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    // SAFETY: signalling the child we started.
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGINT);
+    }
+    let out = child.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("(simulate keeps no journal: run it again"),
+        "{said}"
+    );
+    let runs = |marked: bool| -> Vec<std::path::PathBuf> {
+        let mut found: Vec<_> = std::fs::read_dir(dir.join("runs"))
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.is_dir())
+            .filter(|p| {
+                let name = p.file_name().unwrap().to_string_lossy().into_owned();
+                p.with_file_name(format!(".{name}.running")).exists() == marked
+            })
+            .collect();
+        found.sort();
+        found
+    };
+    let killed = runs(true);
+    assert_eq!(killed.len(), 1, "{killed:?}");
+    assert!(killed[0].join("partial").is_file());
+
+    std::fs::write(&fail, "").unwrap();
+    let out = simulate().output().unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains("kalibre: note: removed 1 run directory that runs killed mid-run left"),
+        "{said}"
+    );
+    assert!(said.contains("exited with code 3"), "{said}");
+    // The killed run's files are gone (its name may be the failed run's now).
+    assert!(!killed[0].join("partial").exists(), "{killed:?}");
+    let kept = runs(false);
+    assert_eq!(kept.len(), 1, "{kept:?}");
+    assert!(!kept[0].join("partial").exists(), "{kept:?}");
+    assert!(runs(true).is_empty());
+    // The failed run's directory stays, unmarked, and the next command keeps it.
+    let out = simulate().output().unwrap();
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("removed"));
+    assert!(kept[0].is_dir());
+}
+
 /// `kalibre simulate --model command` runs the command once per snapshot: with `kalibre
 /// simulate` itself as the command its predictions are the built-in model's, digit for
 /// digit; a failed run ends it with the reason and the kept directory; the built-in

@@ -364,13 +364,23 @@ fn model_options_are_checked() {
             .arg(dir.join("out"));
         c.output().unwrap()
     };
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 6] = [
         (&["--np", "2"], "--np is an OpenFOAM option"),
         (&["--model", "command"], "--model command needs --config"),
         (&["--config", "m.toml"], "--config is for --model command"),
         (
             &["--model", "openfoam", "--grid-m", "0.25"],
             "not on the 0.25 m grid",
+        ),
+        // The hall's own path, not `hall.json`.
+        (
+            &["--model", "openfoam", "--grid-m", "0.25"],
+            "of-dev-clean/hall.json: /",
+        ),
+        // 1e14 cells: refused before blockMesh tries, on any machine.
+        (
+            &["--model", "openfoam", "--grid-m", "0.0001"],
+            "--grid-m 0.0001: the OpenFOAM mesh would have 1.04e14 cells, needing about",
         ),
     ];
     for (args, needle) in cases {

@@ -1,5 +1,6 @@
 //! Killing `kalibre calibrate --model openfoam` while OpenFOAM solves, then running it
-//! again: no OpenFOAM process is left behind and no finished run is repeated.
+//! again: no OpenFOAM process is left behind, no finished run is repeated, and the killed
+//! solves' run directories are removed.
 //!
 //! These tests need OpenFOAM (Debian's `openfoam` package; CI installs it). Without
 //! `blockMesh` in PATH they fail with a message saying so; they never skip.
@@ -101,9 +102,27 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
     let before = journal_lines(&journal);
     let done_before = before.len();
     assert!(done_before >= 3, "only {done_before} runs before the kill");
+    // The killed solves' directories are left behind, marked as unfinished.
+    let interrupted = marked_run_dirs(&dir.join("out/openfoam"));
+    assert!(
+        !interrupted.is_empty(),
+        "no run directory of the killed solve"
+    );
 
     let o = calibrate_cmd(&dir).output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    // The resume clears them, says so, and leaves no marker.
+    let n = interrupted.len();
+    let dirs = if n == 1 { "directory" } else { "directories" };
+    assert!(
+        err.contains(&format!(
+            "kalibre: note: removed {n} run {dirs} that runs killed"
+        )),
+        "{err}"
+    );
+    assert!(interrupted.iter().all(|d| !d.exists()), "{interrupted:?}");
+    assert!(marked_run_dirs(&dir.join("out/openfoam")).is_empty());
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("out/report.json")).unwrap())
             .unwrap();
@@ -173,6 +192,34 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
             "{extra:?}: {err}"
         );
     }
+}
+
+/// The run directories under `root`'s `runs-*` that a marker (`.<name>.running`) says
+/// are a run's that has not ended.
+fn marked_run_dirs(root: &Path) -> Vec<std::path::PathBuf> {
+    let mut dirs = Vec::new();
+    for runs in std::fs::read_dir(root).into_iter().flatten().flatten() {
+        if !runs.file_name().to_string_lossy().starts_with("runs-") {
+            continue;
+        }
+        for e in std::fs::read_dir(runs.path())
+            .into_iter()
+            .flatten()
+            .flatten()
+        {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if let Some(run) = name
+                .strip_prefix('.')
+                .and_then(|n| n.strip_suffix(".running"))
+            {
+                let dir = runs.path().join(run);
+                if dir.is_dir() {
+                    dirs.push(dir);
+                }
+            }
+        }
+    }
+    dirs
 }
 
 extern "C" {

@@ -73,6 +73,57 @@ impl ModelError {
         }
     }
 
+    /// The directory a failed run was kept in, when its log tail names it (a line
+    /// `run dir: PATH`, as [`crate::external::ExternalCommand`] and the OpenFOAM model
+    /// write first).
+    ///
+    /// ```
+    /// use kalibre_core::ModelError;
+    /// let e = ModelError::Failed {
+    ///     reason: "energy balance off".into(),
+    ///     log_tail: Some("run dir: /runs/t0-1\n==> stdout.log <==\nEnd\n".into()),
+    /// };
+    /// assert_eq!(e.run_dir(), Some("/runs/t0-1"));
+    /// assert_eq!(e.log_gist().as_deref(), Some("`End`"));
+    /// ```
+    pub fn run_dir(&self) -> Option<&str> {
+        let (ModelError::Failed { log_tail, .. } | ModelError::Timeout { log_tail, .. }) = self
+        else {
+            return None;
+        };
+        log_tail
+            .as_deref()?
+            .lines()
+            .find_map(|l| l.strip_prefix(RUN_DIR_LINE))
+            .map(str::trim)
+    }
+
+    /// The error with `dir` named as the kept run directory (see [`Self::run_dir`]), when
+    /// it names none yet.
+    pub fn with_run_dir(self, dir: &std::path::Path) -> Self {
+        if self.run_dir().is_some() {
+            return self;
+        }
+        let named = |tail: Option<String>| {
+            let line = format!("{RUN_DIR_LINE}{}", dir.display());
+            Some(match tail {
+                Some(t) => format!("{line}\n{t}"),
+                None => line,
+            })
+        };
+        match self {
+            ModelError::Failed { reason, log_tail } => ModelError::Failed {
+                reason,
+                log_tail: named(log_tail),
+            },
+            ModelError::Timeout { seconds, log_tail } => ModelError::Timeout {
+                seconds,
+                log_tail: named(log_tail),
+            },
+            e => e,
+        }
+    }
+
     /// The gist of the run's log for a one-line message: the first and last non-empty
     /// lines of its last section (stderr's, when the program wrote any), where a program
     /// usually says what went wrong and how it ended; `None` without a log.
@@ -95,7 +146,7 @@ impl ModelError {
             .lines()
             .skip(usize::from(section.contains(" <==")))
             .map(str::trim)
-            .filter(|l| !l.is_empty());
+            .filter(|l| !l.is_empty() && !l.starts_with(RUN_DIR_LINE));
         let first = lines.next()?;
         Some(match lines.last() {
             Some(last) => format!("`{first}` ... `{last}`"),
@@ -103,6 +154,9 @@ impl ModelError {
         })
     }
 }
+
+/// How a log tail names the kept run directory: its first line, `run dir: PATH`.
+const RUN_DIR_LINE: &str = "run dir: ";
 
 /// A stable digest (FNV-1a 128, hex) of a scenario's inputs written as text, for
 /// [`Model::scenario_key`]; the same on every build and platform.

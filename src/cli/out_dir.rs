@@ -8,7 +8,7 @@
 //! one, so a crash never leaves the directory locked.
 
 use std::fs::{File, OpenOptions, TryLockError};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use super::{io_err, CliError, CliResult};
 
@@ -130,6 +130,28 @@ pub fn check_out_file(flag: &str, path: &Path) -> CliResult {
             }
         }
         _ => Ok(()),
+    }
+}
+
+/// Says on stderr which run directories of killed runs `removed` (the result of a
+/// model's `remove_interrupted_runs`) cleared, or why they could not be.
+pub fn note_interrupted_runs(removed: std::io::Result<Vec<PathBuf>>) {
+    match removed {
+        Ok(dirs) if dirs.is_empty() => {}
+        Ok(dirs) => {
+            let root = dirs[0].parent().unwrap_or(Path::new("."));
+            eprintln!(
+                "kalibre: note: removed {} run director{} that runs killed mid-run left under \
+                 {} (first: {})",
+                dirs.len(),
+                if dirs.len() == 1 { "y" } else { "ies" },
+                root.display(),
+                dirs[0].file_name().unwrap_or_default().to_string_lossy()
+            );
+        }
+        Err(e) => eprintln!(
+            "kalibre: warning: the run directories of runs killed earlier were not removed: {e}"
+        ),
     }
 }
 

@@ -57,6 +57,7 @@ pub(super) fn run(
         None => hall.clone(),
     };
     let model = HallCommand::new(&hall, hall_command::load_config(path)?, path)?;
+    super::out_dir::note_interrupted_runs(model.command.remove_interrupted_runs());
     match recorded {
         Some(m) if m.kind != "command" => eprintln!(
             "note: the calibration ran the {} model; simulate runs the command of {} at its \

@@ -6,7 +6,9 @@ use std::time::Instant;
 
 use kalibre_core::Model;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::openfoam::{server_air_from_intakes, OpenFoamModel, SERVER_INTAKE_KEY};
+use kalibre_dc::openfoam::{
+    remove_interrupted_runs, server_air_from_intakes, OpenFoamModel, SERVER_INTAKE_KEY,
+};
 use kalibre_dc::sim::{inlet_check, setpoint_headroom_c, write_server_air};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 
@@ -76,7 +78,10 @@ pub(super) fn run(
             .map_or_else(|| "openfoam".into(), |d| d.join("openfoam")),
     };
     let settings = of_args.settings(&root, grid_or_recorded(args.grid_m, of_recorded))?;
-    let model = OpenFoamModel::new(&hall, settings).map_err(of_err)?;
+    super::openfoam_args::check_mesh(&hall, &args.hall, settings.grid_m, args.grid_m.is_some())?;
+    let model = OpenFoamModel::new(&hall, settings)
+        .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?;
+    super::out_dir::note_interrupted_runs(remove_interrupted_runs(&model.settings().cache_root));
     let space = model.layout().space();
     let params = match (&args.params, file) {
         (Some(p), Some((json, _))) => load_params(p, json, space)?,
@@ -93,9 +98,17 @@ pub(super) fn run(
         let started = Instant::now();
         let failed =
             |e: &dyn std::fmt::Display| CliError::Run(format!("snapshot `{label}`: OpenFOAM: {e}"));
-        let out = model
-            .evaluate(&snap.state, &params)
-            .map_err(|e| failed(&e))?;
+        let out = model.evaluate(&snap.state, &params).map_err(|e| {
+            let gist = e.log_gist().map(|g| format!("; its log: {g}"));
+            let kept = e
+                .run_dir()
+                .map(|d| format!(" (its directory is kept: {d})"));
+            failed(&format!(
+                "{e}{}{}",
+                gist.unwrap_or_default(),
+                kept.unwrap_or_default()
+            ))
+        })?;
         let intake_c = out
             .extras
             .get(SERVER_INTAKE_KEY)

@@ -204,6 +204,14 @@ impl<S> ExternalCommand<S> {
         self.dirs.root()
     }
 
+    /// Removes the run directories that runs killed mid-run (a calibration stopped with
+    /// `kill -9`, a lost node) left under the runs root, and returns them; see
+    /// [`RunDirs::remove_interrupted`]. Live runs and kept failed runs stay. Call it when
+    /// a calibration starts; the CLI does.
+    pub fn remove_interrupted_runs(&self) -> std::io::Result<Vec<PathBuf>> {
+        self.dirs.remove_interrupted()
+    }
+
     /// The wall-clock limit of one attempt.
     pub fn timeout(&self) -> Duration {
         self.timeout

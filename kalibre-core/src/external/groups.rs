@@ -5,6 +5,7 @@
 //! starts. [`end_runs_with_kalibre`] installs handlers that signal every group here.
 
 use std::sync::atomic::{AtomicI32, Ordering};
+use std::sync::OnceLock;
 
 /// Runs tracked at once; beyond this a run is not tracked (its first process still gets
 /// the parent-death signal).
@@ -49,13 +50,27 @@ pub fn signal_runs(signal: libc::c_int) -> usize {
     n
 }
 
+/// What [`end_runs_with_kalibre`]'s handler says when it ends runs, unless the program
+/// set its own ([`set_stop_message`]).
+const DEFAULT_STOP_MESSAGE: &str = "kalibre: stopped; the model runs in progress were ended \
+with it (finished runs are kept: the same command resumes where a journal is kept)\n";
+
+static STOP_MESSAGE: OnceLock<&'static str> = OnceLock::new();
+
+/// Sets what the handler of [`end_runs_with_kalibre`] writes on stderr when it ends model
+/// runs (one line, ending in a newline): a command that keeps no journal says so rather
+/// than promise a resume. The first call wins.
+pub fn set_stop_message(message: &'static str) {
+    let _ = STOP_MESSAGE.set(message);
+}
+
 extern "C" fn on_end_signal(signal: libc::c_int) {
     if signal_runs(libc::SIGTERM) > 0 {
-        const SAID: &[u8] = b"kalibre: stopped; the model runs in progress were ended with it \
-(finished runs are kept: the same command resumes where a journal is kept)\n";
-        // SAFETY: write(2) is async-signal-safe; the buffer is static.
+        // An atomic load once set: async-signal-safe.
+        let said = STOP_MESSAGE.get().copied().unwrap_or(DEFAULT_STOP_MESSAGE);
+        // SAFETY: write(2) is async-signal-safe; the text is static.
         unsafe {
-            libc::write(2, SAID.as_ptr().cast(), SAID.len());
+            libc::write(2, said.as_ptr().cast(), said.len());
         }
     }
     // End as the signal would have, with its exit status.

@@ -33,10 +33,10 @@ pub use command::{
     TemplateFile,
 };
 pub use config::CommandModelConfig;
-pub use groups::{end_runs_with_kalibre, signal_runs};
+pub use groups::{end_runs_with_kalibre, set_stop_message, signal_runs};
 pub use parse::OutputParser;
 pub use process::{log_tail, run_process, ProcessEnd, ProcessOutcome, ProcessSpec};
-pub use rundir::RunDirs;
+pub use rundir::{RunDir, RunDirs};
 pub use template::{Format, Template, TemplateValue, Variables};
 
 /// Errors of building or configuring an external model (not of running it: a run's

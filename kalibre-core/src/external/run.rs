@@ -183,7 +183,7 @@ impl<S: TemplateScenario> ExternalCommand<S> {
                 );
             }
         };
-        report.run_dir = Some(dir.clone());
+        report.run_dir = Some(dir.to_path_buf());
         report.kept = true;
         let result = self.attempt_in(&dir, base, attempt, &mut report, t0);
         match &result {

@@ -1,6 +1,8 @@
-//! Fresh working directories for model runs.
+//! Fresh working directories for model runs, and the ones interrupted runs left behind.
 
+use std::fs::{File, OpenOptions, TryLockError};
 use std::io;
+use std::ops::Deref;
 use std::path::{Path, PathBuf};
 
 /// Allocates run directories under a root: `<label>-<hash>-<n>`, where the label is the
@@ -8,6 +10,12 @@ use std::path::{Path, PathBuf};
 /// parameters, and `n` counts from 1. A directory is claimed by `create_dir`, which is
 /// atomic, so parallel runs (threads or processes) never share one and an existing
 /// directory, from this calibration or an earlier one, is never reused.
+///
+/// While a run uses its directory, a locked marker file beside it (`.<name>.running`)
+/// says so. A process killed mid-run cannot remove its marker, but the operating system
+/// releases the lock, so [`RunDirs::remove_interrupted`] can tell the directories of
+/// interrupted runs from those of live ones (of this process or another) and from the
+/// ones kept on purpose (failed runs, `keep_runs = "all"`), which have no marker.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RunDirs {
     root: PathBuf,
@@ -15,6 +23,50 @@ pub struct RunDirs {
 
 /// Longest label kept in a directory name.
 const MAX_LABEL: usize = 48;
+
+/// The marker's name for a run directory's name.
+fn marker_name(dir_name: &str) -> String {
+    format!(".{dir_name}.running")
+}
+
+/// A claimed run directory (dereferences to its path). Dropping it ends the run's claim:
+/// its marker goes, the directory stays (the caller removes it or keeps it).
+#[derive(Debug)]
+pub struct RunDir {
+    path: PathBuf,
+    /// The marker and its locked handle; `None` where the file system has no locks.
+    marker: Option<(PathBuf, File)>,
+}
+
+impl RunDir {
+    /// The directory.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Deref for RunDir {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for RunDir {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for RunDir {
+    fn drop(&mut self) {
+        if let Some((marker, _lock)) = self.marker.take() {
+            // Removed while still locked, so no sweep can take it for an interrupted run's.
+            let _ = std::fs::remove_file(marker);
+        }
+    }
+}
 
 impl RunDirs {
     /// Directories under `root` (created when the first run needs it).
@@ -49,22 +101,96 @@ impl RunDirs {
         }
     }
 
-    /// Creates and returns a new, empty directory for a run of `label` with identity `key`.
-    pub fn create(&self, label: &str, key: u128) -> io::Result<PathBuf> {
+    /// Creates and returns a new, empty directory for a run of `label` with identity `key`,
+    /// marked as in use until the returned [`RunDir`] is dropped.
+    pub fn create(&self, label: &str, key: u128) -> io::Result<RunDir> {
         std::fs::create_dir_all(&self.root)?;
         let stem = format!("{}-{:016x}", Self::sanitize(label), (key >> 64) as u64);
         for n in 1..=1_000_000u32 {
-            let dir = self.root.join(format!("{stem}-{n}"));
-            match std::fs::create_dir(&dir) {
-                Ok(()) => return Ok(dir),
+            let name = format!("{stem}-{n}");
+            // The marker is claimed and locked before the directory exists, so a sweep
+            // never finds a live run's directory without its locked marker.
+            let marker = self.root.join(marker_name(&name));
+            let lock = match OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&marker)
+            {
+                Ok(file) => match file.try_lock() {
+                    Ok(()) => Some((marker.clone(), file)),
+                    // A sweep holds it: that name is being cleared; take the next.
+                    Err(TryLockError::WouldBlock) => continue,
+                    Err(TryLockError::Error(_)) => {
+                        let _ = std::fs::remove_file(&marker);
+                        None
+                    }
+                },
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
-                Err(e) => return Err(e),
+                // A root that takes no marker still takes runs; they are just not swept.
+                Err(_) => None,
+            };
+            let dir = self.root.join(&name);
+            match std::fs::create_dir(&dir) {
+                Ok(()) => {
+                    return Ok(RunDir {
+                        path: dir,
+                        marker: lock,
+                    })
+                }
+                Err(e) => {
+                    if let Some((m, _)) = &lock {
+                        let _ = std::fs::remove_file(m);
+                    }
+                    if e.kind() != io::ErrorKind::AlreadyExists {
+                        return Err(e);
+                    }
+                }
             }
         }
         Err(io::Error::other(format!(
             "{}: a million run directories named {stem}-* exist",
             self.root.display()
         )))
+    }
+
+    /// Removes the directories that runs killed mid-run left under the root (their markers
+    /// unlocked), and returns them. Live runs, of this process or another, and directories
+    /// kept on purpose are left alone. A missing root has none.
+    pub fn remove_interrupted(&self) -> io::Result<Vec<PathBuf>> {
+        let entries = match std::fs::read_dir(&self.root) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) => return Err(e),
+        };
+        let mut removed = Vec::new();
+        for entry in entries {
+            let entry = entry?;
+            let file_name = entry.file_name();
+            let Some(name) = file_name
+                .to_str()
+                .and_then(|n| n.strip_prefix('.'))
+                .and_then(|n| n.strip_suffix(".running"))
+            else {
+                continue;
+            };
+            let marker = entry.path();
+            let Ok(file) = OpenOptions::new().write(true).open(&marker) else {
+                continue;
+            };
+            // Locked: a live run's. Unlocked: its run was killed.
+            if file.try_lock().is_err() {
+                continue;
+            }
+            let dir = self.root.join(name);
+            let is_dir = std::fs::symlink_metadata(&dir).is_ok_and(|m| m.is_dir());
+            if is_dir {
+                std::fs::remove_dir_all(&dir)?;
+                removed.push(dir);
+            }
+            std::fs::remove_file(&marker)?;
+        }
+        removed.sort();
+        Ok(removed)
     }
 }
 
@@ -79,5 +205,54 @@ mod tests {
         assert_eq!(RunDirs::sanitize("../.."), "_..");
         assert_eq!(RunDirs::sanitize(".."), "run");
         assert_eq!(RunDirs::sanitize("2024-07-01T12:00"), "2024-07-01T12_00");
+    }
+
+    fn root(name: &str) -> PathBuf {
+        let root =
+            std::env::temp_dir().join(format!("kalibre-rundirs-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        root
+    }
+
+    #[test]
+    fn a_live_run_is_marked_and_an_ended_one_is_not() {
+        let dirs = RunDirs::new(root("live"));
+        let run = dirs.create("t0", 7).unwrap();
+        let marker = dirs
+            .root()
+            .join(marker_name(&run.file_name().unwrap().to_string_lossy()));
+        assert!(marker.is_file());
+        // Live: neither it nor its directory is swept.
+        assert!(dirs.remove_interrupted().unwrap().is_empty());
+        assert!(run.is_dir());
+        let path = run.to_path_buf();
+        drop(run);
+        // Ended (kept, as a failed run's is): no marker, never swept.
+        assert!(!marker.exists());
+        assert!(dirs.remove_interrupted().unwrap().is_empty());
+        assert!(path.is_dir());
+        std::fs::remove_dir_all(dirs.root()).unwrap();
+    }
+
+    #[test]
+    fn a_killed_runs_directory_is_removed_and_its_name_not_reused_meanwhile() {
+        let dirs = RunDirs::new(root("killed"));
+        let run = dirs.create("t0", 7).unwrap();
+        std::fs::write(run.join("out.txt"), "partial").unwrap();
+        let path = run.to_path_buf();
+        // What a killed process leaves: the directory and an unlocked marker.
+        let (marker, lock) = {
+            let mut run = run;
+            run.marker.take().unwrap()
+        };
+        drop(lock);
+        assert!(marker.is_file());
+        let next = dirs.create("t0", 7).unwrap();
+        assert_ne!(next.path(), path, "a claimed name is never reused");
+        assert_eq!(dirs.remove_interrupted().unwrap(), vec![path.clone()]);
+        assert!(!path.exists() && !marker.exists());
+        assert!(next.is_dir(), "the live run stays");
+        drop(next);
+        std::fs::remove_dir_all(dirs.root()).unwrap();
     }
 }

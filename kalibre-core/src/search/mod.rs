@@ -45,7 +45,8 @@ pub trait Objective: Sync {
 pub struct TracePoint {
     /// Searcher iteration (DE generation or Adam step), counted across phases.
     pub iteration: usize,
-    /// `de` or `adam`.
+    /// The searcher's phase: `de`, `adam` or `spg` for the built-in searchers; a
+    /// searcher of your own names its own.
     pub phase: String,
     /// Best cost so far.
     pub best_cost: f64,
@@ -75,8 +76,9 @@ pub struct SearchOutcome {
 impl SearchOutcome {
     /// The outcome, or [`crate::Error::Search`] when the objective was evaluated and
     /// not finite at any point: its best point would be the start, scored infinite, and
-    /// a caller would take it for a result.
-    pub(crate) fn found_finite(self, searcher: &str) -> Result<Self> {
+    /// a caller would take it for a result. A searcher of your own ends with it, as the
+    /// built-in ones do (`searcher` names it in the error).
+    pub fn found_finite(self, searcher: &str) -> Result<Self> {
         if self.evaluations > 0 && !self.best_cost.is_finite() {
             return Err(crate::Error::Search(format!(
                 "{searcher}: the objective was not finite (NaN or infinite) at any of the {} \
@@ -89,6 +91,61 @@ impl SearchOutcome {
 }
 
 /// Minimises an objective in the unit box, starting from (or seeded with) `start`.
+///
+/// Step 2 of the loop; `Calibrator::with_searcher` plugs one in. `start` is the best
+/// point the model has run so far: a searcher that proposes a point already run ends
+/// the calibration (`converged`). A searcher of your own:
+///
+/// ```
+/// use kalibre_core::{Objective, Result, SearchOutcome, Searcher};
+///
+/// /// Tries `points + 1` points along the box's diagonal, and the start.
+/// struct DiagonalSearch {
+///     points: usize,
+/// }
+///
+/// impl Searcher for DiagonalSearch {
+///     fn search(&self, objective: &dyn Objective, start: &[f64], _seed: u64) -> Result<SearchOutcome> {
+///         let (mut best_unit, mut best_cost) = (start.to_vec(), objective.cost(start));
+///         for i in 0..=self.points {
+///             let x = vec![i as f64 / self.points as f64; objective.dim()];
+///             let cost = objective.cost(&x);
+///             if cost < best_cost {
+///                 (best_unit, best_cost) = (x, cost);
+///             }
+///         }
+///         let outcome = SearchOutcome {
+///             best_unit,
+///             best_cost,
+///             evaluations: self.points + 2,
+///             trace: Vec::new(),
+///             timed_out: false,
+///         };
+///         // An error, not a result, when no cost seen was finite.
+///         outcome.found_finite("diagonal search")
+///     }
+/// }
+///
+/// /// A bowl with its bottom at (0.3, 0.3).
+/// struct Bowl;
+///
+/// impl Objective for Bowl {
+///     fn dim(&self) -> usize {
+///         2
+///     }
+///     fn cost(&self, x: &[f64]) -> f64 {
+///         x.iter().map(|v| (v - 0.3).powi(2)).sum()
+///     }
+///     fn cost_and_gradient(&self, x: &[f64]) -> (f64, Vec<f64>) {
+///         (self.cost(x), x.iter().map(|v| 2.0 * (v - 0.3)).collect())
+///     }
+/// }
+///
+/// let found = DiagonalSearch { points: 10 }.search(&Bowl, &[0.9, 0.9], 1)?;
+/// assert_eq!(found.best_unit, [0.3, 0.3]);
+/// assert!(found.best_cost < 1e-30);
+/// # Ok::<(), kalibre_core::Error>(())
+/// ```
 pub trait Searcher: Sync {
     /// Runs the search. Deterministic for a given `seed`, at any thread count.
     fn search(&self, objective: &dyn Objective, start: &[f64], seed: u64) -> Result<SearchOutcome>;

@@ -288,3 +288,25 @@ impl CaseDir {
         Ok(MeshSummary { cells, patches })
     }
 }
+
+/// Removes the run directories of solves killed mid-run (a calibration or diagnosis
+/// stopped with `kill -9`) under every model's runs directory (`runs-*`) in `cache_root`,
+/// and returns them ([`kalibre_core::external::RunDirs::remove_interrupted`]); live
+/// solves, of this process or another, and kept failed ones stay. A missing root has none.
+pub fn remove_interrupted_runs(cache_root: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let entries = match std::fs::read_dir(cache_root) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e),
+    };
+    let mut removed = Vec::new();
+    for entry in entries {
+        let entry = entry?;
+        if entry.file_name().to_string_lossy().starts_with("runs-") && entry.path().is_dir() {
+            removed
+                .extend(kalibre_core::external::RunDirs::new(entry.path()).remove_interrupted()?);
+        }
+    }
+    removed.sort();
+    Ok(removed)
+}

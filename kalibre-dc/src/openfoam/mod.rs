@@ -25,7 +25,7 @@ mod solver;
 
 use thiserror::Error;
 
-pub use case::{CaseDir, MeshSummary};
+pub use case::{remove_interrupted_runs, CaseDir, MeshSummary};
 pub use geometry::{
     CaseExtras, CaseGeometry, CellRange, FacePatch, GapPatches, PanelPlane, RackGap, ServerPatches,
 };
@@ -90,6 +90,19 @@ pub enum OpenFoamError {
 }
 
 impl OpenFoamError {
+    /// The error with the hall file's real path in place of `hall.json`: a geometry the
+    /// grid cannot hold becomes an [`crate::Error::Format`] naming `file` and the field,
+    /// and the hall's own errors name it as [`crate::Error::in_hall_file`] does.
+    pub fn in_hall_file(self, file: &str) -> Self {
+        match self {
+            OpenFoamError::Geometry { field, message } => {
+                OpenFoamError::Hall(crate::Error::format(file, field, message))
+            }
+            OpenFoamError::Hall(e) => OpenFoamError::Hall(e.in_hall_file(file)),
+            e => e,
+        }
+    }
+
     pub(crate) fn io(path: impl AsRef<std::path::Path>, source: std::io::Error) -> Self {
         OpenFoamError::Io {
             path: path.as_ref().display().to_string(),

@@ -9,7 +9,7 @@ use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 use super::case::{run_step, which, CaseDir};
 use super::geometry::{CaseExtras, CaseGeometry, RackGap};
 use super::params::RunInputs;
-use super::results::{file_tail, last_field_value, log_verdict, probe_window};
+use super::results::{file_tail, last_field_value, log_verdict, probe_window, shows_fpe};
 use super::{OpenFoamError, OpenFoamSettings};
 use crate::effects::{mods_at_upper_bounds, Effect, EffectRegistry};
 use crate::hall::Hall;
@@ -345,7 +345,9 @@ impl OpenFoamModel {
             .runs
             .create(&state.label, key)
             .map_err(|e| ModelError::failed(format!("cannot create a run directory: {e}")))?;
-        let mut result = self.run_in(&dir, inputs, t0);
+        let mut result = self
+            .run_in(&dir, inputs, t0)
+            .map_err(|e| e.with_run_dir(&dir));
         let keep = self.settings.keep_runs || result.is_err();
         if !keep {
             let t3 = Instant::now();
@@ -522,12 +524,16 @@ impl OpenFoamModel {
         match out.end {
             ProcessEnd::Exited(0) => Ok(logs),
             ProcessEnd::Exited(c) => {
-                let fpe = file_tail(&logs.join("stdout.log"), 16 * 1024)
-                    .and_then(|t| log_verdict(&t))
-                    .filter(|r| r.contains("floating-point"));
+                // OpenFOAM prints its trace on stderr, a shell's message on stdout.
+                let fpe = ["stdout.log", "stderr.log"]
+                    .iter()
+                    .any(|f| file_tail(&logs.join(f), 16 * 1024).is_some_and(|t| shows_fpe(&t)));
                 Err(ModelError::Failed {
-                    reason: fpe
-                        .unwrap_or_else(|| format!("{program} ({step}) exited with code {c}")),
+                    reason: if fpe {
+                        "floating-point exception in the solver (diverged)".into()
+                    } else {
+                        format!("{program} ({step}) exited with code {c}")
+                    },
                     log_tail: tail(),
                 })
             }

@@ -17,17 +17,28 @@ pub fn file_tail(path: &Path, max: u64) -> Option<String> {
 
 /// Why a solver log shows a failed run, if it does.
 pub fn log_verdict(tail: &str) -> Option<String> {
-    if tail.contains("Floating point exception") || tail.contains("sigFpe") {
-        return Some("floating-point exception in the solver (diverged)".into());
-    }
     if let Some(i) = tail.find("FOAM FATAL") {
         let msg: String = tail[i..].lines().take(6).collect::<Vec<_>>().join(" | ");
         return Some(format!("OpenFOAM error: {msg}"));
+    }
+    if shows_fpe(tail) {
+        return Some("floating-point exception in the solver (diverged)".into());
     }
     if !tail.lines().any(|l| l.trim() == "End") {
         return Some("the solver log has no `End` line (the run did not finish)".into());
     }
     None
+}
+
+/// A floating-point exception's trace (`Foam::sigFpe::sigHandler`) or the shell's
+/// `Floating point exception (core dumped)`. Not the banner every solver prints at start
+/// (`trapFpe: Floating point exception trapping enabled`, or `sigFpe : Enabling floating
+/// point exception trapping` in older versions), which a short log keeps in its tail.
+pub fn shows_fpe(log: &str) -> bool {
+    log.lines().any(|l| {
+        let l = l.trim_start();
+        l.contains("sigFpe::sigHandler") || l.starts_with("Floating point exception")
+    })
 }
 
 /// Window means and spreads (population standard deviation) of the probes.
@@ -138,6 +149,23 @@ mod tests {
                 .unwrap()
                 .contains("floating-point")
         );
+        assert!(shows_fpe("Floating point exception (core dumped)\n"));
+        // The start-up banners say trapping is on; a finished short run keeps them in
+        // its tail and is no failure.
+        for banner in [
+            "trapFpe: Floating point exception trapping enabled (FOAM_SIGFPE).",
+            "sigFpe : Enabling floating point exception trapping (FOAM_SIGFPE).",
+        ] {
+            let log = format!("nProcs : 1\n{banner}\nTime = 10\n\nEnd\n\n");
+            assert_eq!(log_verdict(&log), None, "{banner}");
+            assert!(!shows_fpe(&log));
+        }
+        // A fatal error is named as such, banner or not.
+        let fatal = "trapFpe: Floating point exception trapping enabled\n--> FOAM FATAL ERROR: \
+                     cannot find file \"0/T\"\n";
+        assert!(log_verdict(fatal)
+            .unwrap()
+            .starts_with("OpenFOAM error: FOAM FATAL ERROR"));
     }
 
     #[test]

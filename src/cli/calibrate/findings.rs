@@ -33,7 +33,7 @@ pub(super) fn openfoam_intakes(
         args.openfoam
             .settings(&args.out.join("openfoam"), args.grid_m)?,
     )
-    .map_err(of_err)?;
+    .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?;
     let store = RunStore::open(journal, model.fingerprint())?;
     let names: Vec<String> = report
         .best

@@ -16,7 +16,7 @@ use kalibre_core::{Model, Observe};
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::openfoam::OpenFoamModel;
+use kalibre_dc::openfoam::{remove_interrupted_runs, OpenFoamModel, OpenFoamSettings};
 use kalibre_dc::snapshots::{self, HallSnapshot};
 use kalibre_dc::surrogate::PenaltyReport;
 
@@ -73,7 +73,8 @@ pub struct CalibrateArgs {
     /// Seed of every random choice; the same seed gives the same result at any thread count.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Grid cell size of the built-in simulator (m); default: the simulator's.
+    /// Grid cell size (m) of the built-in simulator, or of the OpenFOAM mesh with
+    /// `--model openfoam` (the hall's edges must lie on it); default 0.2.
     #[arg(long = "grid-m")]
     grid_m: Option<f64>,
     /// Worker threads (0 = all cores).
@@ -283,7 +284,10 @@ fn calibrate_with_model<'o>(
                 args.openfoam
                     .settings(&args.out.join("openfoam"), args.grid_m)?,
             )
-            .map_err(of_err)?;
+            .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?;
+            super::out_dir::note_interrupted_runs(remove_interrupted_runs(
+                &model.settings().cache_root,
+            ));
             let c = calibrate_hall_model(
                 &hall,
                 snaps,
@@ -302,6 +306,7 @@ fn calibrate_with_model<'o>(
                 .as_deref()
                 .expect("checked by check_model_flags");
             let model = HallCommand::new(&hall, hall_command::load_config(path)?, path)?;
+            super::out_dir::note_interrupted_runs(model.command.remove_interrupted_runs());
             let c = calibrate_hall_model(
                 &hall,
                 snaps,
@@ -419,6 +424,10 @@ pub fn run(args: CalibrateArgs) -> CliResult {
             args.grid_m.is_some(),
         )?;
         super::plausible::warn_off_grid(&args.hall, &hall, settings.sim.cell_m);
+    }
+    if args.model == ModelArg::Openfoam {
+        let grid_m = args.grid_m.unwrap_or(OpenFoamSettings::default().grid_m);
+        super::openfoam_args::check_mesh(&hall, &args.hall, grid_m, args.grid_m.is_some())?;
     }
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.

@@ -12,7 +12,7 @@ use kalibre_dc::diagnosis::{
 };
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
-use kalibre_dc::openfoam::{OpenFoamEffectSolver, OpenFoamModel};
+use kalibre_dc::openfoam::{remove_interrupted_runs, OpenFoamEffectSolver, OpenFoamModel};
 use kalibre_dc::sim::Simulator;
 use kalibre_dc::snapshots;
 use kalibre_dc::story::with_effect_from_report;
@@ -240,8 +240,10 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         ),
         DiagnoseModel::Openfoam => {
             let of = of_args.settings(&args.calibration.join("openfoam"), grid_m)?;
+            super::openfoam_args::check_mesh(&hall, &args.hall, of.grid_m, args.grid_m.is_some())?;
+            super::out_dir::note_interrupted_runs(remove_interrupted_runs(&of.cache_root));
             let fp = OpenFoamModel::new(&hall, of.clone())
-                .map_err(of_err)?
+                .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?
                 .fingerprint();
             (Box::new(OpenFoamEffectSolver::new(&hall, of)?), fp)
         }
