@@ -122,6 +122,12 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
         "{err}"
     );
     assert!(interrupted.iter().all(|d| !d.exists()), "{interrupted:?}");
+    // The summary says how steady the readings are at the best parameters.
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("OpenFOAM probe fluctuation   mean "),
+        "{said}"
+    );
     assert!(marked_run_dirs(&dir.join("out/openfoam")).is_empty());
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("out/report.json")).unwrap())

@@ -16,17 +16,19 @@ use super::super::openfoam_args::of_err;
 use super::super::{CliError, CliResult};
 use super::{calibrated_hall, CalibrateArgs};
 
-/// An OpenFOAM calibration's server intakes at the best parameters, per snapshot, from
-/// the runs it journaled (every OpenFOAM run samples each intake): no solve more. `None`
-/// when a run at the best parameters lacks them (journaled by an older kalibre).
-pub(super) fn openfoam_intakes(
+/// An OpenFOAM calibration's server intakes at the best parameters, per snapshot, and
+/// how much its sensors' readings fluctuate there, from the runs it journaled (every
+/// OpenFOAM run samples each intake and each probe's spread): no solve more. The intakes
+/// are `None` when a run at the best parameters lacks them (journaled by an older
+/// kalibre).
+pub(super) fn openfoam_findings(
     args: &CalibrateArgs,
     hall: &Hall,
     snaps: &[HallSnapshot],
     settings: &HallCalibrationSettings,
     report: &Report,
     journal: &Path,
-) -> CliResult<Option<Vec<(String, InletCheck)>>> {
+) -> CliResult<OpenFoamFindings> {
     let hall = calibrated_hall(hall, settings);
     let model = OpenFoamModel::new(
         &hall,
@@ -45,16 +47,22 @@ pub(super) fn openfoam_intakes(
     let params = report.best.params.values();
     let alpha = model.layout().alpha_per_server(&params);
     let mut checks = Vec::with_capacity(snaps.len());
+    let mut fluctuation: Option<Fluctuation> = None;
+    let mut complete = true;
     for snap in snaps {
         let inputs = model.scenario_key(&snap.state);
         let outputs = store
             .get_keyed(&snap.state.label, &inputs, &names, &params)
             .and_then(|(_, run)| run.result().ok());
+        if let Some(spread) = outputs.as_ref().and_then(|o| o.spread.as_ref()) {
+            fluctuation = Fluctuation::merge(fluctuation, &snap.state.label, spread, &hall);
+        }
         let Some(intake_c) = outputs
             .as_ref()
             .and_then(|o| o.extras.get(SERVER_INTAKE_KEY))
         else {
-            return Ok(None);
+            complete = false;
+            continue;
         };
         let air = server_air_from_intakes(&hall, &snap.state, &alpha, intake_c, model.settings())?;
         checks.push((
@@ -62,7 +70,75 @@ pub(super) fn openfoam_intakes(
             inlet_check(&air, RECOMMENDED_MAX_INLET_C, 3)?,
         ));
     }
-    Ok(Some(checks))
+    Ok(OpenFoamFindings {
+        intakes: complete.then_some(checks),
+        fluctuation,
+    })
+}
+
+/// What an OpenFOAM calibration's journal says at the best parameters.
+pub(super) struct OpenFoamFindings {
+    /// Every server's intake per snapshot; `None` when a run lacks them.
+    pub intakes: Option<Vec<(String, InletCheck)>>,
+    /// How much the sensors' readings fluctuate, when the runs journaled it.
+    pub fluctuation: Option<Fluctuation>,
+}
+
+/// How much OpenFOAM's sensor readings fluctuate over the averaging window (each probe's
+/// standard deviation, journaled as the run's `spread`) at the best parameters: an
+/// unsteady solve limits how closely any calibration can match, and `ok` runs say
+/// nothing of it otherwise.
+pub(super) struct Fluctuation {
+    sum_c: f64,
+    count: usize,
+    largest_c: f64,
+    sensor: String,
+    snapshot: String,
+}
+
+impl Fluctuation {
+    fn merge(into: Option<Self>, snapshot: &str, spread: &[f64], hall: &Hall) -> Option<Self> {
+        let mut f = into.unwrap_or(Fluctuation {
+            sum_c: 0.0,
+            count: 0,
+            largest_c: f64::NEG_INFINITY,
+            sensor: String::new(),
+            snapshot: String::new(),
+        });
+        for (s, &c) in hall.sensors.iter().zip(spread) {
+            f.sum_c += c;
+            f.count += 1;
+            if c > f.largest_c {
+                (f.largest_c, f.sensor, f.snapshot) = (c, s.id.clone(), snapshot.to_string());
+            }
+        }
+        (f.count > 0).then_some(f)
+    }
+
+    /// The summary's line.
+    pub(super) fn describe(&self) -> String {
+        format!(
+            "mean {:.2} C, largest {:.2} C ({}, {}), at the best parameters",
+            self.sum_c / self.count as f64,
+            self.largest_c,
+            self.sensor,
+            self.snapshot
+        )
+    }
+
+    /// A warning when the largest exceeds the fit's MAE.
+    pub(super) fn warn_if_unsteady(&self, best_mae_c: f64) {
+        if self.largest_c > best_mae_c {
+            eprintln!(
+                "kalibre: warning: at the best parameters OpenFOAM's reading at {} ({}) \
+                 fluctuates by {:.2} C (its standard deviation over the averaging window), \
+                 more than the fit's MAE ({:.3} C): the solve is not steady there, so no \
+                 parameter value can match that sensor closer; more --of-iterations or \
+                 another --grid-m may settle it",
+                self.sensor, self.snapshot, self.largest_c, best_mae_c
+            );
+        }
+    }
 }
 
 /// What the calibrated built-in model says beyond the sensors.

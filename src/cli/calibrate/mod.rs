@@ -25,7 +25,7 @@ use super::hall_command::{self, HallCommand};
 use super::likelihood::Likelihood;
 use super::openfoam_args::{of_err, OpenFoamArgs};
 use super::{io_err, with_threads, CliError, CliResult};
-use findings::{builtin_findings, openfoam_intakes};
+use findings::{builtin_findings, openfoam_findings};
 use progress::Progress;
 pub(super) use settings::{check_finer_grids, check_grid_factors};
 use settings::{flag_error, settings};
@@ -500,16 +500,18 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         .map_err(|e| CliError::Run(format!("report.json: {e}")))?;
     kalibre_core::write_atomic(&report_path, json).map_err(|e| io_err(&report_path, e))?;
     let html_path = args.out.join("report.html");
+    let mut fluctuation = None;
     let (intakes, warming) = match args.model {
         ModelArg::Builtin => {
             let found = builtin_findings(&hall, &snaps, &settings, &report)?;
             (Some(found.intakes), Some(found.warming))
         }
         // OpenFOAM's flow is not the built-in model's: its own intakes, and no attribution.
-        ModelArg::Openfoam => (
-            openfoam_intakes(&args, &hall, &snaps, &settings, &report, &journal)?,
-            None,
-        ),
+        ModelArg::Openfoam => {
+            let found = openfoam_findings(&args, &hall, &snaps, &settings, &report, &journal)?;
+            fluctuation = found.fluctuation;
+            (found.intakes, None)
+        }
         // A command model gives its sensors' readings only.
         ModelArg::Command => (None, None),
     };
@@ -526,7 +528,16 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         under_read: kalibre_dc::sim::coldest_under_read(&hall, &report.residuals),
     });
     kalibre_core::write_atomic(&html_path, html).map_err(|e| io_err(&html_path, e))?;
-    print_summary(&report, wall_s, &penalty_report, intakes.as_ref());
+    print_summary(
+        &report,
+        wall_s,
+        &penalty_report,
+        intakes.as_ref(),
+        fluctuation.as_ref().map(|f| f.describe()).as_deref(),
+    );
+    if let Some(f) = &fluctuation {
+        f.warn_if_unsteady(report.best.mae_c);
+    }
     println!(
         "wrote {}, {}, {}",
         report_path.display(),

@@ -137,6 +137,7 @@ pub(super) fn print_summary(
     wall_s: f64,
     penalty: &kalibre_dc::surrogate::PenaltyReport,
     intakes: Option<&Intakes>,
+    fluctuation: Option<&str>,
 ) {
     println!();
     println!("calibration summary");
@@ -186,6 +187,9 @@ pub(super) fn print_summary(
     print_uncertainty(report);
     if let Some(line) = intakes.and_then(intakes_line) {
         println!("  {:<28} {line}", "server intakes (model)");
+    }
+    if let Some(line) = fluctuation {
+        println!("  {:<28} {line}", "OpenFOAM probe fluctuation");
     }
     println!("  {:<28} {wall_s:.1} s", "wall time");
     if !penalty.violations.is_empty() {
