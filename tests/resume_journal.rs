@@ -19,9 +19,14 @@ fn calibrate(out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
 }
 
 fn calibrate_output(out: &Path, extra: &[&str]) -> std::process::Output {
+    calibrate_hall_output(&data("of-dev-clean/hall.json"), out, extra)
+}
+
+/// As [`calibrate_output`], of the hall in `hall` (with of-dev-clean's snapshots).
+fn calibrate_hall_output(hall: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
     run(kalibre()
         .args(["calibrate", "--hall"])
-        .arg(data("of-dev-clean/hall.json"))
+        .arg(hall)
         .arg("--snapshots")
         .arg(data("of-dev-clean/snapshots.csv"))
         .args([
@@ -122,19 +127,7 @@ fn an_edited_hall_is_refused_naming_the_changed_fields() {
     let mut renamed = given.clone();
     renamed["name"] = "another name".into();
     write(&renamed);
-    let resumed = run(
-        on_files("calibrate", &edited, &data("of-dev-clean/snapshots.csv"))
-            .args([
-                "--iterations",
-                "1",
-                "--polish",
-                "0",
-                "--no-grid-check",
-                "--quiet",
-            ])
-            .args(["--threads", "1", "--out"])
-            .arg(&out),
-    );
+    let resumed = calibrate_hall_output(&edited, &out, &["--iterations", "1"]);
     assert_eq!(resumed.status.code(), Some(0), "{}", stderr(&resumed));
 
     let mut moved = given.clone();
@@ -142,19 +135,7 @@ fn an_edited_hall_is_refused_naming_the_changed_fields() {
     let sensor = moved["sensors"][2]["id"].as_str().unwrap().to_string();
     moved["sensors"][2]["position_m"][2] = 0.55.into();
     write(&moved);
-    let o = run(
-        on_files("calibrate", &edited, &data("of-dev-clean/snapshots.csv"))
-            .args([
-                "--iterations",
-                "1",
-                "--polish",
-                "0",
-                "--no-grid-check",
-                "--quiet",
-            ])
-            .args(["--threads", "1", "--out"])
-            .arg(&out),
-    );
+    let o = calibrate_hall_output(&edited, &out, &["--iterations", "1"]);
     assert_input_error(&o, "changed since its runs (they were made on ");
     assert_input_error(&o, "/cracs/0/rated_flow_m3_s (crac-1): ");
     assert_input_error(&o, &format!("/sensors/2/position_m ({sensor}): "));
