@@ -268,7 +268,7 @@ fn a_config_that_does_not_fit_the_hall_is_refused_for_its_real_fault() {
 /// Runs that fail (here the design's upper bounds, 2.9999999999999996 on the log scale:
 /// the command exits with 3 there) are
 /// journaled as failed, the loop goes on without them, and the summary says how many
-/// failed and that a poor fit may be their doing.
+/// failed, that a poor fit may be their doing, and at which bound they sit.
 #[test]
 fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
     let dir = tmp("command-failing");
@@ -302,6 +302,15 @@ fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
             "note: 3 of {} model runs failed (their reasons are in runs.jsonl)",
             runs["total"]
         )),
+        "{stdout}"
+    );
+    // Each failed at the upper bounds: the note says which bound, and to narrow it.
+    assert!(
+        stdout.contains(
+            "; all 3 failed runs in the journal sit at a bound, 3 of them at alpha/web = 3 \
+             (upper), alpha/db = 3 (upper), alpha/gpu = 3 (upper); if the model cannot run \
+             there, narrow that bound in hall.json"
+        ),
         "{stdout}"
     );
 }

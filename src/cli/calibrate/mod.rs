@@ -1,6 +1,7 @@
 //! `kalibre calibrate`: the four-step loop on a hall, with the built-in simulator,
 //! OpenFOAM or any external command as the model.
 
+mod failed_at_bounds;
 mod findings;
 mod journal_mismatch;
 mod progress;
@@ -489,6 +490,14 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let wall_s = started.elapsed().as_secs_f64();
     warn_skipped_journal_lines(&journal, &report);
     warn_unreached(&journal, &report);
+    let failed_at_bounds = if report.runs.failed > 0 {
+        let calibrated = calibrated_hall(&hall, &settings);
+        let effects = kalibre_dc::effects::EffectRegistry::builtin().build_all(&calibrated)?;
+        let layout = kalibre_dc::ParamLayout::new(&calibrated, &effects)?;
+        failed_at_bounds::clause(&journal, &fingerprint, layout.space())
+    } else {
+        None
+    };
     let mut report = report;
     let mut record = model_record(&args, &hall, &settings, fingerprint)?;
     if args.model != ModelArg::Command {
@@ -534,6 +543,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         &penalty_report,
         intakes.as_ref(),
         fluctuation.as_ref().map(|f| f.describe()).as_deref(),
+        failed_at_bounds.as_deref(),
     );
     if let Some(f) = &fluctuation {
         f.warn_if_unsteady(report.best.mae_c);

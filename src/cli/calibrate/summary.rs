@@ -138,6 +138,7 @@ pub(super) fn print_summary(
     penalty: &kalibre_dc::surrogate::PenaltyReport,
     intakes: Option<&Intakes>,
     fluctuation: Option<&str>,
+    failed_at_bounds: Option<&str>,
 ) {
     println!();
     println!("calibration summary");
@@ -224,8 +225,11 @@ pub(super) fn print_summary(
         println!(
             "  note: {} of {} model runs failed (their reasons are in runs.jsonl); the loop \
              learned from the rest, so a poor fit may be the failures' doing. Fix what failed \
-             and calibrate again into this --out: failed runs run again, the rest are replayed",
-            report.runs.failed, report.runs.total
+             and calibrate again into this --out: failed runs run again, the rest are \
+             replayed{}",
+            report.runs.failed,
+            report.runs.total,
+            failed_at_bounds.map_or(String::new(), |c| format!("; {c}"))
         );
     }
     if let Some(text) = kalibre_dc::report::passed_over_text(report) {
