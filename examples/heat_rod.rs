@@ -295,7 +295,7 @@ pub struct Outcome {
 /// Calibrates the rod with the default loop (hybrid DE + Adam search) at `seed`: the
 /// paper's plain loop, `Settings::default()`, which this rod's surrogate (exact in
 /// form) needs no more than. `Settings::recommended()`, the start `docs/library.md` gives
-/// for a model of your own, reaches the same fit here (0.104 K at seed 1), but its polish
+/// for a model of your own, reaches the same fit here (0.104 K at seed 7), but its polish
 /// takes one of `tests/heat_rod.rs`'s seeds to 13 runs per condition after the design,
 /// past the 10 this example is held to.
 pub fn run(seed: u64) -> kalibre_core::Result<Outcome> {
