@@ -3,9 +3,10 @@
 //! snapshot at a calibration's parameters or any others, what-ifs included: the
 //! predicted sensor readings.
 
+use std::path::Path;
 use std::time::Instant;
 
-use kalibre_core::Model;
+use kalibre_core::{Model, ModelError};
 use kalibre_dc::hall::Hall;
 use kalibre_dc::snapshots::{self, HallSnapshot};
 
@@ -88,23 +89,17 @@ pub(super) fn run(
         let label = &snap.state.label;
         let started = Instant::now();
         let report = model.command.run(&model.scenario(&snap.state), &params);
+        // The attempt's own record: a run with no log tail (a non-finite output) is
+        // kept too.
+        let kept = report
+            .attempts
+            .last()
+            .filter(|a| a.kept)
+            .and_then(|a| a.run_dir.as_deref());
         let outputs = report
             .outcome
             .and_then(|o| model.check_plausible(&o).map(|()| o))
-            .map_err(|e| {
-                let gist = e
-                    .log_gist()
-                    .map(|g| format!("; its log: {g}"))
-                    .unwrap_or_default();
-                let kept = report
-                    .attempts
-                    .last()
-                    .filter(|a| a.kept)
-                    .and_then(|a| a.run_dir.as_ref())
-                    .map(|d| format!(" (its directory is kept: {})", d.display()))
-                    .unwrap_or_default();
-                CliError::Run(format!("snapshot `{label}`: {e}{gist}{kept}"))
-            })?;
+            .map_err(|e| CliError::Run(format!("snapshot `{label}`: {}", failed_run(&e, kept))))?;
         say!(
             "{label}: the command ran in {:.1} s",
             started.elapsed().as_secs_f64()
@@ -123,4 +118,16 @@ pub(super) fn run(
         path.display()
     );
     Ok(())
+}
+
+/// A failed run for a one-line message: the error, the gist of its log and where its
+/// directory was kept, if it was.
+pub(super) fn failed_run(e: &ModelError, kept: Option<&Path>) -> String {
+    let gist = e.log_gist().map(|g| format!("; its log: {g}"));
+    let kept = kept.map(|d| format!(" (its directory is kept: {})", d.display()));
+    format!(
+        "{e}{}{}",
+        gist.unwrap_or_default(),
+        kept.unwrap_or_default()
+    )
 }

@@ -99,15 +99,8 @@ pub(super) fn run(
         let failed =
             |e: &dyn std::fmt::Display| CliError::Run(format!("snapshot `{label}`: OpenFOAM: {e}"));
         let out = model.evaluate(&snap.state, &params).map_err(|e| {
-            let gist = e.log_gist().map(|g| format!("; its log: {g}"));
-            let kept = e
-                .run_dir()
-                .map(|d| format!(" (its directory is kept: {d})"));
-            failed(&format!(
-                "{e}{}{}",
-                gist.unwrap_or_default(),
-                kept.unwrap_or_default()
-            ))
+            let kept = e.run_dir().map(std::path::Path::new);
+            failed(&super::simulate_command::failed_run(&e, kept))
         })?;
         let intake_c = out
             .extras

@@ -341,9 +341,10 @@ pub fn diagnose_hall_with(
     let (candidates, overlapping): (Vec<_>, Vec<_>) = candidates.into_iter().partition(|(_, e)| {
         openings_overlap(&supply_openings(e.as_ref(), hall), &hall_openings).is_none()
     });
+    let calibrated_names = space.names();
     for (spec, e) in &overlapping {
         not_tried.push(NotTried {
-            candidate: hypothesis_name(spec, e.as_ref(), &space.names()),
+            candidate: hypothesis_name(spec, e.as_ref(), &calibrated_names),
             count: 1,
             reason: "its opening would overlap an opening the hall has".into(),
         });
@@ -490,7 +491,6 @@ pub fn diagnose_hall_with(
             residuals = residuals.with_model_form(spread_of(&others)?)?;
         }
     }
-    let calibrated_names = space.names();
     let names: Vec<String> = candidates
         .iter()
         .map(|(spec, e)| hypothesis_name(spec, e.as_ref(), &calibrated_names))

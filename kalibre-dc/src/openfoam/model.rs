@@ -9,7 +9,9 @@ use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 use super::case::{run_step, which, CaseDir};
 use super::geometry::{CaseExtras, CaseGeometry, RackGap};
 use super::params::RunInputs;
-use super::results::{file_tail, last_field_value, log_verdict, probe_window, shows_fpe};
+use super::results::{
+    file_tail, last_field_value, log_verdict, probe_window, shows_fpe, FPE_VERDICT,
+};
 use super::{OpenFoamError, OpenFoamSettings};
 use crate::effects::{mods_at_upper_bounds, Effect, EffectRegistry};
 use crate::hall::Hall;
@@ -530,7 +532,7 @@ impl OpenFoamModel {
                     .any(|f| file_tail(&logs.join(f), 16 * 1024).is_some_and(|t| shows_fpe(&t)));
                 Err(ModelError::Failed {
                     reason: if fpe {
-                        "floating-point exception in the solver (diverged)".into()
+                        FPE_VERDICT.into()
                     } else {
                         format!("{program} ({step}) exited with code {c}")
                     },

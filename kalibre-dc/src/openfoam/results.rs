@@ -15,6 +15,9 @@ pub fn file_tail(path: &Path, max: u64) -> Option<String> {
     Some(String::from_utf8_lossy(&buf).into_owned())
 }
 
+/// The reason a run fails with when its solver hit a floating-point exception.
+pub const FPE_VERDICT: &str = "floating-point exception in the solver (diverged)";
+
 /// Why a solver log shows a failed run, if it does.
 pub fn log_verdict(tail: &str) -> Option<String> {
     if let Some(i) = tail.find("FOAM FATAL") {
@@ -22,7 +25,7 @@ pub fn log_verdict(tail: &str) -> Option<String> {
         return Some(format!("OpenFOAM error: {msg}"));
     }
     if shows_fpe(tail) {
-        return Some("floating-point exception in the solver (diverged)".into());
+        return Some(FPE_VERDICT.into());
     }
     if !tail.lines().any(|l| l.trim() == "End") {
         return Some("the solver log has no `End` line (the run did not finish)".into());

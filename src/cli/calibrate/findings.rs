@@ -47,7 +47,7 @@ pub(super) fn openfoam_findings(
     let params = report.best.params.values();
     let alpha = model.layout().alpha_per_server(&params);
     let mut checks = Vec::with_capacity(snaps.len());
-    let mut fluctuation: Option<Fluctuation> = None;
+    let mut fluctuation = Fluctuation::default();
     let mut complete = true;
     for snap in snaps {
         let inputs = model.scenario_key(&snap.state);
@@ -55,7 +55,7 @@ pub(super) fn openfoam_findings(
             .get_keyed(&snap.state.label, &inputs, &names, &params)
             .and_then(|(_, run)| run.result().ok());
         if let Some(spread) = outputs.as_ref().and_then(|o| o.spread.as_ref()) {
-            fluctuation = Fluctuation::merge(fluctuation, &snap.state.label, spread, &hall);
+            fluctuation.add(&snap.state.label, spread, &hall);
         }
         let Some(intake_c) = outputs
             .as_ref()
@@ -72,7 +72,7 @@ pub(super) fn openfoam_findings(
     }
     Ok(OpenFoamFindings {
         intakes: complete.then_some(checks),
-        fluctuation,
+        fluctuation: (fluctuation.count > 0).then_some(fluctuation),
     })
 }
 
@@ -88,6 +88,7 @@ pub(super) struct OpenFoamFindings {
 /// standard deviation, journaled as the run's `spread`) at the best parameters: an
 /// unsteady solve limits how closely any calibration can match, and `ok` runs say
 /// nothing of it otherwise.
+#[derive(Default)]
 pub(super) struct Fluctuation {
     sum_c: f64,
     count: usize,
@@ -97,22 +98,17 @@ pub(super) struct Fluctuation {
 }
 
 impl Fluctuation {
-    fn merge(into: Option<Self>, snapshot: &str, spread: &[f64], hall: &Hall) -> Option<Self> {
-        let mut f = into.unwrap_or(Fluctuation {
-            sum_c: 0.0,
-            count: 0,
-            largest_c: f64::NEG_INFINITY,
-            sensor: String::new(),
-            snapshot: String::new(),
-        });
+    /// Adds one snapshot's run: each sensor's spread, in the hall's sensor order.
+    fn add(&mut self, snapshot: &str, spread: &[f64], hall: &Hall) {
         for (s, &c) in hall.sensors.iter().zip(spread) {
-            f.sum_c += c;
-            f.count += 1;
-            if c > f.largest_c {
-                (f.largest_c, f.sensor, f.snapshot) = (c, s.id.clone(), snapshot.to_string());
+            self.sum_c += c;
+            // The first reading, or a larger one.
+            if self.count == 0 || c > self.largest_c {
+                (self.largest_c, self.sensor, self.snapshot) =
+                    (c, s.id.clone(), snapshot.to_string());
             }
+            self.count += 1;
         }
-        (f.count > 0).then_some(f)
     }
 
     /// The summary's line.

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use clap::{Args, ValueEnum};
 use kalibre_core::calibrate::Report;
-use kalibre_core::{Model, Observe};
+use kalibre_core::{Model, Observe, ParamSpace};
 use kalibre_dc::calibration::{calibrate_hall, HallCalibrationSettings};
 use kalibre_dc::calibration_model::calibrate_hall_model;
 use kalibre_dc::hall::Hall;
@@ -252,6 +252,10 @@ fn check_model_flags(args: &CalibrateArgs) -> CliResult {
     }
 }
 
+/// What a calibration with one of the models gives: its report, the prior's report, the
+/// model's fingerprint and the parameter space it searched.
+type Calibrated = (Report, PenaltyReport, String, ParamSpace);
+
 /// Runs the calibration with the chosen model.
 fn calibrate_with_model<'o>(
     args: &CalibrateArgs,
@@ -260,7 +264,7 @@ fn calibrate_with_model<'o>(
     settings: &HallCalibrationSettings,
     journal: &Path,
     observers: Vec<Box<dyn Observe + 'o>>,
-) -> CliResult<(Report, PenaltyReport, String)> {
+) -> CliResult<Calibrated> {
     let hall = calibrated_hall(hall, settings);
     let refused = |e: kalibre_dc::Error| match e {
         kalibre_dc::Error::OtherModelJournal { path, runs } => {
@@ -277,7 +281,8 @@ fn calibrate_with_model<'o>(
         ModelArg::Builtin => {
             let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)
                 .map_err(refused)?;
-            Ok((c.report, c.penalty_report, c.model.fingerprint()))
+            let space = c.model.layout().space().clone();
+            Ok((c.report, c.penalty_report, c.model.fingerprint(), space))
         }
         ModelArg::Openfoam => {
             let model = OpenFoamModel::new(
@@ -299,7 +304,8 @@ fn calibrate_with_model<'o>(
                 observers,
             )
             .map_err(refused)?;
-            Ok((c.report, c.penalty_report, model.fingerprint()))
+            let space = model.layout().space().clone();
+            Ok((c.report, c.penalty_report, model.fingerprint(), space))
         }
         ModelArg::Command => {
             let path = args
@@ -318,7 +324,8 @@ fn calibrate_with_model<'o>(
                 observers,
             )
             .map_err(refused)?;
-            Ok((c.report, c.penalty_report, model.fingerprint()))
+            let space = model.layout.space().clone();
+            Ok((c.report, c.penalty_report, model.fingerprint(), space))
         }
     }
 }
@@ -433,8 +440,10 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.
     let _lock = super::out_dir::lock(&args.out, "calibrate")?;
-    super::out_dir::check_files(&args.out, &OUT_FILES)?;
-    super::out_dir::check_files(&args.out, &[super::hall_changes::RUNS_HALL])?;
+    super::out_dir::check_files(
+        &args.out,
+        &[&OUT_FILES[..], &[super::hall_changes::RUNS_HALL]].concat(),
+    )?;
     // An input kept in --out under an output's name would be replaced by it.
     let outputs: Vec<(String, PathBuf)> = OUT_FILES
         .iter()
@@ -477,7 +486,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let total_runs = ((4 + args.iterations) * snaps.len()) as u64;
     let progress = Progress::new(total_runs, args.quiet);
     let started = Instant::now();
-    let (report, penalty_report, fingerprint) = with_threads(args.threads, || {
+    let (report, penalty_report, fingerprint, space) = with_threads(args.threads, || {
         calibrate_with_model(
             &args,
             &hall,
@@ -490,14 +499,9 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let wall_s = started.elapsed().as_secs_f64();
     warn_skipped_journal_lines(&journal, &report);
     warn_unreached(&journal, &report);
-    let failed_at_bounds = if report.runs.failed > 0 {
-        let calibrated = calibrated_hall(&hall, &settings);
-        let effects = kalibre_dc::effects::EffectRegistry::builtin().build_all(&calibrated)?;
-        let layout = kalibre_dc::ParamLayout::new(&calibrated, &effects)?;
-        failed_at_bounds::clause(&journal, &fingerprint, layout.space())
-    } else {
-        None
-    };
+    let failed_at_bounds = (report.runs.failed > 0)
+        .then(|| failed_at_bounds::clause(&journal, &fingerprint, &space))
+        .flatten();
     let mut report = report;
     let mut record = model_record(&args, &hall, &settings, fingerprint)?;
     if args.model != ModelArg::Command {

@@ -7,7 +7,7 @@ use std::io::{IsTerminal, Write};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{FormattedDuration, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kalibre_core::{Event, Observe};
 
 /// The least time between two progress lines when stderr is not a terminal.
@@ -17,7 +17,6 @@ const LOG_EVERY: Duration = Duration::from_secs(30);
 struct Log {
     out: Box<dyn Write + Send>,
     every: Duration,
-    started: Instant,
     last: Instant,
 }
 
@@ -55,7 +54,6 @@ impl Progress {
             .expect("static template")
             .progress_chars("=> "),
         );
-        let now = Instant::now();
         Progress {
             runs,
             best_mae: Mutex::new(None),
@@ -64,8 +62,7 @@ impl Progress {
                 Mutex::new(Log {
                     out,
                     every,
-                    started: now,
-                    last: now,
+                    last: Instant::now(),
                 })
             }),
         }
@@ -84,10 +81,8 @@ impl Progress {
         log.last = now;
         let iteration = *self.iteration.lock().unwrap_or_else(|p| p.into_inner());
         let best = *self.best_mae.lock().unwrap_or_else(|p| p.into_inner());
-        let elapsed = now.duration_since(log.started).as_secs();
         let line = format!(
-            "kalibre: {} model runs done (of about {} planned), {}, best MAE {}, \
-             {:02}:{:02}:{:02} elapsed\n",
+            "kalibre: {} model runs done (of about {} planned), {}, best MAE {}, {} elapsed\n",
             self.runs.position(),
             self.runs.length().unwrap_or(0),
             match iteration {
@@ -95,9 +90,8 @@ impl Progress {
                 i => format!("iteration {i}"),
             },
             best.map_or("-".into(), |b| format!("{b:.3} C")),
-            elapsed / 3600,
-            elapsed / 60 % 60,
-            elapsed % 60
+            // As the bar's `elapsed_precise`.
+            FormattedDuration(self.runs.elapsed())
         );
         // A log that cannot be written must not stop the calibration.
         let _ = log.out.write_all(line.as_bytes());
