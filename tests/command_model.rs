@@ -268,30 +268,40 @@ fn a_config_that_does_not_fit_the_hall_is_refused_for_its_real_fault() {
 /// Runs that fail (here the design's upper bounds, 2.9999999999999996 on the log scale:
 /// the command exits with 3 there) are
 /// journaled as failed, the loop goes on without them, and the summary says how many
-/// failed, that a poor fit may be their doing, and at which bound they sit.
+/// failed, that a poor fit may be their doing, and at which bound they sit. A resume
+/// with `--replay-failed` does not run them again; one without it does.
 #[test]
 fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
     let dir = tmp("command-failing");
     let hall = dev_hall();
     write_command_model(&dir, &hall, 0.25);
+    let fails = dir.join("fails.txt");
     run_under_sh(
         &dir,
-        r#"case \"$(cat params.json)\" in *'gpu\": 2.99'*) exit 3;; esac; exec \"$0\" \"$@\""#,
+        &format!(
+            r#"case \"$(cat params.json)\" in *'gpu\": 2.99'*) echo x >> '{}'; exit 3;; esac; exec \"$0\" \"$@\""#,
+            fails.display()
+        ),
     );
-    let o = run(on_dataset("calibrate", "of-dev-clean")
-        .args([
-            "--iterations",
-            "1",
-            "--polish",
-            "0",
-            "--quiet",
-            "--model",
-            "command",
-        ])
-        .arg("--config")
-        .arg(dir.join("model.toml"))
-        .arg("--out")
-        .arg(dir.join("cal")));
+    let calibrate = |extra: &[&str]| {
+        run(on_dataset("calibrate", "of-dev-clean")
+            .args([
+                "--iterations",
+                "1",
+                "--polish",
+                "0",
+                "--quiet",
+                "--model",
+                "command",
+            ])
+            .args(extra)
+            .arg("--config")
+            .arg(dir.join("model.toml"))
+            .arg("--out")
+            .arg(dir.join("cal")))
+    };
+    let failures = || std::fs::read_to_string(&fails).unwrap().lines().count();
+    let o = calibrate(&[]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let (_, _, runs) = best(&dir.join("cal"));
@@ -312,6 +322,27 @@ fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
              there, narrow that bound in hall.json"
         ),
         "{stdout}"
+    );
+    assert_eq!(failures(), 3);
+
+    // Replayed: the same failures, and the command is not run at them again.
+    let o = calibrate(&["--replay-failed"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(failures(), 3, "a replayed failure ran again");
+    assert!(
+        stderr(&o).contains("3 run(s) journaled only as failed were replayed as failures"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(best(&dir.join("cal")).2["failed"].as_u64(), Some(3));
+    // A plain resume tries them again.
+    let o = calibrate(&[]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(failures(), 6);
+    assert!(
+        stderr(&o).contains("3 run(s) journaled only as failed were not replayed"),
+        "{}",
+        stderr(&o)
     );
 }
 

@@ -160,6 +160,11 @@ pub struct LoadReport {
     /// of the store a failed run is replayed like any other. Missing in older reports: 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub failed_to_retry: usize,
+    /// Runs journaled only as failed and replayed as failures, when the store was opened
+    /// with [`RunStore::open_replaying_failures`] (`failed_to_retry` is then 0). Missing in
+    /// older reports: 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub failed_replayed: usize,
     /// Complete lines that could not be parsed, skipped.
     pub bad_lines: Vec<BadLine>,
     /// A torn last line (no trailing newline and unparsable), cut off the file.
@@ -279,8 +284,42 @@ impl RunStore {
     /// written until then), so that later lines start clean; bad lines
     /// and runs of other fingerprints are skipped. See [`Self::load_report`].
     pub fn open(path: impl AsRef<Path>, fingerprint: impl Into<String>) -> Result<Self> {
-        let path = path.as_ref().to_path_buf();
-        let fingerprint = fingerprint.into();
+        Self::open_impl(path.as_ref(), fingerprint.into(), false)
+    }
+
+    /// [`Self::open`], but a run journaled only as failed is replayed as that failure
+    /// rather than run again ([`LoadReport::failed_replayed`] counts them): for failures
+    /// that recur at the same point (a solver that diverges at a corner of the box),
+    /// which a resume would otherwise pay for again. A later `ok` line of the same point
+    /// (a retry's result) is replayed instead.
+    ///
+    /// ```
+    /// use kalibre_core::{ModelError, RunStore};
+    /// let path = std::env::temp_dir().join(format!("replay-doc-{}.jsonl", std::process::id()));
+    /// let names = vec!["k".to_string()];
+    /// {
+    ///     let store = RunStore::open(&path, "model-v1").unwrap();
+    ///     let failed = Err(ModelError::failed("diverged"));
+    ///     store.record("t0", &names, &[3.0], &failed, 9.0).unwrap();
+    /// }
+    /// // A resume runs it again ...
+    /// assert!(RunStore::open(&path, "model-v1").unwrap().get("t0", &names, &[3.0]).is_none());
+    /// // ... unless the failures are replayed.
+    /// let store = RunStore::open_replaying_failures(&path, "model-v1").unwrap();
+    /// assert!(store.get("t0", &names, &[3.0]).unwrap().result().is_err());
+    /// assert_eq!(store.load_report().failed_replayed, 1);
+    /// # drop(store);
+    /// # std::fs::remove_file(&path).unwrap();
+    /// ```
+    pub fn open_replaying_failures(
+        path: impl AsRef<Path>,
+        fingerprint: impl Into<String>,
+    ) -> Result<Self> {
+        Self::open_impl(path.as_ref(), fingerprint.into(), true)
+    }
+
+    fn open_impl(path: &Path, fingerprint: String, replay_failed: bool) -> Result<Self> {
+        let path = path.to_path_buf();
         let mut file = OpenOptions::new()
             .read(true)
             .append(true)
@@ -303,7 +342,7 @@ impl RunStore {
             .map_err(|e| Error::io(&path, e))?;
 
         let mut load = LoadReport::default();
-        let mut runs = HashMap::new();
+        let mut runs: HashMap<_, (usize, RunRecord)> = HashMap::new();
         let mut failed = HashSet::new();
         let mut max_seq: Option<u64> = None;
         let complete_len = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
@@ -324,8 +363,17 @@ impl RunStore {
             match runs.entry(k) {
                 // Only a result is replayed; a failure is tried again (a later `ok` line
                 // of the same point is that retry's result).
-                Entry::Vacant(v) if rec.status == RunStatus::Failed => {
+                Entry::Vacant(v) if rec.status == RunStatus::Failed && !replay_failed => {
                     failed.insert(v.into_key());
+                }
+                // A replayed failure gives way to a retry's result; a retry that failed
+                // again is the same failure (as it is when failures are not replayed).
+                Entry::Occupied(mut kept)
+                    if replay_failed && kept.get().1.status == RunStatus::Failed =>
+                {
+                    if rec.status == RunStatus::Ok {
+                        kept.insert((line, rec));
+                    }
                 }
                 Entry::Occupied(kept) => {
                     load.duplicates += 1;
@@ -420,6 +468,11 @@ impl RunStore {
             }
         }
         load.failed_to_retry = failed.iter().filter(|k| !runs.contains_key(*k)).count();
+        if replay_failed {
+            let replayed = runs.values().filter(|(_, r)| r.status == RunStatus::Failed);
+            load.failed_replayed = replayed.count();
+            load.loaded -= load.failed_replayed;
+        }
         Ok(RunStore {
             fingerprint,
             path: Some(path),

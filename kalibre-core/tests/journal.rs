@@ -111,6 +111,46 @@ fn failed_runs_run_again_after_reopening() {
     assert!(store.get("t0", &names(), &b).is_none());
 }
 
+/// Opened to replay failures, a journal gives a point that only failed as its failure
+/// (the model is not asked again), and a point whose retry succeeded as that result.
+#[test]
+fn replayed_failures_are_failures_and_a_retrys_result_wins() {
+    let dir = common::temp_dir("journal-replay");
+    let path = dir.join("runs.jsonl");
+    let (a, b) = ([1.0, 2.0], [3.0, 4.0]);
+    let diverged = || Err(ModelError::failed("diverged"));
+    {
+        let store = RunStore::open(&path, "m1").unwrap();
+        store.record("t0", &names(), &a, &diverged(), 0.5).unwrap();
+        store.record("t0", &names(), &b, &diverged(), 0.5).unwrap();
+        store.record("t0", &names(), &b, &diverged(), 0.5).unwrap();
+        store.record("t0", &names(), &a, &ok(&[20.0]), 3.0).unwrap();
+    }
+    let store = RunStore::open_replaying_failures(&path, "m1").unwrap();
+    let load = store.load_report();
+    assert!(load.is_clean() && load.conflicts.is_empty(), "{load:?}");
+    assert_eq!(
+        (load.loaded, load.failed_replayed, load.failed_to_retry),
+        (1, 1, 0)
+    );
+    assert_eq!(
+        store.get("t0", &names(), &a).unwrap().outputs,
+        Some(vec![20.0])
+    );
+    let failed = store.get("t0", &names(), &b).unwrap();
+    assert_eq!(failed.status, RunStatus::Failed);
+    assert!(failed
+        .result()
+        .unwrap_err()
+        .to_string()
+        .contains("diverged"));
+    drop(store);
+    // The same journal opened as usual runs b again.
+    let store = RunStore::open(&path, "m1").unwrap();
+    assert_eq!(store.load_report().failed_to_retry, 1);
+    assert!(store.get("t0", &names(), &b).is_none());
+}
+
 /// What else a run computed (`Outputs::extras`) is journaled with it, bit for bit, and a
 /// run without any writes no `extras` key (older readers see the line they know).
 #[test]

@@ -38,6 +38,7 @@ pub const SERVER_INFLUENCE_CUT: f64 = 0.01;
 /// | `design_within_prior` | false | the initial design spans the alphas whose rises the prior accepts ([`PenaltySettings::plausible_bounds`]) instead of the whole bounds |
 /// | `grid_check` | `[0.75, 0.5]` | cell sizes, relative to `sim.cell_m`, at which the built-in model runs once per snapshot at the best parameters: the alphas' move from the grid alone is their numerical uncertainty (`ParamUncertainty::numerical`), counted when a parameter is called identified; with `core.numerical_weighting` (default) the grids run before the polish too, which weighs each sensor by them; empty: none |
 /// | `polish_max_params` | 64 | the loop's polish stage (`core.polish_iterations`, 8 by default) runs only when there are at most this many parameters: each of its Jacobians costs `params + 1` model runs per snapshot (per-server alpha on a real hall would need thousands); above it the report's settings show `polish_iterations` 0 |
+/// | `replay_failed` | false | a resume replays the journal's failed runs as failures rather than running them again (for failures that recur at the same point; by default a failure's cause may have passed) |
 #[derive(Debug, Clone)]
 pub struct HallCalibrationSettings {
     /// The generic loop's settings; `target_score` is a target MAE (C).
@@ -66,6 +67,9 @@ pub struct HallCalibrationSettings {
     /// Refined grids (cell size relative to `sim.cell_m`, each in (0, 1)) for the
     /// numerical uncertainty; built-in model only.
     pub grid_check: Vec<f64>,
+    /// A resume replays the journal's failed runs as failures instead of running them
+    /// again ([`kalibre_core::RunStore::open_replaying_failures`]).
+    pub replay_failed: bool,
 }
 
 impl HallCalibrationSettings {
@@ -104,6 +108,7 @@ impl Default for HallCalibrationSettings {
             design_within_prior: false,
             polish_max_params: 64,
             grid_check: vec![0.75, 0.5],
+            replay_failed: false,
         }
     }
 }

@@ -5,13 +5,18 @@ use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use kalibre_core::external::{log_tail, run_process, ProcessEnd, ProcessOutcome, ProcessSpec};
+use kalibre_core::external::{
+    log_tail, run_process, ProcessEnd, ProcessOutcome, ProcessSpec, RunDirs,
+};
 
 use super::geometry::CaseGeometry;
 use super::{dicts, OpenFoamError, OpenFoamSettings};
 
 /// Marks a case directory whose meshing finished and was checked.
 const READY: &str = ".kalibre-ready";
+
+/// Where cases are meshed before they are moved into place (under `cache_root`).
+const MESH_BUILDS: &str = "mesh-builds";
 
 /// What meshing produced.
 #[derive(Debug, Clone, PartialEq)]
@@ -113,10 +118,14 @@ impl CaseDir {
         if dir.join(READY).is_file() {
             return Ok(this);
         }
-        let tmp = root.join(format!("tmp-{key}-{}", std::process::id()));
-        if tmp.exists() {
-            std::fs::remove_dir_all(&tmp).map_err(|e| OpenFoamError::io(&tmp, e))?;
-        }
+        // Built in a fresh directory marked as in use, so a builder killed midway (its
+        // mesh can take minutes) leaves one the next sweep removes; a failed build's stays,
+        // unmarked, for its logs.
+        let builds = RunDirs::new(root.join(MESH_BUILDS));
+        let tmp_dir = builds
+            .create(&format!("case-{key}"), 0)
+            .map_err(|e| OpenFoamError::io(builds.root(), e))?;
+        let tmp = tmp_dir.to_path_buf();
         let built = CaseDir {
             dir: tmp.clone(),
             project_dir: settings.project_dir.clone(),
@@ -291,8 +300,9 @@ impl CaseDir {
 
 /// Removes the run directories of solves killed mid-run (a calibration or diagnosis
 /// stopped with `kill -9`) under every model's runs directory (`runs-*`) in `cache_root`,
-/// and returns them ([`kalibre_core::external::RunDirs::remove_interrupted`]); live
-/// solves, of this process or another, and kept failed ones stay. A missing root has none.
+/// and the half-meshed cases of builders killed midway (`mesh-builds`), and returns them
+/// ([`kalibre_core::external::RunDirs::remove_interrupted`]); live solves and builds, of
+/// this process or another, and kept failed ones stay. A missing root has none.
 pub fn remove_interrupted_runs(cache_root: &Path) -> std::io::Result<Vec<PathBuf>> {
     let entries = match std::fs::read_dir(cache_root) {
         Ok(entries) => entries,
@@ -302,11 +312,47 @@ pub fn remove_interrupted_runs(cache_root: &Path) -> std::io::Result<Vec<PathBuf
     let mut removed = Vec::new();
     for entry in entries {
         let entry = entry?;
-        if entry.file_name().to_string_lossy().starts_with("runs-") && entry.path().is_dir() {
-            removed
-                .extend(kalibre_core::external::RunDirs::new(entry.path()).remove_interrupted()?);
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if (name.starts_with("runs-") || name == MESH_BUILDS) && entry.path().is_dir() {
+            removed.extend(RunDirs::new(entry.path()).remove_interrupted()?);
         }
     }
     removed.sort();
     Ok(removed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_killed_builders_half_meshed_case_is_swept_and_a_live_ones_is_not() {
+        let root = std::env::temp_dir().join(format!("kalibre-mesh-sweep-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let builds = RunDirs::new(root.join(MESH_BUILDS));
+        let live = builds.create("case-abc", 0).unwrap();
+        // What a builder killed mid-mesh leaves: its directory and an unlocked marker.
+        let killed = builds.root().join("case-abc-0000000000000000-9");
+        std::fs::create_dir_all(killed.join("constant/polyMesh")).unwrap();
+        std::fs::write(
+            builds.root().join(".case-abc-0000000000000000-9.running"),
+            "",
+        )
+        .unwrap();
+        // A finished case beside them is never touched.
+        let case = root.join("case-abc");
+        std::fs::create_dir_all(&case).unwrap();
+        std::fs::write(case.join(READY), "").unwrap();
+
+        assert_eq!(
+            remove_interrupted_runs(&root).unwrap(),
+            vec![killed.clone()]
+        );
+        assert!(!killed.exists());
+        assert!(live.is_dir(), "a build under way stays");
+        assert!(case.join(READY).is_file());
+        drop(live);
+        std::fs::remove_dir_all(&root).unwrap();
+    }
 }

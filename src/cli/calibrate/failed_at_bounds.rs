@@ -1,7 +1,8 @@
 //! Failed runs at a bound of the box. A model that cannot run at a corner (OpenFOAM
 //! misses its energy balance where servers draw many times the supply) fails there on
 //! every resume, since a resume runs failed points again: "fix what failed" then means
-//! narrowing that bound in hall.json, and the summary says so.
+//! narrowing that bound in hall.json, or resuming with `--replay-failed`, and the
+//! summary says so.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -73,7 +74,8 @@ pub(super) fn clause(journal: &Path, fingerprint: &str, space: &ParamSpace) -> O
     };
     Some(format!(
         "{which} sit at a bound, {most} of them at {listed}; if the model cannot run there, \
-         narrow that bound in hall.json, as a resume runs failed points again"
+         narrow that bound in hall.json, as a resume runs failed points again (or resume \
+         with --replay-failed)"
     ))
 }
 
@@ -112,7 +114,7 @@ mod tests {
             Some(
                 "1 of the 2 failed runs in the journal sit at a bound, 1 of them at a = 3 \
                  (upper); if the model cannot run there, narrow that bound in hall.json, as a \
-                 resume runs failed points again"
+                 resume runs failed points again (or resume with --replay-failed)"
             )
         );
         write(&[line("failed", "m", [1.0, 0.4])]);

@@ -111,6 +111,12 @@ pub struct CalibrateArgs {
     /// at the proposal (a model run under way finishes; see --of-timeout-s for OpenFOAM).
     #[arg(long = "max-wall-s")]
     max_wall_s: Option<f64>,
+    /// Resume without running the journal's failed runs again: each is replayed as the
+    /// failure it was. For failures that recur at the same point (a solver that diverges
+    /// at a corner of the box); by default a resume runs them again, since a failure's
+    /// cause (a timeout, a busy machine, a setting since fixed) may have passed.
+    #[arg(long = "replay-failed")]
+    replay_failed: bool,
     /// Model runs at once (default: one per snapshot, up to the threads).
     #[arg(long = "parallel-runs")]
     parallel_runs: Option<usize>,
@@ -581,9 +587,18 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
     if load.failed_to_retry > 0 {
         eprintln!(
             "note: {}: {} run(s) journaled only as failed were not replayed (a failure's \
-             cause may have passed); each ran again where the calibration asked for it",
+             cause may have passed); each ran again where the calibration asked for it \
+             (--replay-failed replays them as failures)",
             journal.display(),
             load.failed_to_retry
+        );
+    }
+    if load.failed_replayed > 0 {
+        eprintln!(
+            "note: {}: {} run(s) journaled only as failed were replayed as failures \
+             (--replay-failed), not run again",
+            journal.display(),
+            load.failed_replayed
         );
     }
     if let Some(first) = load.conflicts.first() {

@@ -127,6 +127,7 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         server_influence: args
             .influence_edges
             .then_some(kalibre_dc::calibration::SERVER_INFLUENCE_CUT),
+        replay_failed: args.replay_failed,
         ..HallCalibrationSettings::default()
     };
     if !(1..=MAX_EPOCHS).contains(&args.epochs) {

@@ -225,8 +225,8 @@ pub(super) fn print_summary(
         println!(
             "  note: {} of {} model runs failed (their reasons are in runs.jsonl); the loop \
              learned from the rest, so a poor fit may be the failures' doing. Fix what failed \
-             and calibrate again into this --out: failed runs run again, the rest are \
-             replayed{}",
+             and calibrate again into this --out: failed runs run again (unless \
+             --replay-failed), the rest are replayed{}",
             report.runs.failed,
             report.runs.total,
             failed_at_bounds.map_or(String::new(), |c| format!("; {c}"))
