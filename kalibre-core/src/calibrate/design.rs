@@ -40,6 +40,25 @@ fn reflect(u: f64) -> f64 {
     }
 }
 
+/// Refuses a run budget smaller than the initial design (`points` x `snapshots` runs).
+pub(crate) fn check_budget(
+    max_model_runs: Option<usize>,
+    points: usize,
+    snapshots: usize,
+) -> Result<()> {
+    let design_runs = points * snapshots;
+    match max_model_runs {
+        Some(budget) if budget < design_runs => Err(Error::InvalidSetting {
+            name: "max_model_runs".into(),
+            reason: format!(
+                "{budget} is smaller than the initial design's {design_runs} runs ({points} \
+                 points x {snapshots} snapshots)"
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// Lower bounds, upper bounds, midpoint (unit box), then the initial values unless they
 /// coincide with one of those. Returns the points (unit box) and the index of the initial one.
 /// With `bounds` (physical lower and upper values within the space), the first three

@@ -10,6 +10,7 @@ mod design;
 mod geometry;
 mod numerical;
 mod polish;
+mod propose;
 mod report;
 mod robust;
 mod runner;
@@ -21,6 +22,7 @@ mod uncertainty;
 mod unreached;
 
 pub use numerical::{NumericalCheck, SKIPPED_PAST_WALL};
+pub use propose::FAILED_NEIGHBOURHOOD_UNIT;
 pub use report::{
     Best, Errors, Initial, IterationRecord, NamedValues, PassedOver, Report, Residual, RunCounts,
     SnapshotErrors, StopReason, Timings, REPORT_SCHEMA,
@@ -36,22 +38,15 @@ pub use unreached::{UnreachedBest, UnreachedRuns};
 use std::time::Instant;
 
 use crate::observe::{Event, Observe};
-use crate::search::Objective as _;
 use crate::{
     Error, ErrorMetrics, Model, Observations, ParamSpace, Regularizer, Result, RunStore, Sample,
     Searcher, Surrogate, SurrogateObjective, TrainingSet, Validation, Validator,
 };
 use design::{derive_seed, Stream};
+use propose::Placement;
 use robust::residuals as residuals_of;
 use runner::Runner;
 use state::State;
-
-/// A proposal whose corrected-surrogate loss is less than this fraction below the best
-/// run's counts as a stall: the surrogate promises too little to spend a model run on (see `Settings::stall_step`).
-const STALL_GAIN: f64 = 0.1;
-/// A proposal within this max-norm distance (unit box) of a failed run is moved off it
-/// with `perturb_sigma`'s noise: a model that fails at a point fails beside it too.
-pub const FAILED_NEIGHBOURHOOD_UNIT: f64 = 1e-3;
 
 /// The calibration loop over a model, a surrogate, a searcher and a validator.
 ///
@@ -166,30 +161,8 @@ where
         let (design_units, initial_idx) =
             design::initial_design(space, self.design_bounds.as_ref())?;
         let design_runs = design_units.len() * n_snap;
-        if let Some(budget) = st.max_model_runs {
-            if budget < design_runs {
-                return Err(Error::InvalidSetting {
-                    name: "max_model_runs".into(),
-                    reason: format!(
-                        "{budget} is smaller than the initial design's {design_runs} runs ({} \
-                         points x {n_snap} snapshots)",
-                        design_units.len()
-                    ),
-                });
-            }
-        }
-        let pool = match st.max_parallel_runs {
-            Some(n) => Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build()
-                    .map_err(|e| Error::InvalidSetting {
-                        name: "max_parallel_runs".into(),
-                        reason: e.to_string(),
-                    })?,
-            ),
-            None => None,
-        };
+        design::check_budget(st.max_model_runs, design_units.len(), n_snap)?;
+        let pool = runner::pool(st.max_parallel_runs)?;
         let scenario_keys: Vec<String> = (obs.snapshots().iter())
             .map(|s| self.model.scenario_key(&s.scenario))
             .collect();
@@ -246,23 +219,7 @@ where
             failed: design_failed,
         });
         if state.samples.is_empty() {
-            let why = first_failure.map_or_else(String::new, |e| match e.log_gist() {
-                Some(gist) => format!("; the first: {e}; its log: {gist}"),
-                None => format!("; the first: {e}"),
-            });
-            // An in-memory store keeps the reasons with the calibrator, not in a file.
-            let where_ = match store.path() {
-                Some(p) => format!(
-                    " (each run's reason is in the run journal, {})",
-                    p.display()
-                ),
-                None => " (a journal, `with_store(RunStore::open(..))`, keeps each run's \
-                          reason)"
-                    .to_string(),
-            };
-            return Err(Error::NoSuccessfulRun(format!(
-                "all {design_runs} runs of the initial design failed{why}{where_}"
-            )));
+            return Err(runner::design_failed(design_runs, first_failure, store));
         }
         let augmented = design::augment(
             space,
@@ -425,67 +382,20 @@ where
                 .iter()
                 .map(|u| u.clamp(0.0, 1.0))
                 .collect();
-            let near = |pts: &[Vec<f64>], u: &[f64], tol: f64| {
-                pts.iter().any(|p| design::distance(p, u) <= tol)
+            let Placement::Run {
+                perturbed,
+                geometry_step,
+            } = self.place_proposal(
+                iteration,
+                &mut unit,
+                st,
+                &state,
+                &objective,
+                outcome.best_cost,
+            )
+            else {
+                break StopReason::Converged;
             };
-            let mut perturbed = false;
-            let mut geometry_step = false;
-            if let (Some(h), Some(best)) = (st.stall_step, &state.best) {
-                // The corrected surrogate matches the model at the best run, so its loss
-                // there is the best run's loss (plus the regulariser's).
-                let anchor_cost = objective.cost(&best.unit);
-                let stalled = outcome.best_cost > anchor_cost - STALL_GAIN * anchor_cost.abs()
-                    || near(&state.ok_units, &unit, st.duplicate_tol);
-                if stalled {
-                    let moved = geometry::least_covered_step(
-                        &best.unit,
-                        &state.ok_units,
-                        3.0 * crate::search::CORRECTION_LENGTH_UNIT,
-                        h,
-                        derive_seed(st.seed, iteration, Stream::Geometry),
-                    );
-                    self.move_proposal(iteration, &mut unit, moved);
-                    perturbed = true;
-                    geometry_step = true;
-                }
-            }
-            // Within a neighbourhood of a failed run, not only on it: a search's repeats
-            // of one optimum differ by 1e-7 or so, and a failure there was paid again
-            // every iteration.
-            let failed_tol = st.duplicate_tol.max(FAILED_NEIGHBOURHOOD_UNIT);
-            if near(&state.failed_units, &unit, failed_tol) {
-                let moved = design::perturb(
-                    &unit,
-                    &state.failed_units,
-                    failed_tol,
-                    st.perturb_sigma,
-                    derive_seed(st.seed, iteration, Stream::Perturb),
-                );
-                self.move_proposal(iteration, &mut unit, moved);
-                perturbed = true;
-            }
-            if near(&state.ok_units, &unit, st.duplicate_tol) {
-                // The surrogate has nothing new to say here: stop, or sample near the
-                // proposal so the next fit learns the neighbourhood.
-                let Some(sigma) = st.explore_on_repeat else {
-                    break StopReason::Converged;
-                };
-                let known: Vec<Vec<f64>> = state
-                    .ok_units
-                    .iter()
-                    .chain(&state.failed_units)
-                    .cloned()
-                    .collect();
-                let moved = design::perturb(
-                    &unit,
-                    &known,
-                    st.duplicate_tol,
-                    sigma,
-                    derive_seed(st.seed, iteration, Stream::Explore),
-                );
-                self.move_proposal(iteration, &mut unit, moved);
-                perturbed = true;
-            }
 
             // Steps 3 and 4: run at every snapshot, validate.
             let params = space.from_unit(&unit)?;

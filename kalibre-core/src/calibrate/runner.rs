@@ -191,3 +191,44 @@ pub(crate) fn snapshots_failed_throughout(
         .collect();
     (!dead.is_empty()).then(|| dead.join("; "))
 }
+
+/// The pool of `max_parallel_runs` threads for model runs (`None`: rayon's global pool).
+pub(crate) fn pool(max_parallel_runs: Option<usize>) -> Result<Option<rayon::ThreadPool>> {
+    max_parallel_runs
+        .map(|n| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| Error::InvalidSetting {
+                    name: "max_parallel_runs".into(),
+                    reason: e.to_string(),
+                })
+        })
+        .transpose()
+}
+
+/// The error when all `design_runs` runs of the initial design failed, with the first
+/// failure (by design order) and where each run's reason is.
+pub(crate) fn design_failed(
+    design_runs: usize,
+    first_failure: Option<ModelError>,
+    store: &RunStore,
+) -> Error {
+    let why = first_failure.map_or_else(String::new, |e| match e.log_gist() {
+        Some(gist) => format!("; the first: {e}; its log: {gist}"),
+        None => format!("; the first: {e}"),
+    });
+    // An in-memory store keeps the reasons with the calibrator, not in a file.
+    let where_ = match store.path() {
+        Some(p) => format!(
+            " (each run's reason is in the run journal, {})",
+            p.display()
+        ),
+        None => {
+            " (a journal, `with_store(RunStore::open(..))`, keeps each run's reason)".to_string()
+        }
+    };
+    Error::NoSuccessfulRun(format!(
+        "all {design_runs} runs of the initial design failed{why}{where_}"
+    ))
+}
