@@ -291,6 +291,40 @@ fn calibrate_resumes_after_kill_without_repeating_runs() {
     assert_eq!(assert_each_run_once(&runs), total - replayed_in_whole);
 }
 
+/// Ctrl-C in a calibration of the built-in model (no external run to end) ends it as
+/// SIGINT does, and says where the finished runs are and that the same command resumes.
+#[cfg(target_os = "linux")]
+#[test]
+fn ctrl_c_says_where_the_finished_runs_are() {
+    use std::os::unix::process::ExitStatusExt;
+    let out = tmp("ctrl-c");
+    let journal = out.join("runs.jsonl");
+    let child = calibrate_cmd(&out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while journal_lines(&journal).len() < 3 && start.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // SAFETY: signalling a child this test started and has not reaped.
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGINT);
+    }
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.signal(), Some(libc::SIGINT), "{o:?}");
+    assert!(
+        stderr(&o).contains(&format!(
+            "kalibre: stopped; finished model runs are kept in {}: the same command resumes \
+             from there without repeating them",
+            journal.display()
+        )),
+        "{}",
+        stderr(&o)
+    );
+    let _ = std::fs::remove_dir_all(out);
+}
+
 /// Without the polish, the spreads come from a local fit of the model's own runs (the
 /// loop's runs near the best one spread enough in every direction on this hall), and a
 /// model error that repeats at the same sensors is reported and warned about.

@@ -50,28 +50,45 @@ pub fn signal_runs(signal: libc::c_int) -> usize {
     n
 }
 
-/// What [`end_runs_with_kalibre`]'s handler says when it ends runs, unless the program
-/// set its own ([`set_stop_message`]).
-const DEFAULT_STOP_MESSAGE: &str = "kalibre: stopped; the model runs in progress were ended \
-with it (finished runs are kept: the same command resumes where a journal is kept)\n";
+/// What [`end_runs_with_kalibre`]'s handler says, unless the program set its own
+/// ([`set_stop_message`]).
+const DEFAULT_STOP_MESSAGE: StopMessage = StopMessage {
+    runs_ended: "kalibre: stopped; the model runs in progress were ended with it (finished \
+                 runs are kept: the same command resumes where a journal is kept)\n",
+    no_runs: "kalibre: stopped\n",
+};
 
-static STOP_MESSAGE: OnceLock<&'static str> = OnceLock::new();
+/// What the handler of [`end_runs_with_kalibre`] writes on stderr, one line each, ending
+/// in a newline.
+#[derive(Debug, Clone, Copy)]
+pub struct StopMessage {
+    /// When it ended external model runs in progress.
+    pub runs_ended: &'static str,
+    /// When none was in progress (in-process models, or between runs).
+    pub no_runs: &'static str,
+}
 
-/// Sets what the handler of [`end_runs_with_kalibre`] writes on stderr when it ends model
-/// runs (one line, ending in a newline): a command that keeps no journal says so rather
+static STOP_MESSAGE: OnceLock<StopMessage> = OnceLock::new();
+
+/// Sets what the handler of [`end_runs_with_kalibre`] writes on stderr: a command that
+/// keeps a journal says where the finished runs are, one that keeps none says so rather
 /// than promise a resume. The first call wins.
-pub fn set_stop_message(message: &'static str) {
+pub fn set_stop_message(message: StopMessage) {
     let _ = STOP_MESSAGE.set(message);
 }
 
 extern "C" fn on_end_signal(signal: libc::c_int) {
-    if signal_runs(libc::SIGTERM) > 0 {
-        // An atomic load once set: async-signal-safe.
-        let said = STOP_MESSAGE.get().copied().unwrap_or(DEFAULT_STOP_MESSAGE);
-        // SAFETY: write(2) is async-signal-safe; the text is static.
-        unsafe {
-            libc::write(2, said.as_ptr().cast(), said.len());
-        }
+    let ended = signal_runs(libc::SIGTERM) > 0;
+    // An atomic load once set: async-signal-safe.
+    let message = STOP_MESSAGE.get().copied().unwrap_or(DEFAULT_STOP_MESSAGE);
+    let said = if ended {
+        message.runs_ended
+    } else {
+        message.no_runs
+    };
+    // SAFETY: write(2) is async-signal-safe; the text is static.
+    unsafe {
+        libc::write(2, said.as_ptr().cast(), said.len());
     }
     // End as the signal would have, with its exit status.
     // SAFETY: signal(2) and raise(3) are async-signal-safe.

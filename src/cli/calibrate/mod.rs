@@ -489,8 +489,16 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     note_replaced_report(&args.out, &hall, &snaps);
     let journal = args.out.join("runs.jsonl");
     super::hall_changes::keep_runs_hall(&args.out, &args.hall, &journal)?;
-    let total_runs = ((4 + args.iterations) * snaps.len()) as u64;
-    let progress = Progress::new(total_runs, args.quiet);
+    set_stop_message(&journal);
+    let progress = Progress::new(
+        progress::Plan {
+            snapshots: snaps.len(),
+            iterations: args.iterations,
+            polish_iterations: settings.core.polish_iterations,
+            polish_max_params: settings.polish_max_params,
+        },
+        args.quiet,
+    );
     let started = Instant::now();
     let (report, penalty_report, fingerprint, space) = with_threads(args.threads, || {
         calibrate_with_model(
@@ -614,4 +622,23 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
             }
         );
     }
+}
+
+/// What Ctrl-C (or a kill) says: where the finished runs are, and that the same command
+/// resumes from them (once per process: the texts live as long as it).
+fn set_stop_message(journal: &Path) {
+    let kept = format!(
+        "kept in {}: the same command resumes from there without repeating them",
+        journal.display()
+    );
+    let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
+    kalibre_core::external::set_stop_message(kalibre_core::external::StopMessage {
+        runs_ended: leak(format!(
+            "kalibre: stopped; the model runs in progress were ended with it; finished runs \
+             are {kept}\n"
+        )),
+        no_runs: leak(format!(
+            "kalibre: stopped; finished model runs are {kept}\n"
+        )),
+    });
 }

@@ -20,27 +20,76 @@ struct Log {
     last: Instant,
 }
 
+/// What a calibration may run, for the bar's length: the most model runs it can take.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Plan {
+    /// Snapshots (each point runs once per snapshot).
+    pub(super) snapshots: usize,
+    /// The loop's iterations after the design.
+    pub(super) iterations: usize,
+    /// Levenberg-Marquardt steps after the loop.
+    pub(super) polish_iterations: usize,
+    /// Most parameters for which the polish runs.
+    pub(super) polish_max_params: usize,
+}
+
+impl Plan {
+    /// The most model runs: a design of at most 4 points, one point per iteration, and
+    /// per polish step a Jacobian (one point per parameter) and the step, all at every
+    /// snapshot. The parameters are counted once the first run shows them (`dim`).
+    fn most_runs(&self, dim: Option<usize>) -> u64 {
+        let polish_points = match dim {
+            Some(d) if d <= self.polish_max_params => self.polish_iterations * (d + 1),
+            _ => 0,
+        };
+        ((4 + self.iterations + polish_points) * self.snapshots) as u64
+    }
+}
+
+/// Where the calibration is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    Design,
+    Iteration(usize),
+    /// The n-th polish step done.
+    Polish(usize),
+}
+
+impl std::fmt::Display for Phase {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Phase::Design => write!(f, "initial design"),
+            Phase::Iteration(i) => write!(f, "iteration {i}"),
+            Phase::Polish(k) => write!(f, "polish step {k}"),
+        }
+    }
+}
+
 /// Progress driven by calibration events.
 pub(super) struct Progress {
     runs: ProgressBar,
+    plan: Plan,
+    /// Whether the bar's length counts the polish yet (it needs the parameter count).
+    sized: std::sync::atomic::AtomicBool,
     best_mae: Mutex<Option<f64>>,
-    iteration: Mutex<usize>,
+    phase: Mutex<Phase>,
     log: Option<Mutex<Log>>,
 }
 
 impl Progress {
-    pub(super) fn new(total_runs: u64, quiet: bool) -> Self {
+    pub(super) fn new(plan: Plan, quiet: bool) -> Self {
         let terminal = std::io::stderr().is_terminal();
         let log = (!quiet && !terminal).then(|| {
             let out: Box<dyn Write + Send> = Box::new(std::io::stderr());
             (out, LOG_EVERY)
         });
-        Self::with(total_runs, !quiet && terminal, log)
+        Self::with(plan, !quiet && terminal, log)
     }
 
     /// A bar on stderr when `bar`, and lines to `log`'s writer at most every its
     /// duration.
-    fn with(total_runs: u64, bar: bool, log: Option<(Box<dyn Write + Send>, Duration)>) -> Self {
+    fn with(plan: Plan, bar: bool, log: Option<(Box<dyn Write + Send>, Duration)>) -> Self {
+        let total_runs = plan.most_runs(None);
         let target = if bar {
             ProgressDrawTarget::stderr()
         } else {
@@ -56,8 +105,10 @@ impl Progress {
         );
         Progress {
             runs,
+            plan,
+            sized: std::sync::atomic::AtomicBool::new(false),
             best_mae: Mutex::new(None),
-            iteration: Mutex::new(0),
+            phase: Mutex::new(Phase::Design),
             log: log.map(|(out, every)| {
                 Mutex::new(Log {
                     out,
@@ -79,16 +130,13 @@ impl Progress {
             return;
         }
         log.last = now;
-        let iteration = *self.iteration.lock().unwrap_or_else(|p| p.into_inner());
+        let phase = *self.phase.lock().unwrap_or_else(|p| p.into_inner());
         let best = *self.best_mae.lock().unwrap_or_else(|p| p.into_inner());
         let line = format!(
-            "kalibre: {} model runs done (of about {} planned), {}, best MAE {}, {} elapsed\n",
+            "kalibre: {} model runs done (of at most {} planned), {phase}, best MAE {}, {} \
+             elapsed\n",
             self.runs.position(),
             self.runs.length().unwrap_or(0),
-            match iteration {
-                0 => "initial design".to_string(),
-                i => format!("iteration {i}"),
-            },
             best.map_or("-".into(), |b| format!("{b:.3} C")),
             // As the bar's `elapsed_precise`.
             FormattedDuration(self.runs.elapsed())
@@ -102,7 +150,11 @@ impl Progress {
 impl Observe for Progress {
     fn observe(&self, event: &Event<'_>) {
         match event {
-            Event::RunFinished { .. } => {
+            Event::RunFinished { params, .. } => {
+                if !self.sized.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                    self.runs
+                        .set_length(self.plan.most_runs(Some(params.len())));
+                }
                 self.runs.inc(1);
                 self.log_line();
             }
@@ -111,12 +163,19 @@ impl Observe for Progress {
                 if let Some(m) = record.mae_c.filter(|m| m.is_finite()) {
                     *best = Some(best.map_or(m, |b: f64| b.min(m)));
                 }
-                *self.iteration.lock().unwrap_or_else(|p| p.into_inner()) = record.iteration;
+                let mut phase = self.phase.lock().unwrap_or_else(|p| p.into_inner());
+                // Polish steps fit no surrogate (no training samples); their record
+                // numbers count on past the loop's, two per step with a new Jacobian.
+                *phase = match (*phase, record.training_samples) {
+                    (Phase::Polish(k), 0) => Phase::Polish(k + 1),
+                    (_, 0) => Phase::Polish(1),
+                    _ => Phase::Iteration(record.iteration),
+                };
                 self.runs.set_message(format!(
-                    "iteration {} | best MAE {}",
-                    record.iteration,
+                    "{phase} | best MAE {}",
                     best.map_or("-".into(), |b| format!("{b:.3} C"))
                 ));
+                drop(phase);
                 drop(best);
                 self.log_line();
             }
@@ -129,6 +188,7 @@ impl Observe for Progress {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use kalibre_core::calibrate::IterationRecord;
     use std::sync::Arc;
 
     /// A writer the test reads back.
@@ -156,30 +216,129 @@ mod tests {
         });
     }
 
+    /// Three snapshots, no iterations, no polish: the design's 12 runs at most.
+    const DESIGN_ONLY: Plan = Plan {
+        snapshots: 3,
+        iterations: 0,
+        polish_iterations: 0,
+        polish_max_params: 64,
+    };
+
+    fn record(iteration: usize, training_samples: usize, mae_c: f64) -> IterationRecord {
+        IterationRecord {
+            iteration,
+            model_runs: 0,
+            mae_c: Some(mae_c),
+            rmse_c: None,
+            max_abs_c: None,
+            score: None,
+            best_mae_c: None,
+            per_snapshot: Vec::new(),
+            per_group: Default::default(),
+            fit_mse: f64::NAN,
+            training_samples,
+            search_loss: f64::NAN,
+            search_data_mse: f64::NAN,
+            search_evaluations: 0,
+            failed_runs: 0,
+            perturbed: false,
+            params: Default::default(),
+            wall_s: Default::default(),
+        }
+    }
+
+    fn text_of(out: &Shared) -> String {
+        String::from_utf8(out.0.lock().unwrap().clone()).unwrap()
+    }
+
     #[test]
     fn a_log_gets_a_line_per_interval_and_none_sooner() {
         let out = Shared::default();
-        let every_time = Progress::with(12, false, Some((Box::new(out.clone()), Duration::ZERO)));
+        let every_time = Progress::with(
+            DESIGN_ONLY,
+            false,
+            Some((Box::new(out.clone()), Duration::ZERO)),
+        );
         run_event(&every_time);
         run_event(&every_time);
-        let text = String::from_utf8(out.0.lock().unwrap().clone()).unwrap();
+        let text = text_of(&out);
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines.len(), 2, "{text}");
         assert!(
             lines[1].starts_with(
-                "kalibre: 2 model runs done (of about 12 planned), initial design, best MAE -, \
-                 00:00:00 elapsed"
+                "kalibre: 2 model runs done (of at most 12 planned), initial design, best MAE \
+                 -, 00:00:00 elapsed"
             ),
             "{text}"
         );
 
         let out = Shared::default();
         let hourly = Progress::with(
-            12,
+            DESIGN_ONLY,
             false,
             Some((Box::new(out.clone()), Duration::from_secs(3600))),
         );
         run_event(&hourly);
         assert!(out.0.lock().unwrap().is_empty());
+    }
+
+    /// The plan counts the polish's Jacobians once a run shows the parameters, and the
+    /// polish's steps are named as such, not as iterations past `--iterations`.
+    #[test]
+    fn the_plan_counts_the_polish_and_its_steps_are_named() {
+        let plan = Plan {
+            snapshots: 16,
+            iterations: 10,
+            polish_iterations: 8,
+            polish_max_params: 64,
+        };
+        let out = Shared::default();
+        let p = Progress::with(plan, false, Some((Box::new(out.clone()), Duration::ZERO)));
+        assert_eq!(p.runs.length(), Some(224));
+        let five_params = Event::RunFinished {
+            iteration: 0,
+            snapshot: "t0",
+            params: &[0.1; 5],
+            cached: false,
+            error: None,
+            wall_s: 1.0,
+        };
+        // Five parameters: 8 steps of 6 points at 16 snapshots more.
+        p.observe(&five_params);
+        assert_eq!(p.runs.length(), Some(224 + 8 * 6 * 16));
+        p.observe(&Event::IterationDone {
+            record: &record(10, 48, 0.5),
+        });
+        p.observe(&Event::IterationDone {
+            record: &record(12, 0, 0.4),
+        });
+        p.observe(&Event::IterationDone {
+            record: &record(14, 0, 0.3),
+        });
+        let text = text_of(&out);
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(
+            lines[1].contains(", iteration 10, best MAE 0.500 C"),
+            "{text}"
+        );
+        assert!(
+            lines[2].contains(", polish step 1, best MAE 0.400 C"),
+            "{text}"
+        );
+        assert!(
+            lines[3].contains(", polish step 2, best MAE 0.300 C"),
+            "{text}"
+        );
+        // More parameters than the polish takes: no polish in the plan.
+        let p = Progress::with(
+            Plan {
+                polish_max_params: 4,
+                ..plan
+            },
+            false,
+            None,
+        );
+        p.observe(&five_params);
+        assert_eq!(p.runs.length(), Some(224));
     }
 }
