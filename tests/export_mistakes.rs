@@ -164,3 +164,86 @@ fn the_power_of_a_snapshot_without_air_is_given_in_whole_watts() {
     let kw = (servers as f64 * 100.1).round() / 1000.0;
     assert_input_error(&o, &format!("(the servers draw {kw} kW)"));
 }
+
+/// The development snapshots with `convert` applied to the value of each row it picks
+/// (by kind and id), written to `dir/name`.
+fn edited_snapshots(
+    dir: &Path,
+    name: &str,
+    picks: impl Fn(&str, &str) -> bool,
+    convert: impl Fn(f64) -> f64,
+) -> PathBuf {
+    let text = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
+    let mut out = String::new();
+    for (i, line) in text.lines().enumerate() {
+        let f: Vec<&str> = line.split(',').collect();
+        if i > 0 && picks(f[1], f[2]) {
+            let v: f64 = f[3].parse().unwrap();
+            out.push_str(&format!("{},{},{},{}\n", f[0], f[1], f[2], convert(v)));
+        } else {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// A sensor exported in Fahrenheit (its readings 45 C above the supply) and setpoints in
+/// Fahrenheit are warned of, naming the file, the sensor or CRAC, and the value read as
+/// Fahrenheit; the clean data give no such warning.
+#[test]
+fn readings_and_setpoints_in_fahrenheit_are_warned_of() {
+    let dir = tmp("export-fahrenheit");
+    let to_f = |c: f64| ((c * 1.8 + 32.0) * 100.0).round() / 100.0;
+    let one_sensor = edited_snapshots(
+        &dir,
+        "one-sensor.csv",
+        |kind, id| kind == "sensor_c" && id == "c-A3-hi",
+        to_f,
+    );
+    let calibrate = |snapshots: &Path| {
+        run(
+            on_files("calibrate", &data("of-dev-clean/hall.json"), snapshots)
+                .args([
+                    "--iterations",
+                    "1",
+                    "--polish",
+                    "0",
+                    "--no-grid-check",
+                    "--quiet",
+                ])
+                .arg("--out")
+                .arg(dir.join("cal")),
+        )
+    };
+    let o = calibrate(&one_sensor);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = stderr(&o);
+    assert!(
+        said.contains(&format!(
+            "kalibre: warning: {}: 3 reading(s) of sensor `c-A3-hi` lie more than 40 C above \
+             the warmest running CRAC's setpoint",
+            one_sensor.display()
+        )) && said.contains("Read as Fahrenheit it is"),
+        "{said}"
+    );
+    assert!(!said.contains("setpoint(s) above 45 C"), "{said}");
+
+    let setpoints = edited_snapshots(&dir, "setpoints.csv", |kind, _| kind == "setpoint_c", to_f);
+    let o = simulate(&dir, &data("of-dev-clean/hall.json"), Some(&setpoints));
+    let said = stderr(&o);
+    assert!(
+        said.contains(&format!(
+            "kalibre: warning: {}: 3 setpoint(s) above 45 C (CRAC `crac-1`)",
+            setpoints.display()
+        )) && said.contains("is 63.5 C; read as Fahrenheit it is 17.5 C"),
+        "{said}"
+    );
+
+    let o = calibrate(&data("of-dev-clean/snapshots.csv"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = stderr(&o);
+    assert!(!said.contains("Fahrenheit"), "{said}");
+}

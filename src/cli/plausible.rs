@@ -39,6 +39,88 @@ pub(crate) fn warn_cold_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot
     );
 }
 
+/// The reading `f` in degrees Fahrenheit, as Celsius.
+fn fahrenheit_as_c(f: f64) -> String {
+    snapshots::number(((f - 32.0) / 1.8 * 10.0).round() / 10.0)
+}
+
+/// `` `a` `` or `` `a`, `b` and 3 more ``: the distinct names among `names`, in order.
+fn distinct(names: impl IntoIterator<Item = String>) -> (usize, String) {
+    let mut seen: Vec<String> = Vec::new();
+    for n in names {
+        if !seen.contains(&n) {
+            seen.push(n);
+        }
+    }
+    let quoted: Vec<String> = seen.iter().map(|n| format!("`{n}`")).collect();
+    let text = match quoted.len() {
+        0..=3 => quoted.join(", "),
+        n => format!("{} and {} more", quoted[..3].join(", "), n - 3),
+    };
+    (seen.len(), text)
+}
+
+/// Warns of readings far warmer than any hall's air (more than
+/// [`snapshots::ABOVE_SUPPLY_MARGIN_C`] above the warmest running setpoint), as readings
+/// in degrees Fahrenheit are, naming the file, the first and the sensors; fitted as they
+/// are, they would set the alphas (a sensor in Fahrenheit pinned one at its bound).
+pub(crate) fn warn_hot_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+    let hot = snapshots::readings_above_supply(hall, snaps);
+    let Some(first) = hot.first() else {
+        return;
+    };
+    let (sensors, named) = distinct(hot.iter().map(|h| h.sensor.clone()));
+    let sensors = if sensors == 1 {
+        format!("sensor {named}")
+    } else {
+        format!("{sensors} sensors ({named})")
+    };
+    eprintln!(
+        "kalibre: warning: {}: {} reading(s) of {sensors} lie more than {} C above the \
+         warmest running CRAC's setpoint, which no hall's air does; the first, snapshot `{}` \
+         sensor `{}`, reads {} C ({} C above {} C). Read as Fahrenheit it is {} C: are \
+         these readings in F? They are fitted as they are: convert them, or leave their \
+         rows out",
+        path.display(),
+        hot.len(),
+        snapshots::ABOVE_SUPPLY_MARGIN_C,
+        first.snapshot,
+        first.sensor,
+        snapshots::number(first.reading_c),
+        snapshots::number(((first.reading_c - first.warmest_supply_c) * 10.0).round() / 10.0),
+        snapshots::number(first.warmest_supply_c),
+        fahrenheit_as_c(first.reading_c),
+    );
+}
+
+/// Warns of CRAC setpoints above [`snapshots::MAX_SETPOINT_C`], as setpoints in degrees
+/// Fahrenheit are, naming the file, the first and the CRACs.
+pub(crate) fn warn_setpoints<'a>(
+    path: &Path,
+    hall: &Hall,
+    states: impl IntoIterator<Item = &'a OperatingState>,
+) {
+    let found = snapshots::implausible_setpoints(hall, states);
+    let Some(first) = found.first() else {
+        return;
+    };
+    let (_, cracs) = distinct(found.iter().map(|f| f.crac.clone()));
+    eprintln!(
+        "kalibre: warning: {}: {} setpoint(s) above {} C (CRAC {cracs}); no data hall \
+         supplies air that warm (ASHRAE's warmest class allows {} C at the intake). The \
+         first, snapshot `{}` CRAC `{}`, is {} C; read as Fahrenheit it is {} C: are the \
+         setpoints (and readings) in F? kalibre takes C",
+        path.display(),
+        found.len(),
+        snapshots::MAX_SETPOINT_C,
+        snapshots::MAX_SETPOINT_C,
+        first.snapshot,
+        first.crac,
+        snapshots::number(first.setpoint_c),
+        fahrenheit_as_c(first.setpoint_c),
+    );
+}
+
 /// Warns of snapshots whose servers' heat and CRACs' air flow give a mean return-air
 /// rise outside the plausible band (a flow in l/s or cfm typed as m3/s, powers in kW
 /// typed as W), naming the two files and the first such snapshot.

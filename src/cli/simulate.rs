@@ -402,6 +402,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         }
     }
     // Before any what-if: the warning is about the files.
+    super::plausible::warn_setpoints(&args.snapshots, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_alpha_units(&args.hall, &hall);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);

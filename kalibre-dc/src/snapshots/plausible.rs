@@ -1,7 +1,8 @@
-//! Readings no state of the hall can produce: air colder than every running CRAC's
-//! supply. Mixing only warms supply air (servers add heat, nothing in an air-cooled hall
-//! removes it but the CRACs), so such a reading is a faulty sensor or a typing slip, and
-//! a least-squares fit would bend every parameter toward it.
+//! Readings and setpoints no state of the hall can produce. Air colder than every
+//! running CRAC's supply: mixing only warms supply air (servers add heat, nothing in an
+//! air-cooled hall removes it but the CRACs), so such a reading is a faulty sensor or a
+//! typing slip, and a least-squares fit would bend every parameter toward it. Air or a
+//! setpoint far warmer than any hall's: most often degrees Fahrenheit.
 
 use super::{HallSnapshot, OperatingState};
 use crate::hall::Hall;
@@ -69,6 +70,122 @@ pub fn readings_below_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<Col
         }
     }
     cold
+}
+
+/// How far above the warmest running CRAC's setpoint a reading may lie before it is
+/// named (C): a server's exhaust rises 5-20 K over its intake (the default prior), and
+/// an intake that takes in exhaust rises again, but no hall's air sits 40 K above its
+/// supply. A reading in degrees Fahrenheit does (18 C is 64 F).
+pub const ABOVE_SUPPLY_MARGIN_C: f64 = 40.0;
+
+/// The warmest CRAC setpoint not named (C): ASHRAE's warmest equipment class allows 45 C
+/// at the intake, so no hall supplies air warmer. Setpoints in degrees Fahrenheit are
+/// (a data hall's 55-80 F).
+pub const MAX_SETPOINT_C: f64 = 45.0;
+
+/// A reading warmer than its snapshot's air can be.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HotReading {
+    /// Snapshot label.
+    pub snapshot: String,
+    /// Sensor id.
+    pub sensor: String,
+    /// The reading (C).
+    pub reading_c: f64,
+    /// The warmest setpoint of a CRAC whose fans run in that snapshot (C).
+    pub warmest_supply_c: f64,
+}
+
+/// Every reading more than [`ABOVE_SUPPLY_MARGIN_C`] above the warmest setpoint of the
+/// CRACs running in its snapshot (fan speed above 0), as a reading in degrees Fahrenheit
+/// is; a snapshot with none running is skipped.
+///
+/// ```
+/// use kalibre_dc::snapshots::{readings_above_supply, HallSnapshot, OperatingState};
+/// let hall = kalibre_dc::synth::generate_hall(&Default::default()).unwrap();
+/// let state = OperatingState {
+///     label: "t0".into(),
+///     setpoint_c: vec![18.0; hall.cracs.len()],
+///     fan_speed: vec![1.0; hall.cracs.len()],
+///     power_w: vec![300.0; hall.server_count()],
+/// };
+/// let mut sensor_c = vec![Some(35.0); hall.sensors.len()];
+/// sensor_c[1] = Some(71.6); // 22 C in Fahrenheit
+/// let hot = readings_above_supply(&hall, &[HallSnapshot { state, sensor_c }]);
+/// assert_eq!(hot.len(), 1);
+/// assert_eq!(hot[0].sensor, hall.sensors[1].id);
+/// ```
+pub fn readings_above_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<HotReading> {
+    let mut hot = Vec::new();
+    for s in snapshots {
+        let st = &s.state;
+        let warmest = st
+            .setpoint_c
+            .iter()
+            .zip(&st.fan_speed)
+            .filter(|(_, &fan)| fan > 0.0)
+            .map(|(&c, _)| c)
+            .fold(f64::NEG_INFINITY, f64::max);
+        if !warmest.is_finite() {
+            continue;
+        }
+        for (sensor, reading) in hall.sensors.iter().zip(&s.sensor_c) {
+            if let Some(c) = reading.filter(|&c| c > warmest + ABOVE_SUPPLY_MARGIN_C) {
+                hot.push(HotReading {
+                    snapshot: st.label.clone(),
+                    sensor: sensor.id.clone(),
+                    reading_c: c,
+                    warmest_supply_c: warmest,
+                });
+            }
+        }
+    }
+    hot
+}
+
+/// A CRAC setpoint no hall runs at.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImplausibleSetpoint {
+    /// Snapshot label.
+    pub snapshot: String,
+    /// CRAC id.
+    pub crac: String,
+    /// The setpoint (C).
+    pub setpoint_c: f64,
+}
+
+/// Every CRAC setpoint above [`MAX_SETPOINT_C`], as one in degrees Fahrenheit is.
+///
+/// ```
+/// use kalibre_dc::snapshots::{implausible_setpoints, OperatingState};
+/// let hall = kalibre_dc::synth::generate_hall(&Default::default()).unwrap();
+/// let mut state = OperatingState {
+///     label: "t0".into(),
+///     setpoint_c: vec![18.0; hall.cracs.len()],
+///     fan_speed: vec![1.0; hall.cracs.len()],
+///     power_w: vec![300.0; hall.server_count()],
+/// };
+/// assert!(implausible_setpoints(&hall, [&state]).is_empty());
+/// state.setpoint_c[0] = 64.4; // 18 C in Fahrenheit
+/// assert_eq!(implausible_setpoints(&hall, [&state])[0].crac, hall.cracs[0].id);
+/// ```
+pub fn implausible_setpoints<'a>(
+    hall: &Hall,
+    states: impl IntoIterator<Item = &'a OperatingState>,
+) -> Vec<ImplausibleSetpoint> {
+    let mut found = Vec::new();
+    for st in states {
+        for (crac, &c) in hall.cracs.iter().zip(&st.setpoint_c) {
+            if c > MAX_SETPOINT_C {
+                found.push(ImplausibleSetpoint {
+                    snapshot: st.label.clone(),
+                    crac: crac.id.clone(),
+                    setpoint_c: c,
+                });
+            }
+        }
+    }
+    found
 }
 
 /// Air density times heat capacity (J/(m3 K)): rho 1.2 kg/m3, cp 1005 J/(kg K), as in

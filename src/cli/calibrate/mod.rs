@@ -427,6 +427,8 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         .check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
     super::plausible::warn_cold_readings(&args.snapshots, &hall, &snaps);
+    super::plausible::warn_hot_readings(&args.snapshots, &hall, &snaps);
+    super::plausible::warn_setpoints(&args.snapshots, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_alpha_units(&args.hall, &hall);
     super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
