@@ -4,7 +4,7 @@
 
 mod cli_support;
 
-use cli_support::{on_dataset, run, stderr, tmp};
+use cli_support::{data, on_dataset, on_files, run, stderr, tmp};
 
 #[test]
 fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
@@ -22,6 +22,13 @@ fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
     assert!(o.status.success(), "{}", stderr(&o));
     let d: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
     let hyps = d["hypotheses"].as_array().unwrap();
+    // Its snapshots are steady: none is off at every sensor.
+    assert_eq!(
+        d["odd_snapshots"],
+        serde_json::json!([]),
+        "{}",
+        d["odd_snapshots"]
+    );
     let o = run(on_dataset("diagnose", "of-dev-clean")
         .arg("--calibration")
         .arg(&cal));
@@ -56,5 +63,56 @@ fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
     // On this hall the model's own error looks like negative bypasses (more supply at the
     // tiles), so the listing has some to flag.
     assert!(outside > 0, "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A snapshot whose setpoint was raised 3 C before its readings caught up is named on
+/// its own, in the text and the JSON, rather than left spread over the sensors.
+#[test]
+fn a_snapshot_off_at_every_sensor_is_named() {
+    let dir = tmp("listing-odd-snapshot");
+    let text = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
+    let shifted: String = text
+        .lines()
+        .map(|l| match l.split(',').collect::<Vec<_>>()[..] {
+            ["t1", "setpoint_c", id, v] => {
+                format!("t1,setpoint_c,{id},{}\n", v.parse::<f64>().unwrap() + 3.0)
+            }
+            _ => format!("{l}\n"),
+        })
+        .collect();
+    let snapshots = dir.join("snapshots.csv");
+    std::fs::write(&snapshots, shifted).unwrap();
+    let hall = data("of-dev-clean/hall.json");
+    let cal = dir.join("cal");
+    let o = run(on_files("calibrate", &hall, &snapshots)
+        .args(["--iterations", "3", "--polish", "0", "--quiet"])
+        .arg("--out")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let diagnose = |json: bool| {
+        let mut c = on_files("diagnose", &hall, &snapshots);
+        if json {
+            c.arg("--json");
+        }
+        run(c.arg("--calibration").arg(&cal))
+    };
+    let o = diagnose(true);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let d: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    let odd = d["odd_snapshots"].as_array().unwrap();
+    assert_eq!(odd.len(), 1, "{odd:?}");
+    assert_eq!(odd[0]["snapshot"], "t1");
+    let shift = odd[0]["shift_c"].as_f64().unwrap();
+    // The model reads warm there by most of the 3 C (the alphas take a little of it).
+    assert!(shift > 2.0 && shift < 3.2, "{shift}");
+    let o = diagnose(false);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains(&format!(
+            "snapshot t1: the model reads {shift:.2} C too warm at "
+        )) && text.contains("its conditions were likely not steady"),
+        "{text}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

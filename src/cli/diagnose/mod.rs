@@ -19,6 +19,7 @@ use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
 
 mod journal;
+mod odd_snapshots;
 mod print;
 
 use print::{
@@ -359,6 +360,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     if args.json {
         let mut doc = d.to_json();
         doc["worst_sensors"] = worst_sensors_json(&hall, &report, heat.as_deref());
+        doc["odd_snapshots"] = serde_json::json!(odd_snapshots::odd_snapshots(&report.residuals));
         println!(
             "{}",
             serde_json::to_string_pretty(&doc).map_err(|e| CliError::Run(format!("JSON: {e}")))?
@@ -370,6 +372,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         return Ok(());
     }
     print_where_it_fails(&hall, &report, heat.as_deref());
+    odd_snapshots::print_odd_snapshots(&odd_snapshots::odd_snapshots(&report.residuals));
     println!(
         "\nmissing effects, best first (MAE now {:.3} C; `explains`: the share of the residual, \
          as the ranking weighs the sensors, that the effect removes; `predicted MAE`: over \
