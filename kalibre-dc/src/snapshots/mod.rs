@@ -2,6 +2,8 @@
 //! reading with every rule of `formats.md` section 2 enforced, writing measurements and
 //! predictions, and conversion into the core's [`kalibre_core::Observations`].
 
+mod hints;
+mod lexical;
 mod plausible;
 mod read;
 mod write;

@@ -260,5 +260,34 @@ pub fn csv_cases() -> Vec<CsvCase> {
             "snapshot label holds a control character (U+001B)",
             |r| replace_row(r, 7, "t\u{1b}[31m0,sensor_c,h01,30"),
         ),
+        csv_case(
+            "a decimal comma splits a value",
+            "line 9",
+            "found 5: a decimal comma? `30,5` reads as two fields; write `30.5`",
+            |r| replace_row(r, 7, "t0,sensor_c,h01,30,5"),
+        ),
+        csv_case(
+            "a space after a number",
+            "line 9, column value",
+            "found `30.5 `; a space before or after the number: remove it",
+            |r| replace_row(r, 7, "t0,sensor_c,h01,30.5 "),
+        ),
+        csv_case(
+            "a swapped id",
+            "line 9, column id",
+            "unknown sensor id `c10` for kind sensor_c; expected a sensor of the hall; did \
+             you mean `c01`?",
+            |r| replace_row(r, 7, "t0,sensor_c,c10,30"),
+        ),
+        CsvCase {
+            name: "an export's extra columns",
+            text: csv_text(&csv_rows()).replacen(
+                "snapshot,kind,id,value",
+                "snapshot,kind,id,value,unit",
+                1,
+            ),
+            field: "line 1".into(),
+            phrase: "; remove the other columns (kalibre reads exactly these four, in this order)",
+        },
     ]
 }

@@ -1,0 +1,136 @@
+//! The lexical pieces of `snapshots.csv`: physical line numbers, decimal numbers, and
+//! fields shown in messages.
+
+/// Physical line numbers of records. The csv crate's own line count drifts after blank
+/// lines (which it skips), so lines are counted from the record's byte offset instead.
+#[derive(Default)]
+pub(super) struct LineCounter {
+    counted_to: usize,
+    line: u64,
+}
+
+impl LineCounter {
+    /// The 1-based line where the record at byte offset `byte` starts; offsets must come in
+    /// increasing order.
+    pub(super) fn line_at(&mut self, bytes: &[u8], byte: u64) -> u64 {
+        let mut start = usize::try_from(byte).unwrap_or(usize::MAX).min(bytes.len());
+        // The offset may include the terminators of skipped blank lines.
+        while start < bytes.len() && matches!(bytes[start], b'\r' | b'\n') {
+            start += 1;
+        }
+        let from = self.counted_to.min(start);
+        for (k, &b) in bytes[from..start].iter().enumerate() {
+            let lone_cr = b == b'\r' && bytes.get(from + k + 1) != Some(&b'\n');
+            if b == b'\n' || lone_cr {
+                self.line += 1;
+            }
+        }
+        self.counted_to = self.counted_to.max(start);
+        self.line + 1
+    }
+}
+
+/// A finite decimal number: optional sign, digits with an optional fraction, an optional
+/// exponent. Rejects `nan`, `inf`, hex, empty text and values that overflow to infinity.
+pub(crate) fn parse_decimal(text: &str) -> Option<f64> {
+    let b = text.as_bytes();
+    let mut i = 0;
+    if matches!(b.first(), Some(b'+' | b'-')) {
+        i += 1;
+    }
+    let int_start = i;
+    while i < b.len() && b[i].is_ascii_digit() {
+        i += 1;
+    }
+    let mut digits = i - int_start;
+    if i < b.len() && b[i] == b'.' {
+        i += 1;
+        let frac_start = i;
+        while i < b.len() && b[i].is_ascii_digit() {
+            i += 1;
+        }
+        digits += i - frac_start;
+    }
+    if digits == 0 {
+        return None;
+    }
+    if i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+        i += 1;
+        if matches!(b.get(i), Some(b'+' | b'-')) {
+            i += 1;
+        }
+        let exp_start = i;
+        while i < b.len() && b[i].is_ascii_digit() {
+            i += 1;
+        }
+        if i == exp_start {
+            return None;
+        }
+    }
+    if i != b.len() {
+        return None;
+    }
+    text.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+/// Text for a message, cut short so that a huge field does not flood the error.
+pub(super) fn show(text: &str) -> String {
+    const MAX: usize = 60;
+    match text.char_indices().nth(MAX) {
+        Some((cut, _)) => format!("{}...", &text[..cut]),
+        None => text.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{parse_decimal, LineCounter};
+
+    #[test]
+    fn lines_count_blank_lines_crlf_and_quoted_breaks() {
+        let text = "h\n\na\n\n\"b\nx\"\nc\r\n\r\nd\re\n";
+        let mut r = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .from_reader(text.as_bytes());
+        let mut rec = csv::ByteRecord::new();
+        let mut lines = LineCounter::default();
+        let mut got = Vec::new();
+        while r.read_byte_record(&mut rec).unwrap() {
+            let byte = rec.position().unwrap().byte();
+            got.push((
+                String::from_utf8(rec[0].to_vec()).unwrap(),
+                lines.line_at(text.as_bytes(), byte),
+            ));
+        }
+        let want = [
+            ("h", 1),
+            ("a", 3),
+            ("b\nx", 5),
+            ("c", 7),
+            ("d", 9),
+            ("e", 10),
+        ];
+        let want: Vec<(String, u64)> = want.iter().map(|(s, l)| (s.to_string(), *l)).collect();
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn decimals() {
+        for (t, v) in [
+            ("1", 1.0),
+            ("-2.5", -2.5),
+            ("+.5", 0.5),
+            ("3.", 3.0),
+            ("1e3", 1000.0),
+            ("2.5E-1", 0.25),
+        ] {
+            assert_eq!(parse_decimal(t), Some(v), "{t}");
+        }
+        for t in [
+            "", "nan", "NaN", "inf", "-inf", "infinity", "0x10", "1e", ".", "-", "1,5", " 1",
+            "1e400", "1.2.3",
+        ] {
+            assert_eq!(parse_decimal(t), None, "{t}");
+        }
+    }
+}
