@@ -247,3 +247,40 @@ fn readings_and_setpoints_in_fahrenheit_are_warned_of() {
     let said = stderr(&o);
     assert!(!said.contains("Fahrenheit"), "{said}");
 }
+
+/// A sensor that reads one value in every snapshot while the conditions change (stuck,
+/// or filled in by the export) is warned of, naming the file, the sensor and the value.
+#[test]
+fn a_stuck_sensor_is_warned_of() {
+    let dir = tmp("export-stuck");
+    let stuck = edited_snapshots(
+        &dir,
+        "stuck.csv",
+        |kind, id| kind == "sensor_c" && id == "h-B4",
+        |_| 22.0,
+    );
+    let o = run(
+        on_files("calibrate", &data("of-dev-clean/hall.json"), &stuck)
+            .args([
+                "--iterations",
+                "1",
+                "--polish",
+                "0",
+                "--no-grid-check",
+                "--quiet",
+            ])
+            .arg("--out")
+            .arg(dir.join("cal")),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!(
+            "kalibre: warning: {}: sensor `h-B4` reads 22 C in all 3 snapshots while the \
+             setpoints, fans or powers change",
+            stuck.display()
+        )),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(stderr(&o).matches("22 C in all").count(), 1, "one warning");
+}

@@ -93,6 +93,37 @@ pub(crate) fn warn_hot_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]
     );
 }
 
+/// Warns of sensors that read the same in every snapshot while the conditions change
+/// (stuck, or a default an export filled in), naming the file and the sensors.
+pub(crate) fn warn_stuck_sensors(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+    let stuck = snapshots::stuck_sensors(hall, snaps);
+    let Some(first) = stuck.first() else {
+        return;
+    };
+    let (n, named) = distinct(stuck.iter().map(|s| s.sensor.clone()));
+    let which = if n == 1 {
+        format!(
+            "sensor {named} reads {} C in all {} snapshots",
+            snapshots::number(first.reading_c),
+            first.snapshots
+        )
+    } else {
+        format!(
+            "{n} sensors ({named}) each read one value in every snapshot (`{}`: {} C in all \
+             {})",
+            first.sensor,
+            snapshots::number(first.reading_c),
+            first.snapshots
+        )
+    };
+    eprintln!(
+        "kalibre: warning: {}: {which} while the setpoints, fans or powers change, and a \
+         real sensor's noise alone would make its readings differ: stuck, or a value the \
+         export filled in? It is fitted as it is: leave its rows out if it is stuck",
+        path.display(),
+    );
+}
+
 /// Warns of CRAC setpoints above [`snapshots::MAX_SETPOINT_C`], as setpoints in degrees
 /// Fahrenheit are, naming the file, the first and the CRACs.
 pub(crate) fn warn_setpoints<'a>(

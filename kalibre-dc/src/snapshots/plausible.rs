@@ -188,6 +188,73 @@ pub fn implausible_setpoints<'a>(
     found
 }
 
+/// A sensor that reads the same in every snapshot while the hall's conditions change.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StuckSensor {
+    /// Sensor id.
+    pub sensor: String,
+    /// The one value it reads (C).
+    pub reading_c: f64,
+    /// Snapshots it reads it in.
+    pub snapshots: usize,
+}
+
+/// Every sensor whose readings are equal to the last digit in every snapshot that has
+/// one, at least three of them, where those snapshots' setpoints, fan speeds or powers
+/// are not all equal: a real sensor's noise alone makes readings differ, so a constant
+/// one is stuck (a frozen value, a default the export filled in).
+///
+/// ```
+/// use kalibre_dc::snapshots::{stuck_sensors, HallSnapshot, OperatingState};
+/// let hall = kalibre_dc::synth::generate_hall(&Default::default()).unwrap();
+/// let snaps: Vec<HallSnapshot> = (0..3)
+///     .map(|t| {
+///         let mut sensor_c = vec![Some(25.0 + t as f64 * 0.4); hall.sensors.len()];
+///         sensor_c[2] = Some(22.0);
+///         HallSnapshot {
+///             state: OperatingState {
+///                 label: format!("t{t}"),
+///                 setpoint_c: vec![18.0 + t as f64; hall.cracs.len()],
+///                 fan_speed: vec![1.0; hall.cracs.len()],
+///                 power_w: vec![300.0; hall.server_count()],
+///             },
+///             sensor_c,
+///         }
+///     })
+///     .collect();
+/// let stuck = stuck_sensors(&hall, &snaps);
+/// assert_eq!(stuck.len(), 1);
+/// assert_eq!((stuck[0].sensor.as_str(), stuck[0].snapshots), (hall.sensors[2].id.as_str(), 3));
+/// ```
+pub fn stuck_sensors(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<StuckSensor> {
+    let mut stuck = Vec::new();
+    for (k, sensor) in hall.sensors.iter().enumerate() {
+        let read: Vec<(&OperatingState, f64)> = snapshots
+            .iter()
+            .filter_map(|s| s.sensor_c.get(k).copied().flatten().map(|c| (&s.state, c)))
+            .collect();
+        let Some(&(first_state, first)) = read.first() else {
+            continue;
+        };
+        let same_conditions = |st: &OperatingState| {
+            st.setpoint_c == first_state.setpoint_c
+                && st.fan_speed == first_state.fan_speed
+                && st.power_w == first_state.power_w
+        };
+        if read.len() >= 3
+            && read.iter().all(|&(_, c)| c == first)
+            && !read.iter().all(|&(st, _)| same_conditions(st))
+        {
+            stuck.push(StuckSensor {
+                sensor: sensor.id.clone(),
+                reading_c: first,
+                snapshots: read.len(),
+            });
+        }
+    }
+    stuck
+}
+
 /// Air density times heat capacity (J/(m3 K)): rho 1.2 kg/m3, cp 1005 J/(kg K), as in
 /// the built-in simulator and the OpenFOAM adapter.
 const AIR_RHO_CP: f64 = 1.2 * 1005.0;
