@@ -316,7 +316,7 @@ fn ctrl_c_says_where_the_finished_runs_are() {
     assert!(
         stderr(&o).contains(&format!(
             "kalibre: stopped; finished model runs are kept in {}: the same command resumes \
-             from there without repeating them",
+             from there, repeating no successful run",
             journal.display()
         )),
         "{}",

@@ -330,7 +330,7 @@ fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert_eq!(failures(), 3, "a replayed failure ran again");
     assert!(
-        stderr(&o).contains("3 run(s) journaled only as failed were replayed as failures"),
+        stderr(&o).contains("3 run(s) journaled only as failed are replayed as failures"),
         "{}",
         stderr(&o)
     );

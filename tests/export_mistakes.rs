@@ -223,8 +223,8 @@ fn readings_and_setpoints_in_fahrenheit_are_warned_of() {
     let said = stderr(&o);
     assert!(
         said.contains(&format!(
-            "kalibre: warning: {}: 3 reading(s) of sensor `c-A3-hi` lie more than 40 C above \
-             the warmest running CRAC's setpoint",
+            "kalibre: warning: {}: 3 reading(s) of sensor `c-A3-hi` lie more than 30 C (hot \
+             aisle: 50 C) above the warmest running CRAC's setpoint",
             one_sensor.display()
         )) && said.contains("Read as Fahrenheit it is"),
         "{said}"
@@ -275,12 +275,52 @@ fn a_stuck_sensor_is_warned_of() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains(&format!(
-            "kalibre: warning: {}: sensor `h-B4` reads 22 C in all 3 snapshots while the \
-             setpoints, fans or powers change",
+            "kalibre: warning: {}: sensor `h-B4` reads 22 C in each of its 3 readings while \
+             the setpoints, fans or powers change",
             stuck.display()
         )),
         "{}",
         stderr(&o)
     );
-    assert_eq!(stderr(&o).matches("22 C in all").count(), 1, "one warning");
+    assert_eq!(stderr(&o).matches("22 C in each").count(), 1, "one warning");
+}
+
+/// Readings missing from some snapshots (a dead sensor, an export that left it out) are
+/// fitted around, and the calibration says so, naming the file and the sensor.
+#[test]
+fn missing_readings_are_noted() {
+    let dir = tmp("export-missing");
+    let text = std::fs::read_to_string(data("of-dev-clean/snapshots.csv")).unwrap();
+    let kept: String = text
+        .lines()
+        .filter(|l| {
+            !l.starts_with("t1,sensor_c,c-A3-hi,") && !l.starts_with("t2,sensor_c,c-A3-hi,")
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let path = dir.join("missing.csv");
+    std::fs::write(&path, kept).unwrap();
+    let o = run(
+        on_files("calibrate", &data("of-dev-clean/hall.json"), &path)
+            .args([
+                "--iterations",
+                "1",
+                "--polish",
+                "0",
+                "--no-grid-check",
+                "--quiet",
+            ])
+            .arg("--out")
+            .arg(dir.join("cal")),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!(
+            "note: {}: 2 sensor reading(s) are missing (`c-A3-hi` in 2 of 3 snapshots); the \
+             calibration fits the readings there are",
+            path.display()
+        )),
+        "{}",
+        stderr(&o)
+    );
 }

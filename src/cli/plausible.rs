@@ -76,14 +76,15 @@ pub(crate) fn warn_hot_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]
         format!("{sensors} sensors ({named})")
     };
     eprintln!(
-        "kalibre: warning: {}: {} reading(s) of {sensors} lie more than {} C above the \
-         warmest running CRAC's setpoint, which no hall's air does; the first, snapshot `{}` \
-         sensor `{}`, reads {} C ({} C above {} C). Read as Fahrenheit it is {} C: are \
-         these readings in F? They are fitted as they are: convert them, or leave their \
-         rows out",
+        "kalibre: warning: {}: {} reading(s) of {sensors} lie more than {} C (hot aisle: \
+         {} C) above the warmest running CRAC's setpoint, which no hall's air does; the \
+         first, snapshot `{}` sensor `{}`, reads {} C ({} C above {} C). Read as Fahrenheit \
+         it is {} C: are these readings in F? They are fitted as they are: convert them, or \
+         leave their rows out",
         path.display(),
         hot.len(),
         snapshots::ABOVE_SUPPLY_MARGIN_C,
+        snapshots::HOT_AISLE_ABOVE_SUPPLY_MARGIN_C,
         first.snapshot,
         first.sensor,
         snapshots::number(first.reading_c),
@@ -103,14 +104,14 @@ pub(crate) fn warn_stuck_sensors(path: &Path, hall: &Hall, snaps: &[HallSnapshot
     let (n, named) = distinct(stuck.iter().map(|s| s.sensor.clone()));
     let which = if n == 1 {
         format!(
-            "sensor {named} reads {} C in all {} snapshots",
+            "sensor {named} reads {} C in each of its {} readings",
             snapshots::number(first.reading_c),
             first.snapshots
         )
     } else {
         format!(
-            "{n} sensors ({named}) each read one value in every snapshot (`{}`: {} C in all \
-             {})",
+            "{n} sensors ({named}) each read one value in every snapshot (`{}`: {} C in each \
+             of its {} readings)",
             first.sensor,
             snapshots::number(first.reading_c),
             first.snapshots
@@ -121,6 +122,44 @@ pub(crate) fn warn_stuck_sensors(path: &Path, hall: &Hall, snaps: &[HallSnapshot
          real sensor's noise alone would make its readings differ: stuck, or a value the \
          export filled in? It is fitted as it is: leave its rows out if it is stuck",
         path.display(),
+    );
+}
+
+/// Notes the sensors missing from some snapshots (dead, or left out by the export): the
+/// calibration fits the readings there are, which a user should know rather than find.
+/// Sensors missing from every snapshot are named too: nothing calibrates against them.
+pub(crate) fn note_missing_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+    let missing: Vec<(String, usize)> = hall
+        .sensors
+        .iter()
+        .enumerate()
+        .map(|(k, sensor)| {
+            let absent = snaps
+                .iter()
+                .filter(|s| s.sensor_c.get(k).copied().flatten().is_none())
+                .count();
+            (sensor.id.clone(), absent)
+        })
+        .filter(|(_, absent)| *absent > 0)
+        .collect();
+    if missing.is_empty() {
+        return;
+    }
+    let readings: usize = missing.iter().map(|(_, n)| n).sum();
+    let listed: Vec<String> = missing
+        .iter()
+        .take(3)
+        .map(|(id, n)| format!("`{id}` in {n} of {} snapshots", snaps.len()))
+        .collect();
+    let more = match missing.len() {
+        0..=3 => String::new(),
+        n => format!(" and {} more sensors", n - 3),
+    };
+    eprintln!(
+        "note: {}: {readings} sensor reading(s) are missing ({}{more}); the calibration \
+         fits the readings there are",
+        path.display(),
+        listed.join(", ")
     );
 }
 

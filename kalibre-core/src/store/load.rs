@@ -41,7 +41,7 @@ pub struct LoadReport {
     /// of the store a failed run is replayed like any other. Missing in older reports: 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub failed_to_retry: usize,
-    /// Runs journaled only as failed and replayed as failures, when the store was opened
+    /// Runs journaled only as failed, kept to replay as failures where asked for, when the store was opened
     /// with [`RunStore::open_replaying_failures`](super::RunStore::open_replaying_failures) (`failed_to_retry` is then 0). Missing in
     /// older reports: 0.
     #[serde(default, skip_serializing_if = "is_zero")]

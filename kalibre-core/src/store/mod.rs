@@ -354,11 +354,12 @@ impl RunStore {
 
     /// The journal's runs (of this fingerprint) that nobody asked for since the store was
     /// opened, in journal order with their lines: after a calibration, the runs an
-    /// earlier, longer calibration made beyond this one's budget.
+    /// earlier, longer calibration made beyond this one's budget. Successful runs only.
     pub fn unreached(&self) -> Vec<(usize, RunRecord)> {
         let inner = self.lock();
+        // Failures are in the cache only when replayed; unused, they are no result.
         let mut out: Vec<(usize, RunRecord)> = (inner.runs.iter())
-            .filter(|(k, _)| !inner.reached.contains(*k))
+            .filter(|(k, (_, rec))| !inner.reached.contains(*k) && rec.status == RunStatus::Ok)
             .map(|(_, run)| run.clone())
             .collect();
         out.sort_by_key(|(line, rec)| (*line, rec.seq));

@@ -8,14 +8,25 @@ pub(super) fn field_count(fields: &[&str]) -> String {
     let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
     let signed = |s: &str| digits(s.trim_start_matches(['-', '+']));
     if fields.len() == 5 && signed(fields[3]) && digits(fields[4]) {
-        format!(
-            ": a decimal comma? `{},{}` reads as two fields; write `{}.{}`",
-            fields[3], fields[4], fields[3], fields[4]
-        )
+        comma(": ", fields[3], fields[4], "reads as two fields")
     } else if fields.len() > 4 {
         "; an export's extra columns? kalibre reads exactly snapshot,kind,id,value".to_string()
     } else {
         String::new()
+    }
+}
+
+/// The hint for `a,b`, a value with a comma: a decimal comma, or with three digits after
+/// it a thousands separator as likely (`4,200` W).
+/// `lead` starts it (`: ` or `; `, as the message before it reads).
+fn comma(lead: &str, a: &str, b: &str, what: &str) -> String {
+    if b.len() == 3 {
+        format!(
+            "{lead}a thousands separator or a decimal comma? `{a},{b}` {what}; write `{a}{b}` \
+             or `{a}.{b}`, whichever it means"
+        )
+    } else {
+        format!("{lead}a decimal comma? `{a},{b}` {what}; write `{a}.{b}`")
     }
 }
 
@@ -38,7 +49,8 @@ pub(super) fn value(text: &str, parses: impl Fn(&str) -> bool) -> String {
     if text.trim() != text && parses(text.trim()) {
         "; a space before or after the number: remove it".into()
     } else if text.matches(',').count() == 1 && parses(&text.replace(',', ".")) {
-        format!("; a decimal comma? write `{}`", text.replace(',', "."))
+        let (a, b) = text.split_once(',').expect("one comma");
+        comma("; ", a, b, "is no number")
     } else {
         String::new()
     }
@@ -84,6 +96,10 @@ pub(super) fn nearest_id<'a>(id: &str, ids: impl IntoIterator<Item = &'a str>) -
     let mut best: Option<((usize, bool), &str)> = None;
     let mut tie = false;
     for candidate in ids {
+        // More than two characters apart in length is more than two slips.
+        if candidate.chars().count().abs_diff(lower.chars().count()) > 2 {
+            continue;
+        }
         let c = candidate.to_lowercase();
         let rank = (slips(&lower, &c), sorted(&c) != letters);
         match best {
@@ -124,7 +140,12 @@ mod tests {
     fn values_with_spaces_or_commas_say_so() {
         let parses = |s: &str| s.parse::<f64>().is_ok();
         assert!(value("19.95 ", parses).contains("space"));
-        assert_eq!(value("19,95", parses), "; a decimal comma? write `19.95`");
+        assert_eq!(
+            value("19,95", parses),
+            "; a decimal comma? `19,95` is no number; write `19.95`"
+        );
+        assert!(value("4,200", parses).contains("thousands separator"));
+        assert!(field_count(&["t0", "power_w", "A02", "4", "200"]).contains("write `4200` or"));
         assert_eq!(value("n/a", parses), "");
         assert_eq!(value("1,000,5", parses), "");
     }

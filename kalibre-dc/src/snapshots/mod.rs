@@ -16,7 +16,8 @@ use crate::{Error, Result};
 pub use plausible::{
     implausible_rises, implausible_setpoints, readings_above_supply, readings_below_supply,
     stuck_sensors, ColdReading, HotReading, ImplausibleRise, ImplausibleSetpoint, StuckSensor,
-    ABOVE_SUPPLY_MARGIN_C, BELOW_SUPPLY_MARGIN_C, MAX_MEAN_RISE_K, MAX_SETPOINT_C, MIN_MEAN_RISE_K,
+    ABOVE_SUPPLY_MARGIN_C, BELOW_SUPPLY_MARGIN_C, HOT_AISLE_ABOVE_SUPPLY_MARGIN_C, MAX_MEAN_RISE_K,
+    MAX_SETPOINT_C, MIN_MEAN_RISE_K,
 };
 pub use read::{load_snapshots, load_states, parse_snapshots, parse_snapshots_bytes};
 pub(crate) use write::quote;

@@ -72,11 +72,15 @@ pub fn readings_below_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<Col
     cold
 }
 
-/// How far above the warmest running CRAC's setpoint a reading may lie before it is
-/// named (C): a server's exhaust rises 5-20 K over its intake (the default prior), and
-/// an intake that takes in exhaust rises again, but no hall's air sits 40 K above its
-/// supply. A reading in degrees Fahrenheit does (18 C is 64 F).
-pub const ABOVE_SUPPLY_MARGIN_C: f64 = 40.0;
+/// How far above the warmest running CRAC's setpoint a cold-aisle reading may lie
+/// before it is named (C): an intake that takes in exhaust warms by a server's rise
+/// (5-20 K, the default prior) or so, but not by 30 K, which is 45 C over a 15 C supply,
+/// ASHRAE's warmest allowable intake. A reading in degrees Fahrenheit does (18 C is 64 F).
+pub const ABOVE_SUPPLY_MARGIN_C: f64 = 30.0;
+
+/// The same for hot-aisle sensors (C): exhaust that is taken in again rises twice, so a
+/// dense hall's hot aisle may sit 40 K above its supply; 25 C in Fahrenheit is 77 F.
+pub const HOT_AISLE_ABOVE_SUPPLY_MARGIN_C: f64 = 50.0;
 
 /// The warmest CRAC setpoint not named (C): ASHRAE's warmest equipment class allows 45 C
 /// at the intake, so no hall supplies air warmer. Setpoints in degrees Fahrenheit are
@@ -94,11 +98,14 @@ pub struct HotReading {
     pub reading_c: f64,
     /// The warmest setpoint of a CRAC whose fans run in that snapshot (C).
     pub warmest_supply_c: f64,
+    /// The margin it exceeds (C): its aisle's.
+    pub margin_c: f64,
 }
 
-/// Every reading more than [`ABOVE_SUPPLY_MARGIN_C`] above the warmest setpoint of the
-/// CRACs running in its snapshot (fan speed above 0), as a reading in degrees Fahrenheit
-/// is; a snapshot with none running is skipped.
+/// Every reading more than [`ABOVE_SUPPLY_MARGIN_C`] (a hot-aisle sensor's
+/// [`HOT_AISLE_ABOVE_SUPPLY_MARGIN_C`]) above the warmest setpoint of the CRACs running in
+/// its snapshot (fan speed above 0), as a reading in degrees Fahrenheit is; a snapshot
+/// with none running is skipped.
 ///
 /// ```
 /// use kalibre_dc::snapshots::{readings_above_supply, HallSnapshot, OperatingState};
@@ -130,12 +137,17 @@ pub fn readings_above_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<Hot
             continue;
         }
         for (sensor, reading) in hall.sensors.iter().zip(&s.sensor_c) {
-            if let Some(c) = reading.filter(|&c| c > warmest + ABOVE_SUPPLY_MARGIN_C) {
+            let margin = match sensor.aisle {
+                crate::hall::Aisle::Hot => HOT_AISLE_ABOVE_SUPPLY_MARGIN_C,
+                crate::hall::Aisle::Cold => ABOVE_SUPPLY_MARGIN_C,
+            };
+            if let Some(c) = reading.filter(|&c| c > warmest + margin) {
                 hot.push(HotReading {
                     snapshot: st.label.clone(),
                     sensor: sensor.id.clone(),
                     reading_c: c,
                     warmest_supply_c: warmest,
+                    margin_c: margin,
                 });
             }
         }
@@ -195,14 +207,19 @@ pub struct StuckSensor {
     pub sensor: String,
     /// The one value it reads (C).
     pub reading_c: f64,
-    /// Snapshots it reads it in.
+    /// Its readings (snapshots that have one).
     pub snapshots: usize,
 }
+
+/// More than this share of the sensors constant is the export's resolution (whole
+/// degrees of a steady hall), not stuck sensors: none is named then.
+const MOST_STUCK_SHARE: f64 = 0.25;
 
 /// Every sensor whose readings are equal to the last digit in every snapshot that has
 /// one, at least three of them, where those snapshots' setpoints, fan speeds or powers
 /// are not all equal: a real sensor's noise alone makes readings differ, so a constant
-/// one is stuck (a frozen value, a default the export filled in).
+/// one is stuck (a frozen value, a default the export filled in). When more than a
+/// quarter of the sensors are, that is the readings' resolution, and none is named.
 ///
 /// ```
 /// use kalibre_dc::snapshots::{stuck_sensors, HallSnapshot, OperatingState};
@@ -251,6 +268,9 @@ pub fn stuck_sensors(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<StuckSensor
                 snapshots: read.len(),
             });
         }
+    }
+    if stuck.len() as f64 > MOST_STUCK_SHARE * hall.sensors.len() as f64 {
+        return Vec::new();
     }
     stuck
 }

@@ -12,7 +12,13 @@ use kalibre_core::ParamSpace;
 /// Of the failed runs of the model `fingerprint` in `journal`, those at a bound of
 /// `space`: how many, and the bound most of them share, as a clause for the summary's
 /// note. `None` when no failed run sits at a bound.
-pub(super) fn clause(journal: &Path, fingerprint: &str, space: &ParamSpace) -> Option<String> {
+/// `replayed`: this calibration replayed them (`--replay-failed`) rather than run them.
+pub(super) fn clause(
+    journal: &Path,
+    fingerprint: &str,
+    space: &ParamSpace,
+    replayed: bool,
+) -> Option<String> {
     let text = std::fs::read_to_string(journal).ok()?;
     let names = space.names();
     let mut failed = 0usize;
@@ -72,10 +78,15 @@ pub(super) fn clause(journal: &Path, fingerprint: &str, space: &ParamSpace) -> O
         0..=3 => shared.join(", "),
         n => format!("{} and {} more", shared[..3].join(", "), n - 3),
     };
+    let remedy = if replayed {
+        "narrow that bound in hall.json (this resume replayed them, --replay-failed)"
+    } else {
+        "narrow that bound in hall.json, as a resume runs failed points again (or resume \
+         with --replay-failed)"
+    };
     Some(format!(
         "{which} sit at a bound, {most} of them at {listed}; if the model cannot run there, \
-         narrow that bound in hall.json, as a resume runs failed points again (or resume \
-         with --replay-failed)"
+         {remedy}"
     ))
 }
 
@@ -110,15 +121,18 @@ mod tests {
             line("failed", "other", [0.1, 0.0]),
         ]);
         assert_eq!(
-            clause(&journal, "m", &space).as_deref(),
+            clause(&journal, "m", &space, false).as_deref(),
             Some(
                 "1 of the 2 failed runs in the journal sit at a bound, 1 of them at a = 3 \
                  (upper); if the model cannot run there, narrow that bound in hall.json, as a \
                  resume runs failed points again (or resume with --replay-failed)"
             )
         );
+        assert!(clause(&journal, "m", &space, true).unwrap().ends_with(
+            "narrow that bound in hall.json (this resume replayed them, --replay-failed)"
+        ));
         write(&[line("failed", "m", [1.0, 0.4])]);
-        assert_eq!(clause(&journal, "m", &space), None);
+        assert_eq!(clause(&journal, "m", &space, false), None);
         std::fs::remove_file(&journal).unwrap();
     }
 }

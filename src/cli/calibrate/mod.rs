@@ -429,6 +429,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     super::plausible::warn_cold_readings(&args.snapshots, &hall, &snaps);
     super::plausible::warn_hot_readings(&args.snapshots, &hall, &snaps);
     super::plausible::warn_stuck_sensors(&args.snapshots, &hall, &snaps);
+    super::plausible::note_missing_readings(&args.snapshots, &hall, &snaps);
     super::plausible::warn_setpoints(&args.snapshots, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_alpha_units(&args.hall, &hall);
@@ -517,7 +518,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     warn_skipped_journal_lines(&journal, &report);
     warn_unreached(&journal, &report);
     let failed_at_bounds = (report.runs.failed > 0)
-        .then(|| failed_at_bounds::clause(&journal, &fingerprint, &space))
+        .then(|| failed_at_bounds::clause(&journal, &fingerprint, &space, args.replay_failed))
         .flatten();
     let mut report = report;
     let mut record = model_record(&args, &hall, &settings, fingerprint)?;
@@ -606,8 +607,8 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
     }
     if load.failed_replayed > 0 {
         eprintln!(
-            "note: {}: {} run(s) journaled only as failed were replayed as failures \
-             (--replay-failed), not run again",
+            "note: {}: {} run(s) journaled only as failed are replayed as failures where the \
+             calibration asks for them (--replay-failed), not run again",
             journal.display(),
             load.failed_replayed
         );
@@ -631,7 +632,7 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
 /// resumes from them (once per process: the texts live as long as it).
 fn set_stop_message(journal: &Path) {
     let kept = format!(
-        "kept in {}: the same command resumes from there without repeating them",
+        "kept in {}: the same command resumes from there, repeating no successful run",
         journal.display()
     );
     let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };

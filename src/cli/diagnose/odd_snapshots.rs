@@ -46,7 +46,8 @@ fn median(values: &mut [f64]) -> f64 {
 /// recurs) averages at least [`MIN_SHIFT_C`] and [`MIN_STANDARD_ERRORS`] standard errors
 /// in the snapshot, with at least [`MIN_SHARE_OFF`] of its sensors off the same way by
 /// half of it or more.
-/// Needs three snapshots: of two, either could be the odd one.
+/// Needs three snapshots (of two, either could be the odd one), and names fewer than half
+/// of them.
 pub(crate) fn odd_snapshots(residuals: &[Residual]) -> Vec<OddSnapshot> {
     let mut snapshots: Vec<&str> = Vec::new();
     for r in residuals {
@@ -95,7 +96,7 @@ pub(crate) fn odd_snapshots(residuals: &[Residual]) -> Vec<OddSnapshot> {
         return Vec::new();
     }
     let sigma = 1.4826 * median(&mut spread);
-    shifts
+    let odd: Vec<OddSnapshot> = shifts
         .into_iter()
         .filter_map(|(snapshot, e, shift_c)| {
             let n = e.len();
@@ -115,7 +116,13 @@ pub(crate) fn odd_snapshots(residuals: &[Residual]) -> Vec<OddSnapshot> {
                     sensors: n,
                 })
         })
-        .collect()
+        .collect();
+    // The usual residual is the majority's: when half the snapshots or more stand out,
+    // they are two groups of conditions (a load the model errs at), not odd snapshots.
+    if 2 * odd.len() >= snapshots.len() {
+        return Vec::new();
+    }
+    odd
 }
 
 /// The note on each odd snapshot, for the text listing.
@@ -124,11 +131,12 @@ pub(crate) fn print_odd_snapshots(odd: &[OddSnapshot]) {
         let side = if o.shift_c > 0.0 { "warm" } else { "cold" };
         println!(
             "\nsnapshot {}: the model reads {:.2} C too {side} at {} of its {} sensors, beyond \
-             each sensor's usual residual. No effect of the hall shifts one snapshot alone: \
-             its conditions were likely not steady (a setpoint or load change the sensors had \
-             not caught up with), or its setpoint, fan or power rows are wrong. Check it, or \
-             leave it out of the snapshots and calibrate again; the ranking below takes it \
-             as it is, and its shift is spread over the sensors listed as unexplained",
+             each sensor's usual residual in the other snapshots. No effect of the hall shifts \
+             one snapshot alone: its conditions were likely not steady (a setpoint or load \
+             change the sensors had not caught up with), its setpoint, fan or power rows are \
+             wrong, or the model errs at its conditions alone. Check it, or leave it out of \
+             the snapshots and calibrate again; the ranking below takes it as it is, and its \
+             shift is spread over the sensors listed as unexplained",
             o.snapshot,
             o.shift_c.abs(),
             o.sensors_off,
@@ -175,6 +183,11 @@ mod tests {
         assert_eq!((odd[0].sensors_off, odd[0].sensors), (10, 10));
         // Noise and the model's recurring error at one sensor: nothing.
         assert!(odd_snapshots(&rows(5, noise)).is_empty());
+        // Two of four shifted: two groups of conditions, neither odd.
+        let two = odd_snapshots(&rows(4, |k, t| {
+            noise(k, t) + if t >= 2 { 3.0 } else { 0.0 }
+        }));
+        assert!(two.is_empty(), "{two:?}");
         // Of two snapshots either could be the odd one: nothing said.
         assert!(odd_snapshots(&rows(2, |k, t| noise(k, t) + t as f64 * 3.0)).is_empty());
         // A shift at half the sensors is theirs, not the snapshot's.
