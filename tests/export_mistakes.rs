@@ -165,6 +165,17 @@ fn the_power_of_a_snapshot_without_air_is_given_in_whole_watts() {
     assert_input_error(&o, &format!("(the servers draw {kw} kW)"));
 }
 
+/// A calibration of the development hall on `snapshots`, of a second or two, into
+/// `dir/cal`.
+fn quick_calibration(dir: &Path, snapshots: &Path) -> std::process::Output {
+    run(
+        on_files("calibrate", &data("of-dev-clean/hall.json"), snapshots)
+            .args(QUICK_CALIBRATION)
+            .arg("--out")
+            .arg(dir.join("cal")),
+    )
+}
+
 /// The development snapshots with `convert` applied to the value of each row it picks
 /// (by kind and id), written to `dir/name`.
 fn edited_snapshots(
@@ -203,21 +214,7 @@ fn readings_and_setpoints_in_fahrenheit_are_warned_of() {
         |kind, id| kind == "sensor_c" && id == "c-A3-hi",
         to_f,
     );
-    let calibrate = |snapshots: &Path| {
-        run(
-            on_files("calibrate", &data("of-dev-clean/hall.json"), snapshots)
-                .args([
-                    "--iterations",
-                    "1",
-                    "--polish",
-                    "0",
-                    "--no-grid-check",
-                    "--quiet",
-                ])
-                .arg("--out")
-                .arg(dir.join("cal")),
-        )
-    };
+    let calibrate = |snapshots: &Path| quick_calibration(&dir, snapshots);
     let o = calibrate(&one_sensor);
     assert!(o.status.success(), "{}", stderr(&o));
     let said = stderr(&o);
@@ -259,19 +256,7 @@ fn a_stuck_sensor_is_warned_of() {
         |kind, id| kind == "sensor_c" && id == "h-B4",
         |_| 22.0,
     );
-    let o = run(
-        on_files("calibrate", &data("of-dev-clean/hall.json"), &stuck)
-            .args([
-                "--iterations",
-                "1",
-                "--polish",
-                "0",
-                "--no-grid-check",
-                "--quiet",
-            ])
-            .arg("--out")
-            .arg(dir.join("cal")),
-    );
+    let o = quick_calibration(&dir, &stuck);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains(&format!(
@@ -300,19 +285,7 @@ fn missing_readings_are_noted() {
         .collect();
     let path = dir.join("missing.csv");
     std::fs::write(&path, kept).unwrap();
-    let o = run(
-        on_files("calibrate", &data("of-dev-clean/hall.json"), &path)
-            .args([
-                "--iterations",
-                "1",
-                "--polish",
-                "0",
-                "--no-grid-check",
-                "--quiet",
-            ])
-            .arg("--out")
-            .arg(dir.join("cal")),
-    );
+    let o = quick_calibration(&dir, &path);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains(&format!(
