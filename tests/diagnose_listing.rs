@@ -4,7 +4,7 @@
 
 mod cli_support;
 
-use cli_support::{data, on_dataset, on_files, run, stderr, tmp};
+use cli_support::{data, kalibre, on_dataset, on_files, run, stderr, tmp, QUICK_CALIBRATION};
 
 #[test]
 fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
@@ -114,5 +114,43 @@ fn a_snapshot_off_at_every_sensor_is_named() {
         )) && text.contains("its conditions were likely not steady"),
         "{text}"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// On a hall whose CRACs all supply 1.5 C warm, the hall-wide offset is named and said to
+/// be one the data cannot tell from the per-CRAC ones; those fit above their range of
+/// 5 C, which the listing calls more than any entry gives, not the opposite of the effect.
+#[test]
+fn a_fit_above_its_range_and_an_unidentifiable_one_are_said_as_such() {
+    let dir = tmp("listing-offset");
+    let o = run(kalibre()
+        .args(["synth", "--preset", "demo", "--seed", "3", "--effect"])
+        .arg("crac_supply_offset:offset_c=1.5")
+        .arg("--out")
+        .arg(dir.join("hall")));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (hall, snapshots) = (dir.join("hall/hall.json"), dir.join("hall/snapshots.csv"));
+    let cal = dir.join("cal");
+    let o = run(on_files("calibrate", &hall, &snapshots)
+        .args(QUICK_CALIBRATION)
+        .arg("--out")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(on_files("diagnose", &hall, &snapshots)
+        .arg("--calibration")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains(
+            "not identifiable: the data cannot tell it from crac_supply_offset(crac=crac-"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains(": above its range [-5, 5], more than any entry gives"),
+        "{text}"
+    );
+    assert!(!text.contains("lean the opposite way"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }

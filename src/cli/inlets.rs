@@ -19,13 +19,21 @@ pub fn inlet_line(label: &str, check: &InletCheck) -> String {
         check.servers,
         check.limit_c,
         hottest.join(", "),
-        setpoint_headroom_c(check).map_or(String::new(), |room| if room >= 0.0 {
-            format!("; headroom {room:.2} C: every setpoint could rise by that much at these flows")
-        } else {
-            format!(
-                "; {:.2} C over: every setpoint would have to fall by that much at these flows",
-                -room
-            )
+        setpoint_headroom_c(check).map_or(String::new(), |room| {
+            // Within a hundredth of the limit, two decimals would read 0.00.
+            let digits = if room.abs() < 0.005 { 3 } else { 2 };
+            if room >= 0.0 {
+                format!(
+                    "; headroom {room:.digits$} C: every setpoint could rise by that much at \
+                     these flows"
+                )
+            } else {
+                format!(
+                    "; {:.digits$} C over: every setpoint would have to fall by that much at \
+                     these flows",
+                    -room
+                )
+            }
         })
     )
 }

@@ -372,6 +372,7 @@ pub fn diagnose(
             added_rank,
             fitted: NamedValues::new(&names, dq),
             in_range,
+            ranges: h.params.iter().map(|q| [q.lower, q.upper]).collect(),
             current_change: NamedValues::new(res.params(), &sol.x[..p]),
             single_output_delta_bic,
             sensor_bias_delta_bic,

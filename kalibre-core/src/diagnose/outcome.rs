@@ -149,6 +149,10 @@ pub struct HypothesisResult {
     pub fitted: NamedValues,
     /// Whether every fitted value lies in its parameter's range.
     pub in_range: bool,
+    /// Each parameter's range `[lower, upper]`, in `fitted`'s order (so that a fit
+    /// outside it can be said to be below or above it). Missing in older diagnoses.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ranges: Vec<[f64; 2]>,
     /// Change of the current parameters in the joint refit.
     pub current_change: NamedValues,
     /// The largest BIC change with one output (all its snapshots) left out, for a

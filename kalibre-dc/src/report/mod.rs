@@ -161,7 +161,7 @@ pub fn calibration_html(
     let _ = write!(
         h,
         "<table><tr><th>measure</th><th>value</th></tr>\
-         <tr><td>MAE of the uncalibrated model (C)</td><td>{}</td></tr>\
+         <tr><td>MAE at the hall's initial parameters (C)</td><td>{}</td></tr>\
          <tr><td>best MAE (C)</td><td>{:.3} (found in {})</td></tr>\
          <tr><td>best RMSE / max abs (C)</td><td>{:.3} / {:.3}</td></tr>\
          <tr><td>model runs</td><td>{} ({} new, {} from the journal, {} failed)</td></tr>\

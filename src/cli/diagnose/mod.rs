@@ -377,7 +377,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     println!(
         "\nmissing effects, best first (MAE now {:.3} C; `explains`: the share of the residual, \
          as the ranking weighs the sensors, that the effect removes; `predicted MAE`: over \
-         every sensor, linearised):",
+         every sensor, linearised, with the calibrated parameters refitted beside the effect, \
+         as a recalibration with it refits them):",
         d.diagnosis.mae
     );
     // Said only when it weighs: on data the model reproduces the share is about 0.
@@ -427,18 +428,10 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         );
         let entry = || serde_json::to_string(s).unwrap_or_default();
         if !h.in_range {
-            // A bypass at a negative share, say: the data ask for the opposite of the
-            // effect, which no entry can give.
-            let fitted: Vec<String> = h
-                .fitted
-                .0
-                .iter()
-                .map(|(name, v)| format!("{name} = {v:.4}"))
-                .collect();
-            println!(
-                "    fitted {}: the data lean the opposite way, which no entry gives",
-                fitted.join(", ")
-            );
+            println!("    {}", print::outside_range(h));
+        }
+        if h.significant && !h.identifiable {
+            println!("    {}", print::not_identifiable(h));
         }
         if h.significant {
             // What the kind is on the floor: its name is the model's.

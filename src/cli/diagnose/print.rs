@@ -248,3 +248,67 @@ pub(crate) fn print_where_it_fails(hall: &Hall, report: &Report, heat: Option<&[
         );
     }
 }
+
+/// Why a fit lies outside its range, in words. Below a range that starts at the effect's
+/// absence (a bypass at a negative share), the data ask for the opposite of the effect;
+/// beyond its range otherwise (an offset of 5.7 C where 5 is the most), more of it than
+/// any entry gives.
+pub(crate) fn outside_range(h: &HypothesisResult) -> String {
+    let fitted: Vec<String> = h
+        .fitted
+        .0
+        .iter()
+        .map(|(name, v)| format!("{name} = {v:.4}"))
+        .collect();
+    let opposite = h
+        .fitted
+        .0
+        .iter()
+        .zip(&h.ranges)
+        .any(|((_, v), [lower, _])| *v < *lower && *lower >= 0.0);
+    let beyond: Vec<String> = h
+        .fitted
+        .0
+        .iter()
+        .zip(&h.ranges)
+        .filter(|((_, v), [lower, upper])| *v < *lower || *v > *upper)
+        .map(|((_, v), [lower, upper])| {
+            let side = if *v > *upper { "above" } else { "below" };
+            format!("{side} its range [{lower}, {upper}]")
+        })
+        .collect();
+    if opposite || beyond.is_empty() {
+        format!(
+            "fitted {}: the data lean the opposite way, which no entry gives",
+            fitted.join(", ")
+        )
+    } else {
+        format!(
+            "fitted {}: {}, more than any entry gives",
+            fitted.join(", "),
+            beyond.join(", ")
+        )
+    }
+}
+
+/// Why a significant hypothesis is not identifiable: another candidate, or the
+/// calibrated parameters, move the readings the same way, so its place or size is not
+/// the data's alone.
+pub(crate) fn not_identifiable(h: &HypothesisResult) -> String {
+    if h.collinear_with.is_empty() {
+        "not identifiable: the calibrated parameters move the readings much as it does, so \
+         its size may trade against theirs (calibrating with it settles both)"
+            .to_string()
+    } else {
+        let names = h.collinear_with.iter().take(3).cloned().collect::<Vec<_>>();
+        let more = match h.collinear_with.len() {
+            0..=3 => String::new(),
+            n => format!(" and {} more", n - 3),
+        };
+        format!(
+            "not identifiable: the data cannot tell it from {}{more}, which move the readings \
+             the same way; calibrating with it settles its size",
+            names.join(", ")
+        )
+    }
+}
