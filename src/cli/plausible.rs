@@ -19,7 +19,7 @@ fn more_such(count: usize, what: &str) -> String {
 /// Warns of readings colder than every running CRAC's supply (a faulty sensor or a slip,
 /// which least squares would fit as data), naming the file, snapshot and sensor; the
 /// calibration goes on with them, as they are the user's measurements.
-pub(crate) fn warn_cold_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+fn warn_cold_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
     let cold = snapshots::readings_below_supply(hall, snaps);
     let Some(first) = cold.first() else {
         return;
@@ -44,27 +44,32 @@ fn fahrenheit_as_c(f: f64) -> String {
     snapshots::number(((f - 32.0) / 1.8 * 10.0).round() / 10.0)
 }
 
-/// `` `a` `` or `` `a`, `b` and 3 more ``: the distinct names among `names`, in order.
+/// How many distinct names `names` holds, and them quoted for a message, in order
+/// ([`kalibre_core::some_names`]: the first few of a long list and its count).
 fn distinct(names: impl IntoIterator<Item = String>) -> (usize, String) {
     let mut seen: Vec<String> = Vec::new();
     for n in names {
-        if !seen.contains(&n) {
-            seen.push(n);
+        let quoted = format!("`{n}`");
+        if !seen.contains(&quoted) {
+            seen.push(quoted);
         }
     }
-    let quoted: Vec<String> = seen.iter().map(|n| format!("`{n}`")).collect();
-    let text = match quoted.len() {
-        0..=3 => quoted.join(", "),
-        n => format!("{} and {} more", quoted[..3].join(", "), n - 3),
-    };
-    (seen.len(), text)
+    (seen.len(), kalibre_core::some_names(&seen))
+}
+
+/// The warnings about a snapshot file's readings that `calibrate` and `diagnose` give
+/// alike: colder than the supply, far warmer than any hall's air, stuck.
+pub(crate) fn warn_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+    warn_cold_readings(path, hall, snaps);
+    warn_hot_readings(path, hall, snaps);
+    warn_stuck_sensors(path, hall, snaps);
 }
 
 /// Warns of readings far warmer than any hall's air (more than
 /// [`snapshots::ABOVE_SUPPLY_MARGIN_C`] above the warmest running setpoint), as readings
 /// in degrees Fahrenheit are, naming the file, the first and the sensors; fitted as they
 /// are, they would set the alphas (a sensor in Fahrenheit pinned one at its bound).
-pub(crate) fn warn_hot_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+fn warn_hot_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
     let hot = snapshots::readings_above_supply(hall, snaps);
     let Some(first) = hot.first() else {
         return;
@@ -96,7 +101,7 @@ pub(crate) fn warn_hot_readings(path: &Path, hall: &Hall, snaps: &[HallSnapshot]
 
 /// Warns of sensors that read the same in every snapshot while the conditions change
 /// (stuck, or a default an export filled in), naming the file and the sensors.
-pub(crate) fn warn_stuck_sensors(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
+fn warn_stuck_sensors(path: &Path, hall: &Hall, snaps: &[HallSnapshot]) {
     let stuck = snapshots::stuck_sensors(hall, snaps);
     let Some(first) = stuck.first() else {
         return;
@@ -148,18 +153,13 @@ pub(crate) fn note_missing_readings(path: &Path, hall: &Hall, snaps: &[HallSnaps
     let readings: usize = missing.iter().map(|(_, n)| n).sum();
     let listed: Vec<String> = missing
         .iter()
-        .take(3)
         .map(|(id, n)| format!("`{id}` in {n} of {} snapshots", snaps.len()))
         .collect();
-    let more = match missing.len() {
-        0..=3 => String::new(),
-        n => format!(" and {} more sensors", n - 3),
-    };
     eprintln!(
-        "note: {}: {readings} sensor reading(s) are missing ({}{more}); the calibration \
-         fits the readings there are",
+        "note: {}: {readings} sensor reading(s) are missing ({}); the calibration fits the \
+         readings there are",
         path.display(),
-        listed.join(", ")
+        kalibre_core::some_names(&listed)
     );
 }
 

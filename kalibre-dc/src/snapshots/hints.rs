@@ -92,12 +92,13 @@ pub(super) fn nearest_id<'a>(id: &str, ids: impl IntoIterator<Item = &'a str>) -
         c
     };
     let letters = sorted(&lower);
+    let length = lower.chars().count();
     // Rank: fewer slips first, then the same characters.
     let mut best: Option<((usize, bool), &str)> = None;
     let mut tie = false;
     for candidate in ids {
         // More than two characters apart in length is more than two slips.
-        if candidate.chars().count().abs_diff(lower.chars().count()) > 2 {
+        if candidate.chars().count().abs_diff(length) > 2 {
             continue;
         }
         let c = candidate.to_lowercase();

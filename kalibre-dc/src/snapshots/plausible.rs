@@ -12,6 +12,16 @@ use crate::hall::Hall;
 /// offset, which `crac_supply_offset` models) and stratified supply air stay within it.
 pub const BELOW_SUPPLY_MARGIN_C: f64 = 5.0;
 
+/// The setpoints of the CRACs whose fans run in `st` (C): the supply the hall's air
+/// comes from.
+fn running_setpoints(st: &OperatingState) -> impl Iterator<Item = f64> + '_ {
+    st.setpoint_c
+        .iter()
+        .zip(&st.fan_speed)
+        .filter(|(_, &fan)| fan > 0.0)
+        .map(|(&c, _)| c)
+}
+
 /// A reading colder than its snapshot's supply air.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColdReading {
@@ -48,13 +58,7 @@ pub fn readings_below_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<Col
     let mut cold = Vec::new();
     for s in snapshots {
         let st = &s.state;
-        let coldest = st
-            .setpoint_c
-            .iter()
-            .zip(&st.fan_speed)
-            .filter(|(_, &fan)| fan > 0.0)
-            .map(|(&c, _)| c)
-            .fold(f64::INFINITY, f64::min);
+        let coldest = running_setpoints(st).fold(f64::INFINITY, f64::min);
         if !coldest.is_finite() {
             continue;
         }
@@ -98,8 +102,6 @@ pub struct HotReading {
     pub reading_c: f64,
     /// The warmest setpoint of a CRAC whose fans run in that snapshot (C).
     pub warmest_supply_c: f64,
-    /// The margin it exceeds (C): its aisle's.
-    pub margin_c: f64,
 }
 
 /// Every reading more than [`ABOVE_SUPPLY_MARGIN_C`] (a hot-aisle sensor's
@@ -126,13 +128,7 @@ pub fn readings_above_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<Hot
     let mut hot = Vec::new();
     for s in snapshots {
         let st = &s.state;
-        let warmest = st
-            .setpoint_c
-            .iter()
-            .zip(&st.fan_speed)
-            .filter(|(_, &fan)| fan > 0.0)
-            .map(|(&c, _)| c)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let warmest = running_setpoints(st).fold(f64::NEG_INFINITY, f64::max);
         if !warmest.is_finite() {
             continue;
         }
@@ -147,7 +143,6 @@ pub fn readings_above_supply(hall: &Hall, snapshots: &[HallSnapshot]) -> Vec<Hot
                     sensor: sensor.id.clone(),
                     reading_c: c,
                     warmest_supply_c: warmest,
-                    margin_c: margin,
                 });
             }
         }

@@ -167,9 +167,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     let registry = EffectRegistry::builtin();
     registry.check_hall(&hall, &args.hall.display().to_string())?;
     let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
-    super::plausible::warn_cold_readings(&args.snapshots, &hall, &snaps);
-    super::plausible::warn_hot_readings(&args.snapshots, &hall, &snaps);
-    super::plausible::warn_stuck_sensors(&args.snapshots, &hall, &snaps);
+    super::plausible::warn_readings(&args.snapshots, &hall, &snaps);
     super::plausible::warn_setpoints(&args.snapshots, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_alpha_units(&args.hall, &hall);

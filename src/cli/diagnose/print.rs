@@ -300,15 +300,10 @@ pub(crate) fn not_identifiable(h: &HypothesisResult) -> String {
          its size may trade against theirs (calibrating with it settles both)"
             .to_string()
     } else {
-        let names = h.collinear_with.iter().take(3).cloned().collect::<Vec<_>>();
-        let more = match h.collinear_with.len() {
-            0..=3 => String::new(),
-            n => format!(" and {} more", n - 3),
-        };
         format!(
-            "not identifiable: the data cannot tell it from {}{more}, which move the readings \
-             the same way; calibrating with it settles its size",
-            names.join(", ")
+            "not identifiable: the data cannot tell it from {}, which move the readings the \
+             same way; calibrating with it settles its size",
+            kalibre_core::some_names(&h.collinear_with)
         )
     }
 }
