@@ -618,15 +618,29 @@ fn diagnose_writes_the_next_hall() {
     let effects = written["effects"].as_array().unwrap();
     assert_eq!(effects.len(), 1);
     assert_eq!(effects[0], d["hypotheses"][0]["suggestion"]);
-    // Warm start: every type's initial alpha is the calibrated one.
+    // Warm start at the diagnosis's fit: every type's initial alpha is the calibrated one
+    // moved by the joint refit beside the effect, within its bounds.
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(cal.join("report.json")).unwrap()).unwrap();
+    let change = &d["hypotheses"][0]["current_change"];
+    let mut moved = 0;
     for t in written["server_types"].as_array().unwrap() {
         let name = format!("alpha/{}", t["id"].as_str().unwrap());
         let calibrated = report["best"]["params"][&name].as_f64().unwrap();
-        let initial = t["alpha_cfm_per_w"]["initial"].as_f64().unwrap();
-        assert!((initial - calibrated).abs() < 1e-12, "{name}");
+        let bounds = &t["alpha_cfm_per_w"];
+        let (lo, hi) = (
+            bounds["min"].as_f64().unwrap(),
+            bounds["max"].as_f64().unwrap(),
+        );
+        let dp = change[&name].as_f64().unwrap_or(0.0);
+        let initial = bounds["initial"].as_f64().unwrap();
+        assert!(
+            (initial - (calibrated + dp).clamp(lo, hi)).abs() < 1e-12,
+            "{name}"
+        );
+        moved += usize::from((initial - calibrated).abs() > 1e-6);
     }
+    assert!(moved > 0, "the refit moved no alpha: {change}");
     let o = run(kalibre()
         .args(["calibrate", "--iterations", "1", "--polish", "1"])
         .args(["--likelihood", "student-t", "--hall"])
@@ -636,6 +650,19 @@ fn diagnose_writes_the_next_hall() {
         .arg("--out")
         .arg(dir.join("cal-next")));
     assert!(o.status.success(), "{}", stderr(&o));
+    // Started there, the hall with the effect already reads better than the calibrated
+    // model without it, as the diagnosis predicted.
+    let next_report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("cal-next").join("report.json")).unwrap(),
+    )
+    .unwrap();
+    let start = next_report["initial"]["mae_c"].as_f64().unwrap();
+    let calibrated = report["best"]["mae_c"].as_f64().unwrap();
+    let predicted = d["hypotheses"][0]["predicted_mae_c"].as_f64().unwrap();
+    assert!(
+        start < calibrated,
+        "next hall at {start:.3} C, calibrated {calibrated:.3} C, predicted {predicted:.3} C"
+    );
     // The clean hall: nothing significant, nothing written.
     let cal = dir.join("cal-clean");
     let o = run(on_dataset("calibrate", "of-dev-clean")

@@ -72,6 +72,14 @@ fn table4_quick_every_approach_improves_and_files_are_written() {
     assert!(text.contains("Kalibre") && text.contains("(1+1)-ES") && text.contains("Manual"));
     // The quick budgets stop before iteration 10: the column says where they stopped.
     assert!(text.contains(" (ran 4 it.)"), "{text}");
+    // And the budgets each row ran with are stated.
+    assert!(
+        text.contains(
+            "budgets: Kalibre 4 iterations, MLP 3 iterations, (1+1)-ES 12 mutations, manual 6 \
+             iterations"
+        ),
+        "{text}"
+    );
     std::fs::remove_dir_all(dir).unwrap();
 }
 

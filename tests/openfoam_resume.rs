@@ -200,6 +200,86 @@ fn openfoam_calibration_resumes_after_kill_without_repeating_runs() {
     }
 }
 
+/// Ctrl-C while OpenFOAM meshes (before any solve) ends the mesh's processes with kalibre
+/// and says that it ended OpenFOAM's work in progress, not only "model runs"; the
+/// half-built mesh stays marked, for the next command's sweep.
+#[test]
+fn ctrl_c_while_meshing_ends_the_mesh_and_says_so() {
+    use std::os::unix::process::ExitStatusExt;
+    require_openfoam();
+    let (hall, snaps) = small_hall();
+    let dir = tmp("ctrl-c-mesh");
+    hall.save(&dir.join("hall.json")).unwrap();
+    std::fs::write(
+        dir.join("snapshots.csv"),
+        snapshots::write_snapshots(hall, &snaps[..1]),
+    )
+    .unwrap();
+    let builds = dir.join("out/openfoam/mesh-builds");
+    let child = calibrate_cmd(&dir)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while marked_dirs(&builds).is_empty() && start.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let building = marked_dirs(&builds);
+    // SAFETY: signalling a child this test started and has not reaped.
+    unsafe {
+        libc_kill(child.id() as i32, 2);
+    }
+    let o = child.wait_with_output().unwrap();
+    assert!(!building.is_empty(), "no mesh was being built");
+    assert_eq!(o.status.signal(), Some(2), "{o:?}");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("kalibre: stopped; the OpenFOAM solves or meshing in progress were ended"),
+        "{err}"
+    );
+    assert!(
+        err.contains("finished runs are kept in") && err.contains("runs.jsonl"),
+        "{err}"
+    );
+    // No mesher outlives kalibre.
+    let t = Instant::now();
+    while !solver_pids_under(&builds).is_empty() && t.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let left = solver_pids_under(&builds);
+    for pid in &left {
+        // SAFETY: kill has no memory effects; these are processes this test started.
+        unsafe {
+            libc_kill(*pid, 9);
+        }
+    }
+    assert!(left.is_empty(), "mesh processes outlived kalibre: {left:?}");
+    // Left marked as unfinished, so the next command's sweep removes it.
+    assert!(
+        building.iter().all(|d| d.is_dir()) && !marked_dirs(&builds).is_empty(),
+        "{building:?}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The directories directly under `root` that a marker (`.<name>.running`) says are in
+/// use.
+fn marked_dirs(root: &Path) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(root)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let run = name
+                .strip_prefix('.')?
+                .strip_suffix(".running")?
+                .to_string();
+            Some(root.join(run)).filter(|d| d.is_dir())
+        })
+        .collect()
+}
+
 /// The run directories under `root`'s `runs-*` that a marker (`.<name>.running`) says
 /// are a run's that has not ended.
 fn marked_run_dirs(root: &Path) -> Vec<std::path::PathBuf> {

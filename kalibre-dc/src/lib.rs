@@ -14,6 +14,7 @@ mod error;
 pub mod hall;
 pub mod json_keys;
 mod model;
+pub mod next_hall;
 pub mod openfoam;
 mod params;
 pub mod report;

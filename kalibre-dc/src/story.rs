@@ -4,8 +4,10 @@
 //! [`run_story`] runs calibrations ([`calibrate_hall`]) and diagnoses ([`diagnose_hall`])
 //! in turn, adding the top significant suggestion after each diagnosis (up to
 //! [`StorySettings::max_effects`]), and stops honestly: when nothing is significant it says
-//! so and adds nothing. Each new calibration starts from the previous one's best alphas
-//! and the suggestion's fitted effect values (a warm start: the user's next run would do
+//! so and adds nothing. Each new calibration starts where the diagnosis predicted its MAE:
+//! the previous one's best alphas moved by the diagnosis's joint refit, and the
+//! suggestion's fitted effect values ([`with_effect_refitted`]; a warm start: the user's
+//! next run would do
 //! the same). With an output directory it writes `story.json` (schema
 //! [`STORY_SCHEMA`]), `hall-with-effect.json`, per step `step-N/report.json`, per
 //! diagnosis `diagnosis-N.json`, and `report.html`.
@@ -20,11 +22,12 @@ use serde::{Deserialize, Serialize};
 use crate::calibration::{calibrate_hall, HallCalibration, HallCalibrationSettings};
 use crate::diagnosis::{diagnose_hall, HallDiagnosis, HallDiagnosisSettings};
 use crate::effects::EffectRegistry;
-use crate::hall::{AlphaMode, EffectSpec, Hall};
+use crate::hall::{EffectSpec, Hall};
+pub use crate::next_hall::{with_effect_from_report, with_effect_refitted};
 use crate::report::{ThermalPlane, INLET_HEIGHT_M};
 use crate::sim::intake_error;
 use crate::snapshots::HallSnapshot;
-use crate::{Error, HallModel, ParamLayout, Result};
+use crate::{Error, Result};
 
 /// The schema tag of `story.json`.
 pub const STORY_SCHEMA: &str = "kalibre.story/1";
@@ -394,7 +397,19 @@ pub fn run_story(
                 };
             }
         };
-        current = with_effect(&current, &cal, &registry, &top.entry)?;
+        // Where the diagnosis predicted its MAE: the effect at its fitted value and the
+        // calibrated parameters moved beside it.
+        let fit = full
+            .diagnosis
+            .hypotheses
+            .iter()
+            .find(|h| h.name == top.name);
+        current = match fit {
+            Some(h) => {
+                with_effect_refitted(&current, &cal.report, &cal.model, &registry, h, &top.entry)?
+            }
+            None => with_effect(&current, &cal, &registry, &top.entry)?,
+        };
         if let Some(dir) = out_dir {
             current.save(&dir.join("hall-with-effect.json"))?;
         }
@@ -507,10 +522,8 @@ fn summarise(after_step: usize, d: &HallDiagnosis, wall_s: f64) -> DiagnosisStep
     }
 }
 
-/// The hall with `entry` added, warm-started: each type's initial alpha is the calibrated
-/// one (the mean over its servers when alpha is per server), each effect already present
-/// starts at its calibrated values, and the new one at the diagnosis's fitted values
-/// (which `entry` carries).
+/// The hall with `entry` added, warm-started at `cal`'s calibrated values (not refitted
+/// beside the effect: [`with_effect_refitted`] is).
 pub fn with_effect(
     hall: &Hall,
     cal: &HallCalibration,
@@ -518,56 +531,6 @@ pub fn with_effect(
     entry: &EffectSpec,
 ) -> Result<Hall> {
     with_effect_from_report(hall, &cal.report, &cal.model, registry, entry)
-}
-
-/// [`with_effect`] from a calibration's report and the model of `hall` it calibrated (as
-/// `kalibre diagnose --write-hall` has them).
-pub fn with_effect_from_report(
-    hall: &Hall,
-    report: &Report,
-    model: &HallModel,
-    registry: &EffectRegistry,
-    entry: &EffectSpec,
-) -> Result<Hall> {
-    let best = &report.best.params;
-    let layout: &ParamLayout = model.layout();
-    let mut next = hall.clone();
-    let values = best.values();
-    if layout.mode() != AlphaMode::Fixed {
-        let per_server = layout.alpha_per_server(&values);
-        let mut sums = std::collections::BTreeMap::<&str, (f64, usize)>::new();
-        for (s, a) in hall.servers().zip(&per_server) {
-            let e = sums.entry(s.server.server_type.as_str()).or_default();
-            e.0 += a;
-            e.1 += 1;
-        }
-        for t in &mut next.server_types {
-            if let Some((sum, n)) = sums.get(t.id.as_str()).filter(|(_, n)| *n > 0) {
-                let b = &mut t.alpha_cfm_per_w;
-                b.initial = (sum / *n as f64).clamp(b.min, b.max);
-            }
-        }
-    }
-    for (e, (effect, spec)) in model
-        .effects()
-        .iter()
-        .zip(next.effects.iter_mut())
-        .enumerate()
-    {
-        for (p, v) in effect
-            .parameters()
-            .iter()
-            .zip(layout.effect_values(&values, e))
-        {
-            spec.fields
-                .insert(p.name.clone(), serde_json::json!(v.clamp(p.lower, p.upper)));
-        }
-    }
-    // Check the entry builds on this hall before adding it.
-    registry.build(entry, &next)?;
-    next.effects.push(entry.clone());
-    next.validate("hall with the suggested effect")?;
-    Ok(next)
 }
 
 fn write_json<T: Serialize>(dir: &Path, name: &str, value: &T) -> Result<()> {

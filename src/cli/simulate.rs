@@ -367,8 +367,16 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
 pub fn run(args: SimulateArgs) -> CliResult {
     // Nothing is journaled here, so a stop cannot promise a resume.
     kalibre_core::external::set_stop_message(kalibre_core::external::StopMessage {
-        runs_ended: "kalibre: stopped; the model runs in progress were ended with it \
-                     (simulate keeps no journal: run it again to redo them)\n",
+        runs_ended: match args.model {
+            SimulateModel::Openfoam => {
+                "kalibre: stopped; the OpenFOAM solves or meshing in progress were ended \
+                 with it (simulate keeps no journal: run it again to redo them)\n"
+            }
+            _ => {
+                "kalibre: stopped; the model runs in progress were ended with it \
+                 (simulate keeps no journal: run it again to redo them)\n"
+            }
+        },
         no_runs: "kalibre: stopped (simulate keeps no journal: run it again to redo its runs)\n",
     });
     match (args.model, &args.config) {

@@ -109,6 +109,30 @@ pub fn markdown(tables: &[HallTable]) -> String {
                 format!(" (rows not run: {})", missing.join(", "))
             },
         ));
+        s.push_str(&format!("  - budgets: {}\n", budgets(t, &has)));
     }
     s
+}
+
+/// The iteration budget of each row the table has (a combined table's rows keep the
+/// budgets they ran with), so that a "lowest MAE" can be read against its budget.
+fn budgets(t: &HallTable, has: &dyn Fn(Approach) -> bool) -> String {
+    let b = &t.budgets;
+    let mut parts = Vec::new();
+    if has(Approach::Kalibre) {
+        parts.push(format!("Kalibre {} iterations", b.kalibre));
+    }
+    if has(Approach::Mlp) {
+        let seeds = b
+            .mlp_seeds
+            .map_or(String::new(), |n| format!(" (first {n} seeds)"));
+        parts.push(format!("MLP {} iterations{seeds}", b.mlp));
+    }
+    if has(Approach::Es) {
+        parts.push(format!("(1+1)-ES {} mutations", b.es));
+    }
+    if has(Approach::Manual) {
+        parts.push(format!("manual {} iterations", b.manual));
+    }
+    parts.join(", ")
 }

@@ -120,6 +120,8 @@ impl HallDiagnosis {
                     "identifiable": h.identifiable,
                     "fitted": h.fitted,
                     "in_range": h.in_range,
+                    "ranges": h.ranges,
+                    "current_change": h.current_change,
                     "delta_bic": h.delta_bic,
                     "held_out_improvement": h.held_out_improvement,
                     "single_output_delta_bic": h.single_output_delta_bic,

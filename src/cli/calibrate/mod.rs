@@ -491,7 +491,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     note_replaced_report(&args.out, &hall, &snaps);
     let journal = args.out.join("runs.jsonl");
     super::hall_changes::keep_runs_hall(&args.out, &args.hall, &journal)?;
-    set_stop_message(&journal);
+    set_stop_message(&journal, args.model == ModelArg::Openfoam);
     let progress = Progress::new(
         progress::Plan {
             snapshots: snaps.len(),
@@ -627,17 +627,21 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
 }
 
 /// What Ctrl-C (or a kill) says: where the finished runs are, and that the same command
-/// resumes from them (once per process: the texts live as long as it).
-fn set_stop_message(journal: &Path) {
+/// resumes from them (once per process: the texts live as long as it). With OpenFOAM what
+/// it ends may be a mesh being built rather than a solve; the next command sweeps that.
+fn set_stop_message(journal: &Path, openfoam: bool) {
     let kept = format!(
         "kept in {}: the same command resumes from there, repeating no successful run",
         journal.display()
     );
+    let in_progress = match openfoam {
+        true => "the OpenFOAM solves or meshing in progress were",
+        false => "the model runs in progress were",
+    };
     let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
     kalibre_core::external::set_stop_message(kalibre_core::external::StopMessage {
         runs_ended: leak(format!(
-            "kalibre: stopped; the model runs in progress were ended with it; finished runs \
-             are {kept}\n"
+            "kalibre: stopped; {in_progress} ended with it; finished runs are {kept}\n"
         )),
         no_runs: leak(format!(
             "kalibre: stopped; finished model runs are {kept}\n"

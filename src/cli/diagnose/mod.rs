@@ -12,10 +12,10 @@ use kalibre_dc::diagnosis::{
 };
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
+use kalibre_dc::next_hall::with_effect_refitted;
 use kalibre_dc::openfoam::{remove_interrupted_runs, OpenFoamEffectSolver, OpenFoamModel};
 use kalibre_dc::sim::Simulator;
 use kalibre_dc::snapshots;
-use kalibre_dc::story::with_effect_from_report;
 use kalibre_dc::HallModel;
 
 mod journal;
@@ -517,7 +517,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
 }
 
 /// `--write-hall`: the hall with the top significant suggestion added, warm-started at
-/// the calibrated values; returns what to tell the user.
+/// its fit (the calibrated values refitted beside it); returns what to tell the user.
 fn write_next_hall(
     hall: &Hall,
     report: &Report,
@@ -543,16 +543,18 @@ fn write_next_hall(
             path.display()
         )));
     };
-    let next = with_effect_from_report(hall, report, model, &EffectRegistry::builtin(), entry)?;
+    let next = with_effect_refitted(hall, report, model, &EffectRegistry::builtin(), h, entry)?;
     if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
             .map_err(|e| CliError::Input(format!("--write-hall: {}: {e}", dir.display())))?;
     }
     next.save(path)?;
     Ok(Some(format!(
-        "wrote {}: the hall with {} added, warm-started at the calibrated values",
+        "wrote {}: the hall with {} added, warm-started where the predicted MAE ({:.3} C) \
+         puts it: the effect at its fitted value, the calibrated parameters refitted beside it",
         path.display(),
-        h.name
+        h.name,
+        h.predicted_mae
     )))
 }
 
