@@ -347,6 +347,73 @@ fn timed_out_runs_are_recorded_and_the_loop_goes_on() {
     assert!(leftovers.is_empty(), "solver processes left: {leftovers:?}");
 }
 
+/// Kills the first solver process found under `root` with `signal`, once it has run
+/// `after`; returns its pid (none within two minutes: `None`).
+fn kill_the_solver(root: &std::path::Path, signal: i32, after: Duration) -> Option<i32> {
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(120) {
+        let solver = std::fs::read_dir(root).ok().and_then(|_| {
+            solver_pids_under(root).into_iter().find(|pid| {
+                std::fs::read_to_string(format!("/proc/{pid}/comm"))
+                    .is_ok_and(|c| c.starts_with("buoyant"))
+            })
+        });
+        if let Some(pid) = solver {
+            std::thread::sleep(after);
+            // SAFETY: kill has no memory effects; a process of this test's solve.
+            unsafe {
+                libc::kill(pid, signal);
+            }
+            return Some(pid);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    None
+}
+
+/// A solve killed from outside kalibre (the out-of-memory killer's SIGKILL) says nothing
+/// about its parameters: it is solved again in a fresh directory, and the killed
+/// attempt's directory is kept for its logs. With no retry allowed the failure says
+/// what killed it.
+#[test]
+fn a_solve_killed_from_outside_is_solved_again() {
+    require_openfoam();
+    let (hall, snaps) = small_hall();
+    let root = tmp("killed-outside");
+    let model = OpenFoamModel::new(hall, small_settings(&root)).unwrap();
+    let params = model.layout().space().initial();
+    let state = &snaps[0].state;
+    let (result, killed) = std::thread::scope(|sc| {
+        let killer = sc.spawn(|| kill_the_solver(&root, libc::SIGKILL, Duration::from_secs(1)));
+        let result = model.evaluate_timed(state, &params);
+        (result, killer.join().unwrap())
+    });
+    assert!(killed.is_some(), "no solver was found to kill");
+    let (out, timings) = result.expect("the second attempt solves");
+    assert_eq!(out.values.len(), hall.sensors.len());
+    assert_eq!(timings.killed_attempts.len(), 1, "{timings:?}");
+    let kept = &timings.killed_attempts[0];
+    assert!(kept.join("logs/solve").is_dir(), "{}", kept.display());
+    // The same solve, not killed, reads the same: the retry is a full solve.
+    let (again, _) = model.evaluate_timed(state, &params).unwrap();
+    assert_eq!(again.values, out.values);
+
+    let no_retry = OpenFoamModel::new(hall, small_settings(&root).with_killed_retries(0)).unwrap();
+    let (result, killed) = std::thread::scope(|sc| {
+        let killer = sc.spawn(|| kill_the_solver(&root, libc::SIGKILL, Duration::from_secs(1)));
+        let result = no_retry.evaluate_timed(state, &params);
+        (result, killer.join().unwrap())
+    });
+    assert!(killed.is_some(), "no solver was found to kill");
+    match result {
+        Err(ModelError::Failed { reason, .. }) => assert!(
+            reason.contains("killed by signal 9 from outside kalibre"),
+            "{reason}"
+        ),
+        other => panic!("expected a failed run, got {other:?}"),
+    }
+}
+
 /// Model options that do not belong to the chosen model are refused before anything
 /// runs, and a geometry OpenFOAM cannot represent is a clear input error.
 #[test]
@@ -364,8 +431,16 @@ fn model_options_are_checked() {
             .arg(dir.join("out"));
         c.output().unwrap()
     };
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 8] = [
         (&["--np", "2"], "--np is an OpenFOAM option"),
+        (
+            &["--of-killed-retries", "1"],
+            "--of-killed-retries is an OpenFOAM option",
+        ),
+        (
+            &["--model", "openfoam", "--of-killed-retries", "9"],
+            "--of-killed-retries: 9 is more than 5",
+        ),
         (&["--model", "command"], "--model command needs --config"),
         (&["--config", "m.toml"], "--config is for --model command"),
         (

@@ -14,6 +14,9 @@ use super::{CliError, CliResult};
 /// thumb has it (about 1 GB per million cells).
 const BYTES_PER_CELL: f64 = 1e3;
 
+/// The most `--of-killed-retries` allowed.
+const MAX_KILLED_RETRIES: u32 = 5;
+
 /// Above this many cells a warning says what each solve will cost.
 const LARGE_MESH_CELLS: f64 = 1e6;
 
@@ -35,6 +38,11 @@ pub struct OpenFoamArgs {
     /// Default 600.
     #[arg(long = "of-timeout-s")]
     pub of_timeout_s: Option<f64>,
+    /// OpenFOAM: times a solve killed from outside kalibre (SIGKILL or SIGTERM it did not
+    /// send: the out-of-memory killer, an administrator) is solved again at once, in a
+    /// fresh directory; 0 records it as failed. Default 1.
+    #[arg(long = "of-killed-retries")]
+    pub of_killed_retries: Option<u32>,
 }
 
 impl OpenFoamArgs {
@@ -44,6 +52,7 @@ impl OpenFoamArgs {
             ("--np", self.np.is_some()),
             ("--of-iterations", self.of_iterations.is_some()),
             ("--of-timeout-s", self.of_timeout_s.is_some()),
+            ("--of-killed-retries", self.of_killed_retries.is_some()),
         ];
         match given.iter().find(|(_, g)| *g) {
             Some((flag, _)) if !openfoam => Err(CliError::Input(format!(
@@ -72,6 +81,15 @@ impl OpenFoamArgs {
                 )));
             }
             s = s.with_timeout(Duration::from_secs_f64(t));
+        }
+        if let Some(n) = self.of_killed_retries {
+            if n > MAX_KILLED_RETRIES {
+                return Err(CliError::Input(format!(
+                    "--of-killed-retries: {n} is more than {MAX_KILLED_RETRIES}: a solve killed \
+                     that often is being killed for a reason (memory?), not by chance"
+                )));
+            }
+            s = s.with_killed_retries(n);
         }
         s.check().map_err(|e| {
             CliError::Input(match e {

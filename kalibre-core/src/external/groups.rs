@@ -4,7 +4,7 @@
 //! parent-death signal reaches only a run's first process, not the solver a script
 //! starts. [`end_runs_with_kalibre`] installs handlers that signal every group here.
 
-use std::sync::atomic::{AtomicI32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use std::sync::OnceLock;
 
 /// Runs tracked at once; beyond this a run is not tracked (its first process still gets
@@ -77,7 +77,19 @@ pub fn set_stop_message(message: StopMessage) {
     let _ = STOP_MESSAGE.set(message);
 }
 
+/// Set by the handler of [`end_runs_with_kalibre`] before it ends the runs in progress.
+static STOPPING: AtomicBool = AtomicBool::new(false);
+
+/// Whether kalibre is ending (the handler of [`end_runs_with_kalibre`] ran): a run that
+/// ends killed now was ended by kalibre's own stop, not from outside, and is not retried.
+pub fn stopping() -> bool {
+    STOPPING.load(Ordering::Acquire)
+}
+
 extern "C" fn on_end_signal(signal: libc::c_int) {
+    // An atomic store: async-signal-safe. Before the runs are signalled, so that no
+    // worker takes their end for an outside kill.
+    STOPPING.store(true, Ordering::Release);
     let ended = signal_runs(libc::SIGTERM) > 0;
     // An atomic load once set: async-signal-safe.
     let message = STOP_MESSAGE.get().copied().unwrap_or(DEFAULT_STOP_MESSAGE);

@@ -33,7 +33,7 @@ pub use command::{
     TemplateFile,
 };
 pub use config::CommandModelConfig;
-pub use groups::{end_runs_with_kalibre, set_stop_message, signal_runs, StopMessage};
+pub use groups::{end_runs_with_kalibre, set_stop_message, signal_runs, stopping, StopMessage};
 pub use parse::OutputParser;
 pub use process::{log_tail, run_process, ProcessEnd, ProcessOutcome, ProcessSpec};
 pub use rundir::{RunDir, RunDirs};

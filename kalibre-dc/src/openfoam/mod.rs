@@ -22,6 +22,7 @@ mod results;
 mod servers;
 mod settings;
 mod solver;
+mod step;
 
 use thiserror::Error;
 

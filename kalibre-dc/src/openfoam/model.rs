@@ -3,15 +3,14 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use kalibre_core::external::{log_tail, ProcessEnd, RunDirs};
+use kalibre_core::external::{log_tail, RunDirs};
 use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 
-use super::case::{run_step, which, CaseDir};
+use super::case::{which, CaseDir};
 use super::geometry::{CaseExtras, CaseGeometry, RackGap};
 use super::params::RunInputs;
-use super::results::{
-    file_tail, last_field_value, log_verdict, probe_window, shows_fpe, FPE_VERDICT,
-};
+use super::results::{file_tail, last_field_value, log_verdict, probe_window};
+use super::step::{run_solve_step, StepFailure};
 use super::{OpenFoamError, OpenFoamSettings};
 use crate::effects::{mods_at_upper_bounds, Effect, EffectRegistry};
 use crate::hall::Hall;
@@ -71,6 +70,9 @@ pub struct RunTimings {
     pub cleanup_s: f64,
     /// Relative energy balance error.
     pub energy_balance: f64,
+    /// The directories of earlier attempts at this solve that were killed from outside
+    /// (kept for their logs); empty when the first attempt ran through.
+    pub killed_attempts: Vec<PathBuf>,
 }
 
 fn hash_hex(parts: &[&[u8]]) -> String {
@@ -331,34 +333,70 @@ impl OpenFoamModel {
         self.solve_inputs(state, &key, &inputs, t0)
     }
 
-    /// Solves `inputs` in a fresh run directory named from `key`'s values.
+    /// Solves `inputs` in a fresh run directory named from `key`'s values. A solve killed
+    /// from outside (the out-of-memory killer, an administrator) is solved again in
+    /// another fresh directory, up to `killed_retries` times: the kill says nothing about
+    /// the parameters, and a journaled failure would stand until a resume. The killed
+    /// attempts' directories stay, for their logs.
     fn solve_inputs(
         &self,
         state: &OperatingState,
         key: &[f64],
         inputs: &RunInputs,
-        t0: Instant,
+        mut t0: Instant,
     ) -> Result<(Outputs, RunTimings), ModelError> {
         let key = key.iter().fold(
             u128::from_str_radix(&self.fingerprint[GENERATOR.len() + 1..], 16).unwrap_or(0),
             |h, p| h.rotate_left(13) ^ u128::from(p.to_bits()),
         );
-        let dir = self
-            .runs
-            .create(&state.label, key)
-            .map_err(|e| ModelError::failed(format!("cannot create a run directory: {e}")))?;
-        let mut result = self
-            .run_in(&dir, inputs, t0)
-            .map_err(|e| e.with_run_dir(&dir));
-        let keep = self.settings.keep_runs || result.is_err();
-        if !keep {
-            let t3 = Instant::now();
-            let _ = std::fs::remove_dir_all(&dir);
-            if let Ok((_, timings)) = &mut result {
-                timings.cleanup_s = t3.elapsed().as_secs_f64();
+        let attempts = self.settings.killed_retries + 1;
+        let mut killed = Vec::new();
+        loop {
+            let dir = self
+                .runs
+                .create(&state.label, key)
+                .map_err(|e| ModelError::failed(format!("cannot create a run directory: {e}")))?;
+            let mut result = self.run_in(&dir, inputs, t0);
+            if let Err(StepFailure {
+                killed_by: Some(_), ..
+            }) = &result
+            {
+                if killed.len() + 1 < attempts as usize {
+                    killed.push(dir.to_path_buf());
+                    t0 = Instant::now();
+                    continue;
+                }
             }
+            let keep = self.settings.keep_runs || result.is_err();
+            if !keep {
+                let t3 = Instant::now();
+                let _ = std::fs::remove_dir_all(&dir);
+                if let Ok((_, timings)) = &mut result {
+                    timings.cleanup_s = t3.elapsed().as_secs_f64();
+                }
+            }
+            return match result {
+                Ok((outputs, mut timings)) => {
+                    timings.killed_attempts = killed;
+                    Ok((outputs, timings))
+                }
+                Err(f) => {
+                    let error = match f.error {
+                        ModelError::Failed { reason, log_tail } if !killed.is_empty() => {
+                            ModelError::Failed {
+                                reason: format!(
+                                    "{reason} (attempt {} of {attempts})",
+                                    killed.len() + 1
+                                ),
+                                log_tail,
+                            }
+                        }
+                        e => e,
+                    };
+                    Err(error.with_run_dir(&dir))
+                }
+            };
         }
-        result
     }
 
     fn run_in(
@@ -366,7 +404,7 @@ impl OpenFoamModel {
         dir: &Path,
         inputs: &RunInputs,
         t0: Instant,
-    ) -> Result<(Outputs, RunTimings), ModelError> {
+    ) -> Result<(Outputs, RunTimings), StepFailure> {
         let io = |what: &str, e: std::io::Error| ModelError::failed(format!("{what}: {e}"));
         let case = self.case.path();
         for sub in ["constant", "system"] {
@@ -423,7 +461,8 @@ impl OpenFoamModel {
             return Err(ModelError::Failed {
                 reason,
                 log_tail: log_tail(&logs, 20),
-            });
+            }
+            .into());
         }
         let st = &self.settings;
         let k = st.iterations as f64;
@@ -460,7 +499,8 @@ impl OpenFoamModel {
                     100.0 * st.energy_tolerance
                 ),
                 log_tail: log_tail(&logs, 20),
-            });
+            }
+            .into());
         }
         let server_intake_c = self
             .geometry
@@ -500,11 +540,12 @@ impl OpenFoamModel {
                 parse_s: t2.elapsed().as_secs_f64(),
                 cleanup_s: 0.0,
                 energy_balance: balance,
+                killed_attempts: Vec::new(),
             },
         ))
     }
 
-    /// Runs one program; a failed end becomes a [`ModelError`].
+    /// Runs one program of a solve ([`run_solve_step`]).
     fn step(
         &self,
         dir: &Path,
@@ -512,52 +553,18 @@ impl OpenFoamModel {
         program: &str,
         args: &[String],
         timeout: Duration,
-    ) -> Result<PathBuf, ModelError> {
-        let (out, logs) = run_step(
+    ) -> Result<PathBuf, StepFailure> {
+        let project = &self.settings.project_dir;
+        run_solve_step(
             dir,
-            &self.settings.project_dir,
+            project,
             step,
             program,
             args,
             timeout,
+            self.settings.timeout,
         )
-        .map_err(|e| ModelError::failed(e.to_string()))?;
-        let tail = || log_tail(&logs, 20);
-        match out.end {
-            ProcessEnd::Exited(0) => Ok(logs),
-            ProcessEnd::Exited(c) => {
-                // OpenFOAM prints its trace on stderr, a shell's message on stdout.
-                let fpe = ["stdout.log", "stderr.log"]
-                    .iter()
-                    .any(|f| file_tail(&logs.join(f), 16 * 1024).is_some_and(|t| shows_fpe(&t)));
-                Err(ModelError::Failed {
-                    reason: if fpe {
-                        FPE_VERDICT.into()
-                    } else {
-                        format!("{program} ({step}) exited with code {c}")
-                    },
-                    log_tail: tail(),
-                })
-            }
-            ProcessEnd::Signalled(s) => Err(ModelError::Failed {
-                reason: if s == libc_sigfpe() {
-                    format!("{program} ({step}): floating-point exception (SIGFPE)")
-                } else {
-                    format!("{program} ({step}) killed by signal {s}")
-                },
-                log_tail: tail(),
-            }),
-            ProcessEnd::TimedOut { .. } => Err(ModelError::Timeout {
-                seconds: self.settings.timeout.as_secs_f64(),
-                log_tail: tail(),
-            }),
-        }
     }
-}
-
-/// SIGFPE's number on Linux and the BSDs.
-fn libc_sigfpe() -> i32 {
-    8
 }
 
 impl Model for OpenFoamModel {

@@ -17,6 +17,7 @@ use super::OpenFoamError;
 /// | `probe_every` | 5 | probe sampling interval (iterations) |
 /// | `np` | 1 | processes: 1 runs serially, more runs `decomposePar` then `mpirun -np N` |
 /// | `timeout` | 600 s | wall-clock limit per run (all steps), after which the process group is killed |
+/// | `killed_retries` | 1 | times a solve killed from outside (SIGKILL or SIGTERM not sent by kalibre: the out-of-memory killer, an administrator) is solved again, in a fresh directory; a timeout, a divergence or a crash is not |
 /// | `energy_tolerance` | 0.05 | largest accepted relative error of the energy balance |
 /// | `project_dir` | `/usr/share/openfoam` | `WM_PROJECT_DIR` given to every OpenFOAM program |
 /// | `cache_root` | `openfoam-cases` | meshed cases (one per hall and grid) and run directories |
@@ -55,6 +56,10 @@ pub struct OpenFoamSettings {
     /// Wall-clock limit per run.
     #[serde(skip)]
     pub timeout: Duration,
+    /// Times a solve killed from outside is solved again (not in the fingerprint: it
+    /// changes no result).
+    #[serde(skip)]
+    pub killed_retries: u32,
     /// Largest accepted relative energy balance error.
     #[serde(skip)]
     pub energy_tolerance: f64,
@@ -105,6 +110,7 @@ impl Default for OpenFoamSettings {
             nu_m2_s: 1.5e-5,
             return_backflow_c: 25.0,
             timeout: Duration::from_secs(600),
+            killed_retries: 1,
             energy_tolerance: 0.05,
             project_dir: PathBuf::from("/usr/share/openfoam"),
             cache_root: PathBuf::from("openfoam-cases"),
@@ -137,6 +143,12 @@ impl OpenFoamSettings {
     /// Sets the processes (1 = serial).
     pub fn with_np(mut self, np: u32) -> Self {
         self.np = np;
+        self
+    }
+
+    /// Sets how many times a solve killed from outside is solved again (0: never).
+    pub fn with_killed_retries(mut self, retries: u32) -> Self {
+        self.killed_retries = retries;
         self
     }
 
