@@ -330,3 +330,40 @@ fn a_closed_stdout_ends_quietly() {
         o.status
     );
 }
+
+/// `simulate --params` with the report of a calibration that ran another model refuses
+/// to answer with the built-in simulator unasked: it names the model that ran and the
+/// flag that runs it; `--model builtin` asks for the built-in simulator and gets it.
+#[test]
+fn simulate_does_not_answer_for_another_model_unasked() {
+    let dir = tmp("simulate-other-model");
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args(cli_support::QUICK_CALIBRATION)
+        .arg("--out")
+        .arg(dir.join("cal")));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cal/report.json")).unwrap())
+            .unwrap();
+    report["model"]["kind"] = serde_json::json!("openfoam");
+    let edited = dir.join("openfoam-report.json");
+    std::fs::write(&edited, serde_json::to_string(&report).unwrap()).unwrap();
+    let simulate = |extra: &[&str]| {
+        run(on_dataset("simulate", "of-dev-clean")
+            .args(extra)
+            .arg("--params")
+            .arg(&edited)
+            .arg("--out")
+            .arg(dir.join("pred.csv")))
+    };
+    let o = simulate(&[]);
+    assert_input_error(
+        &o,
+        "the calibration ran the openfoam model: --model openfoam runs it, and --model \
+         builtin runs the built-in simulator at its parameters",
+    );
+    assert!(!dir.join("pred.csv").exists());
+    let o = simulate(&["--model", "builtin"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.join("pred.csv").is_file());
+}

@@ -234,7 +234,11 @@ where
     }
     let report = calibrator.run()?;
     let best = report.best.params.values();
-    let penalty_report = penalty.report(&best);
+    // With its weight at 0 the prior took no part in the fit: it binds nothing.
+    let penalty_report = match settings.penalty.weight > 0.0 {
+        true => penalty.report(&best),
+        false => penalty.report(&best).without_prior(),
+    };
     Ok(ModelCalibration {
         report,
         penalty_report,

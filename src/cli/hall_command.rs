@@ -41,6 +41,10 @@ impl HallCommand {
         path: &Path,
     ) -> CliResult<Self> {
         let bad = |what: String| CliError::Input(format!("{}: {what}", path.display()));
+        config
+            .command
+            .check_program()
+            .map_err(|e| bad(e.to_string()))?;
         let effects = EffectRegistry::builtin().build_all(hall)?;
         let layout = ParamLayout::new(hall, &effects)?;
         let want = layout.space().names();

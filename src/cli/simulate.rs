@@ -73,8 +73,10 @@ pub struct SimulateArgs {
     /// hall.json, meshed once into `--of-dir`, one solve per snapshot) or `command` (the
     /// external simulator of `--config model.toml`, one run per snapshot; predicted sensor
     /// readings only).
-    #[arg(long, value_enum, default_value_t = SimulateModel::Builtin)]
-    pub(super) model: SimulateModel,
+    /// Default `builtin`; with `--params` a calibration's report of another model is
+    /// refused unless `--model` says which to run.
+    #[arg(long = "model", value_enum)]
+    pub(super) model_arg: Option<SimulateModel>,
     /// With `--model command`: the `model.toml` describing the external simulator, as for
     /// `kalibre calibrate --model command` (docs/models.md).
     #[arg(long)]
@@ -363,11 +365,18 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
     )
 }
 
+impl SimulateArgs {
+    /// The model to run: `--model`'s, else the built-in simulator.
+    pub(super) fn model(&self) -> SimulateModel {
+        self.model_arg.unwrap_or(SimulateModel::Builtin)
+    }
+}
+
 /// Runs `kalibre simulate`.
 pub fn run(args: SimulateArgs) -> CliResult {
     // Nothing is journaled here, so a stop cannot promise a resume.
     kalibre_core::external::set_stop_message(kalibre_core::external::StopMessage {
-        runs_ended: match args.model {
+        runs_ended: match args.model() {
             SimulateModel::Openfoam => {
                 "kalibre: stopped; the OpenFOAM solves or meshing in progress were ended \
                  with it (simulate keeps no journal: run it again to redo them)\n"
@@ -379,7 +388,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         },
         no_runs: "kalibre: stopped (simulate keeps no journal: run it again to redo its runs)\n",
     });
-    match (args.model, &args.config) {
+    match (args.model(), &args.config) {
         (SimulateModel::Command, None) => {
             return Err(CliError::Input(
                 "--model command needs --config model.toml (see docs/models.md)".into(),
@@ -434,8 +443,8 @@ pub fn run(args: SimulateArgs) -> CliResult {
     }
     let file = args.params.as_deref().map(read_params_file).transpose()?;
     args.openfoam
-        .refuse_unless(args.model == SimulateModel::Openfoam)?;
-    match args.model {
+        .refuse_unless(args.model() == SimulateModel::Openfoam)?;
+    match args.model() {
         SimulateModel::Openfoam => {
             return super::simulate_openfoam::run(&args, &hall, &snaps, file.as_ref())
         }
@@ -453,10 +462,27 @@ pub fn run(args: SimulateArgs) -> CliResult {
     // A calibration's report brings the model it ran: its alpha mode and grid stand
     // unless --grid-m is given.
     if let Some(m) = recorded.filter(|m| m.kind != "builtin") {
+        let path = args
+            .params
+            .as_deref()
+            .expect("a record comes from --params");
+        let run_it = match m.kind.as_str() {
+            "command" => "--model command --config model.toml runs it".to_string(),
+            kind => format!("--model {kind} runs it"),
+        };
+        // Unasked, the built-in simulator would answer for a model it is not.
+        if args.model_arg.is_none() {
+            return Err(CliError::Input(format!(
+                "{}: the calibration ran the {} model: {run_it}, and --model builtin runs the \
+                 built-in simulator at its parameters",
+                path.display(),
+                m.kind
+            )));
+        }
         eprintln!(
-            "note: the calibration ran the {} model; simulate runs the built-in simulator at its parameters{}",
-            m.kind,
-            if m.kind == "openfoam" { " (--model openfoam runs OpenFOAM)" } else { "" }
+            "note: the calibration ran the {} model; simulate runs the built-in simulator at \
+             its parameters, as --model builtin asks ({run_it})",
+            m.kind
         );
     }
     let hall = match recorded {

@@ -230,6 +230,22 @@ pub struct PenaltyReport {
     pub violations: Vec<RiseViolation>,
 }
 
+impl PenaltyReport {
+    /// The report of a prior turned off (weight 0): it binds nothing, whatever rises the
+    /// parameters give, since it took no part in the fit.
+    pub fn without_prior(self) -> Self {
+        PenaltyReport {
+            value: 0.0,
+            binds: false,
+            servers_below: 0,
+            servers_above: 0,
+            weight_fraction_outside: 0.0,
+            violations: Vec::new(),
+            ..self
+        }
+    }
+}
+
 /// The paper's power-weighted ReLU penalty on server temperature rises (module docs).
 #[derive(Debug, Clone)]
 pub struct TemperatureRisePenalty {

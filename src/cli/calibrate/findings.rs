@@ -35,7 +35,7 @@ pub(super) fn openfoam_findings(
         args.openfoam
             .settings(&args.out.join("openfoam"), args.grid_m)?,
     )
-    .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?;
+    .map_err(|e| of_err(e.in_hall_file(&args.hall_path().display().to_string())))?;
     let store = RunStore::open(journal, model.fingerprint())?;
     let names: Vec<String> = report
         .best

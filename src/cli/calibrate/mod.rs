@@ -3,6 +3,7 @@
 
 mod failed_at_bounds;
 mod findings;
+mod generic;
 mod journal_mismatch;
 mod progress;
 mod settings;
@@ -32,6 +33,13 @@ pub(super) use settings::{check_finer_grids, check_grid_factors};
 use settings::{flag_error, settings};
 use summary::{print_summary, warn_unreached, Intakes};
 
+/// `--epochs`' default (the paper's 150).
+const DEFAULT_EPOCHS: usize = 150;
+/// `--rise-weight`'s default (the paper's 1).
+const DEFAULT_RISE_WEIGHT: f64 = 1.0;
+/// `--rise-range`'s default (C).
+const DEFAULT_RISE_RANGE: &str = "5,20";
+
 /// How alpha is calibrated (overrides `calibrate.alpha` in hall.json).
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum AlphaArg {
@@ -58,11 +66,17 @@ pub enum ModelArg {
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
     /// The hall (`hall.json`).
-    #[arg(long)]
-    hall: PathBuf,
+    #[arg(long, required_unless_present = "measurements")]
+    hall: Option<PathBuf>,
     /// Operating conditions and measurements (`snapshots.csv`).
-    #[arg(long)]
-    snapshots: PathBuf,
+    #[arg(long, required_unless_present = "measurements")]
+    snapshots: Option<PathBuf>,
+    /// A model of your own, not a hall: what was measured of it (`measurements.csv`:
+    /// `scenario,output,value` rows, the scenarios and outputs of --config's model.toml).
+    /// With `--model command --config model.toml`; the surrogate is a Gaussian process
+    /// (docs/models.md, "A model of your own").
+    #[arg(long, conflicts_with_all = ["hall", "snapshots"])]
+    measurements: Option<PathBuf>,
     /// Output directory: report.json, runs.jsonl (the run journal), report.html, and
     /// runs-hall.json (the hall the journal's runs were made on). Running again on the
     /// same directory resumes from the journal without repeating a model run.
@@ -123,7 +137,7 @@ pub struct CalibrateArgs {
     /// Adam epochs per surrogate fit (the paper: 150). They train the graph's edges with
     /// --trainable-adjacency; with the default fixed adjacency the fit's least-squares
     /// start already minimises its loss, and Adam keeps it.
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, default_value_t = DEFAULT_EPOCHS)]
     epochs: usize,
     /// Train the surrogate's sensor-to-CRAC and sensor-to-server edges too, by Adam
     /// (--epochs), instead of fixing them from the hall's geometry (docs/experiments.md,
@@ -144,11 +158,11 @@ pub struct CalibrateArgs {
     adam_steps: usize,
     /// Weight of the temperature-rise prior in the search and in judging which run is the
     /// best (the paper: 1; 0 turns it off).
-    #[arg(long = "rise-weight", default_value_t = 1.0)]
+    #[arg(long = "rise-weight", default_value_t = DEFAULT_RISE_WEIGHT)]
     rise_weight: f64,
     /// Plausible server temperature rise range, `LOW,HIGH` in C (the paper: 5,15; real
     /// servers run up to 15-20 C, and a prior below the truth pulls alpha away from it).
-    #[arg(long = "rise-range", default_value = "5,20")]
+    #[arg(long = "rise-range", default_value = DEFAULT_RISE_RANGE)]
     rise_range: String,
     /// Weight the surrogate's fit towards runs near the measurements: a run with `m` times
     /// the best run's MAE weighs exp(-((m-1)/FOCUS)^2/2), FOCUS at least 0.01; 0 turns it
@@ -224,6 +238,23 @@ pub struct CalibrateArgs {
     quiet: bool,
 }
 
+impl CalibrateArgs {
+    /// `--hall`, which clap requires unless `--measurements` is given (the generic path,
+    /// which never asks for it).
+    fn hall_path(&self) -> &Path {
+        self.hall
+            .as_deref()
+            .expect("clap requires --hall without --measurements")
+    }
+
+    /// `--snapshots`, required as `--hall` is.
+    fn snapshots_path(&self) -> &Path {
+        self.snapshots
+            .as_deref()
+            .expect("clap requires --snapshots without --measurements")
+    }
+}
+
 /// Refuses model options that do not belong to the chosen model.
 fn check_model_flags(args: &CalibrateArgs) -> CliResult {
     args.openfoam
@@ -275,13 +306,17 @@ fn calibrate_with_model<'o>(
     let refused = |e: kalibre_dc::Error| match e {
         kalibre_dc::Error::OtherModelJournal { path, runs } => {
             match model_record(args, &hall, settings, String::new()) {
-                Ok(current) => {
-                    journal_mismatch::explain(Path::new(&path), runs, &current, &hall, &args.hall)
-                }
+                Ok(current) => journal_mismatch::explain(
+                    Path::new(&path),
+                    runs,
+                    &current,
+                    &hall,
+                    args.hall_path(),
+                ),
                 Err(e) => e,
             }
         }
-        e => flag_error(e.in_hall_file(&args.hall.display().to_string())),
+        e => flag_error(e.in_hall_file(&args.hall_path().display().to_string())),
     };
     match args.model {
         ModelArg::Builtin => {
@@ -296,7 +331,7 @@ fn calibrate_with_model<'o>(
                 args.openfoam
                     .settings(&args.out.join("openfoam"), args.grid_m)?,
             )
-            .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?;
+            .map_err(|e| of_err(e.in_hall_file(&args.hall_path().display().to_string())))?;
             super::out_dir::note_interrupted_runs(remove_interrupted_runs(
                 &model.settings().cache_root,
             ));
@@ -420,30 +455,38 @@ const OUT_FILES: [&str; 3] = ["runs.jsonl", "report.json", "report.html"];
 
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
+    if let Some(measurements) = &args.measurements {
+        return generic::run(&args, measurements);
+    }
     let settings = settings(&args)?;
     check_model_flags(&args)?;
-    let hall = Hall::load(&args.hall)?;
+    let hall = Hall::load(args.hall_path())?;
     kalibre_dc::effects::EffectRegistry::builtin()
-        .check_hall(&hall, &args.hall.display().to_string())?;
-    let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
-    super::plausible::warn_readings(&args.snapshots, &hall, &snaps);
-    super::plausible::note_missing_readings(&args.snapshots, &hall, &snaps);
-    super::plausible::warn_setpoints(&args.snapshots, &hall, snaps.iter().map(|s| &s.state));
+        .check_hall(&hall, &args.hall_path().display().to_string())?;
+    let snaps = snapshots::load_snapshots(&hall, args.snapshots_path())?;
+    super::plausible::warn_readings(args.snapshots_path(), &hall, &snaps);
+    super::plausible::note_missing_readings(args.snapshots_path(), &hall, &snaps);
+    super::plausible::warn_setpoints(args.snapshots_path(), &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
-    super::plausible::warn_alpha_units(&args.hall, &hall);
-    super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
+    super::plausible::warn_alpha_units(args.hall_path(), &hall);
+    super::plausible::warn_implausible_rises(
+        args.hall_path(),
+        args.snapshots_path(),
+        &hall,
+        states,
+    );
     if args.model == ModelArg::Builtin {
         super::simulate::check_model_cells(
             &hall,
-            &args.hall,
+            args.hall_path(),
             settings.sim.cell_m,
             args.grid_m.is_some(),
         )?;
-        super::plausible::warn_off_grid(&args.hall, &hall, settings.sim.cell_m);
+        super::plausible::warn_off_grid(args.hall_path(), &hall, settings.sim.cell_m);
     }
     if args.model == ModelArg::Openfoam {
         let grid_m = args.grid_m.unwrap_or(OpenFoamSettings::default().grid_m);
-        super::openfoam_args::check_mesh(&hall, &args.hall, grid_m, args.grid_m.is_some())?;
+        super::openfoam_args::check_mesh(&hall, args.hall_path(), grid_m, args.grid_m.is_some())?;
     }
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.
@@ -464,8 +507,8 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     super::same_file::refuse_same_files(
         &outputs,
         &[
-            ("the --hall file", Some(args.hall.as_path())),
-            ("the --snapshots file", Some(args.snapshots.as_path())),
+            ("the --hall file", Some(args.hall_path())),
+            ("the --snapshots file", Some(args.snapshots_path())),
             ("the --config file", args.config.as_deref()),
         ],
     )?;
@@ -490,7 +533,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     }
     note_replaced_report(&args.out, &hall, &snaps);
     let journal = args.out.join("runs.jsonl");
-    super::hall_changes::keep_runs_hall(&args.out, &args.hall, &journal)?;
+    super::hall_changes::keep_runs_hall(&args.out, args.hall_path(), &journal)?;
     set_stop_message(&journal, args.model == ModelArg::Openfoam);
     let progress = Progress::new(
         progress::Plan {
@@ -560,7 +603,8 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     print_summary(
         &report,
         wall_s,
-        &penalty_report,
+        summary::Style::Hall,
+        Some(&penalty_report),
         intakes.as_ref(),
         fluctuation.as_ref().map(|f| f.describe()).as_deref(),
         failed_at_bounds.as_deref(),

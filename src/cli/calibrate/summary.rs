@@ -3,13 +3,27 @@
 
 use kalibre_core::calibrate::Report;
 
-fn fmt_c(v: Option<f64>) -> String {
-    v.filter(|v| v.is_finite())
-        .map_or("-".into(), |v| format!("{v:.3} C"))
+/// What is calibrated: a hall (errors in C, per aisle, a temperature-rise prior) or a
+/// model of your own (errors in its outputs' units, which kalibre does not know).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Style {
+    Hall,
+    Generic,
+}
+
+impl Style {
+    fn error(self, v: Option<f64>) -> String {
+        let unit = match self {
+            Style::Hall => " C",
+            Style::Generic => "",
+        };
+        v.filter(|v| v.is_finite())
+            .map_or("-".into(), |v| format!("{v:.3}{unit}"))
+    }
 }
 
 /// Which parameters the measurements pin down (the report's linearised uncertainty).
-fn print_uncertainty(report: &Report) {
+fn print_uncertainty(report: &Report, style: Style) {
     let u = &report.uncertainty;
     if u.is_empty() {
         return;
@@ -66,7 +80,7 @@ fn print_uncertainty(report: &Report) {
     if let Some(src) = report.uncertainty_slopes {
         println!("  {:<28} {}", "slopes of the spreads", src.describe());
     }
-    if let Some(note) = report.repeated_residual_note() {
+    if let Some(note) = repeated_residual_note(report, style) {
         println!("  {:<28} {note}", "model error");
     }
     if !poor.is_empty() {
@@ -82,6 +96,26 @@ fn print_uncertainty(report: &Report) {
                 String::new()
             }
         );
+    }
+}
+
+/// The report's note on a residual that repeats at the same outputs, in a model of your
+/// own's words: its outputs and scenarios, and no `kalibre diagnose`, which needs a hall.
+fn repeated_residual_note(report: &Report, style: Style) -> Option<String> {
+    match style {
+        Style::Hall => report.repeated_residual_note(),
+        Style::Generic => {
+            let icc = report
+                .residual_icc
+                .filter(|r| *r > kalibre_core::calibrate::REPEATED_RESIDUAL_ICC)?;
+            Some(format!(
+                "{:.0}% of the residual repeats at the same outputs in every scenario: the \
+                 model misses something its parameters cannot absorb, or the fit has not \
+                 finished (more --iterations, or --polish N on the model itself), and the \
+                 values may be off by more than their spreads",
+                100.0 * icc
+            ))
+        }
     }
 }
 
@@ -135,13 +169,22 @@ fn print_numerical_checks(report: &Report) {
 pub(super) fn print_summary(
     report: &Report,
     wall_s: f64,
-    penalty: &kalibre_dc::surrogate::PenaltyReport,
+    style: Style,
+    penalty: Option<&kalibre_dc::surrogate::PenaltyReport>,
     intakes: Option<&Intakes>,
     fluctuation: Option<&str>,
     failed_at_bounds: Option<&str>,
 ) {
+    let fmt_c = |v| style.error(v);
     println!();
     println!("calibration summary");
+    if style == Style::Generic {
+        println!(
+            "  {:<28} mean absolute error over every measured output and scenario, in the \
+             outputs' units",
+            "MAE"
+        );
+    }
     println!(
         "  {:<28} {}",
         "initial MAE",
@@ -167,7 +210,7 @@ pub(super) fn print_summary(
         .iter()
         .find(|h| h.iteration == report.best.iteration)
     {
-        for (group, e) in &rec.per_group {
+        for (group, e) in rec.per_group.iter().filter(|_| style == Style::Hall) {
             println!(
                 "  {:<28} {}",
                 format!("best MAE, {group} aisle"),
@@ -185,7 +228,7 @@ pub(super) fn print_summary(
         "likelihood",
         kalibre_dc::report::likelihood_text(report)
     );
-    print_uncertainty(report);
+    print_uncertainty(report, style);
     if let Some(line) = intakes.and_then(intakes_line) {
         println!("  {:<28} {line}", "server intakes (model)");
     }
@@ -193,7 +236,7 @@ pub(super) fn print_summary(
         println!("  {:<28} {line}", "OpenFOAM probe fluctuation");
     }
     println!("  {:<28} {wall_s:.1} s", "wall time");
-    if !penalty.violations.is_empty() {
+    if let Some(penalty) = penalty.filter(|p| !p.violations.is_empty()) {
         // Which alpha, the rise it gives and the bound: what to check, and the range that
         // would hold it.
         let worst: Vec<String> = penalty

@@ -1,0 +1,258 @@
+//! `measurements.csv`: what was measured of a model of your own (`kalibre calibrate
+//! --model command --config model.toml --measurements FILE`), one row per scenario and
+//! output, with the same CSV rules as `snapshots.csv` (a header, UTF-8, finite decimal
+//! numbers, errors naming the line and column, a near miss of a name suggested).
+//!
+//! ```csv
+//! scenario,output,value
+//! winter,t_in,12.3
+//! winter,t_out,30.1
+//! summer,t_in,25.0
+//! ```
+//!
+//! Scenarios are the `[[scenarios]]` labels of `model.toml`, outputs its `output.names`.
+//! An output may be missing from a scenario (not measured there); a scenario with no row
+//! is not calibrated against (the caller says so).
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use super::hints;
+use super::lexical::{parse_decimal, show, LineCounter};
+use crate::{Error, Result};
+
+const HEADER: [&str; 3] = ["scenario", "output", "value"];
+
+/// A value and the line it was read on.
+type Read = (f64, u64);
+
+/// The measurements of each scenario, in the order the scenarios were given: `None` for
+/// a scenario with no row, else one entry per output (`None`: not measured there).
+pub type ScenarioMeasurements = Vec<Option<Vec<Option<f64>>>>;
+
+/// Reads `measurements.csv` against the scenario labels and output names of a model.
+pub fn load_measurements(
+    path: &Path,
+    scenarios: &[String],
+    outputs: &[String],
+) -> Result<ScenarioMeasurements> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_measurements(&bytes, &path.display().to_string(), scenarios, outputs)
+}
+
+/// [`load_measurements`] of bytes; `file` names the source in errors.
+pub fn parse_measurements(
+    bytes: &[u8],
+    file: &str,
+    scenarios: &[String],
+    outputs: &[String],
+) -> Result<ScenarioMeasurements> {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(bytes);
+    let scenario_index: HashMap<&str, usize> = scenarios
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.as_str(), i))
+        .collect();
+    let output_index: HashMap<&str, usize> = outputs
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.as_str(), i))
+        .collect();
+    // Each value with the line that gave it, for a duplicate's message.
+    let mut values: Vec<Option<Vec<Option<Read>>>> = vec![None; scenarios.len()];
+    let mut record = csv::ByteRecord::new();
+    let mut lines = LineCounter::default();
+    let mut header_seen = false;
+    let mut rows = 0usize;
+    loop {
+        let more = reader.read_byte_record(&mut record).map_err(|e| {
+            let line = lines.line_at(bytes, e.position().map_or(0, csv::Position::byte));
+            Error::format(file, format!("line {line}"), format!("unreadable CSV: {e}"))
+        })?;
+        if !more {
+            break;
+        }
+        let line = lines.line_at(bytes, record.position().map_or(0, csv::Position::byte));
+        let at = |column: Option<usize>| match column {
+            Some(c) => format!("line {line}, column {}", HEADER[c]),
+            None => format!("line {line}"),
+        };
+        let mut fields = Vec::with_capacity(record.len());
+        for (k, f) in record.iter().enumerate() {
+            let text = std::str::from_utf8(f)
+                .map_err(|_| Error::format(file, at(Some(k.min(2))), "expected UTF-8 text"))?;
+            fields.push(text);
+        }
+        if let Some(c) = fields.iter().position(|f| f.contains(['\n', '\r'])) {
+            return Err(Error::format(
+                file,
+                at(Some(c.min(2))),
+                "a quoted value runs on past its line: is a closing `\"` missing?",
+            ));
+        }
+        if !header_seen {
+            if fields != HEADER {
+                return Err(Error::format(
+                    file,
+                    at(None),
+                    format!(
+                        "expected the header `scenario,output,value`, found `{}`{}",
+                        show(&fields.join(",")),
+                        hints::header(&fields)
+                    ),
+                ));
+            }
+            header_seen = true;
+            continue;
+        }
+        if fields.len() != 3 {
+            return Err(Error::format(
+                file,
+                at(None),
+                format!(
+                    "expected 3 fields (scenario,output,value), found {}{}",
+                    fields.len(),
+                    hints::field_count(&fields)
+                ),
+            ));
+        }
+        let (label, output, text) = (fields[0], fields[1], fields[2]);
+        let Some(&s) = scenario_index.get(label) else {
+            return Err(Error::format(
+                file,
+                at(Some(0)),
+                format!(
+                    "unknown scenario `{}`; expected a [[scenarios]] label of the model's \
+                     configuration ({}){}",
+                    show(label),
+                    kalibre_core::some_names(scenarios),
+                    hints::nearest_id(label, scenarios.iter().map(String::as_str))
+                ),
+            ));
+        };
+        let Some(&k) = output_index.get(output) else {
+            return Err(Error::format(
+                file,
+                at(Some(1)),
+                format!(
+                    "unknown output `{}`; expected one of the model's output.names ({}){}",
+                    show(output),
+                    kalibre_core::some_names(outputs),
+                    hints::nearest_id(output, outputs.iter().map(String::as_str))
+                ),
+            ));
+        };
+        let v = parse_decimal(text).ok_or_else(|| {
+            Error::format(
+                file,
+                at(Some(2)),
+                format!(
+                    "expected a finite decimal number for output `{}` of scenario `{}`, found \
+                     `{}`{}",
+                    show(output),
+                    show(label),
+                    show(text),
+                    hints::value(text, |t| parse_decimal(t).is_some())
+                ),
+            )
+        })?;
+        let slot = &mut values[s].get_or_insert_with(|| vec![None; outputs.len()])[k];
+        if let Some((_, first)) = *slot {
+            return Err(Error::format(
+                file,
+                at(Some(1)),
+                format!(
+                    "output `{}` of scenario `{}` is given twice (first on line {first})",
+                    show(output),
+                    show(label)
+                ),
+            ));
+        }
+        *slot = Some((v, line));
+        rows += 1;
+    }
+    if !header_seen {
+        return Err(Error::format(
+            file,
+            "line 1",
+            "empty file; expected the header `scenario,output,value` and at least one row",
+        ));
+    }
+    if rows == 0 {
+        return Err(Error::format(
+            file,
+            "line 2",
+            "no data rows after the header; expected at least one measurement",
+        ));
+    }
+    Ok(values
+        .into_iter()
+        .map(|s| s.map(|row| row.into_iter().map(|v| v.map(|(x, _)| x)).collect()))
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(list: &[&str]) -> Vec<String> {
+        list.iter().map(|s| s.to_string()).collect()
+    }
+
+    fn parse(text: &str) -> Result<ScenarioMeasurements> {
+        parse_measurements(
+            text.as_bytes(),
+            "m.csv",
+            &names(&["winter", "summer", "spring"]),
+            &names(&["t_in", "t_out"]),
+        )
+    }
+
+    #[test]
+    fn rows_land_by_scenario_and_output() {
+        let m = parse("scenario,output,value\r\nsummer,t_out,30.5\nwinter,t_in,5\n").unwrap();
+        assert_eq!(m[0], Some(vec![Some(5.0), None]));
+        assert_eq!(m[1], Some(vec![None, Some(30.5)]));
+        assert_eq!(m[2], None);
+    }
+
+    #[test]
+    fn bad_rows_are_named_by_line_and_column() {
+        let cases = [
+            ("scenario,sensor,value\n", "line 1: expected the header"),
+            ("scenario,output,value\n", "line 2: no data rows"),
+            (
+                "scenario,output,value\nwintr,t_in,1\n",
+                "line 2, column scenario: unknown scenario `wintr`",
+            ),
+            (
+                "scenario,output,value\nwintr,t_in,1\n",
+                "did you mean `winter`?",
+            ),
+            (
+                "scenario,output,value\nwinter,t_ot,1\n",
+                "line 2, column output: unknown output `t_ot`",
+            ),
+            (
+                "scenario,output,value\nwinter,t_in,NaN\n",
+                "line 2, column value: expected a finite decimal number",
+            ),
+            (
+                "scenario,output,value\nwinter,t_in,1\nwinter,t_in,2\n",
+                "line 3, column output: output `t_in` of scenario `winter` is given twice \
+                 (first on line 2)",
+            ),
+            (
+                "scenario,output,value\nwinter,t_in,1,5\n",
+                "line 2: expected 3 fields",
+            ),
+        ];
+        for (text, needle) in cases {
+            let e = parse(text).unwrap_err().to_string();
+            assert!(e.contains("m.csv") && e.contains(needle), "{needle}: {e}");
+        }
+    }
+}

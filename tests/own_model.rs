@@ -1,0 +1,250 @@
+//! A model of your own, not a hall: `kalibre calibrate --model command --config
+//! model.toml --measurements measurements.csv` calibrates an external program against
+//! measurements of its `[[scenarios]]`, with the Gaussian-process surrogate, journals its
+//! runs and resumes from them; hall-only flags and bad measurements are refused by name.
+//! The model here is a small Python heat exchanger (effectiveness-NTU) with a known truth.
+
+mod cli_support;
+
+use std::path::{Path, PathBuf};
+
+use cli_support::{assert_input_error, kalibre, on_dataset, run, stderr, tmp, QUICK_CALIBRATION};
+
+/// A counter-flow heat exchanger: `UA = UA0 * m_hot^n`, and a heat loss `loss` (W/K) of
+/// the hot stream to 20 C ambient before it enters.
+const MODEL_PY: &str = r#"import math, sys
+v = {}
+for line in open(sys.argv[1]):
+    if "=" in line:
+        k, x = line.split("=")
+        v[k.strip()] = float(x)
+cp = 4180.0
+ch, cc = v["m_hot"] * cp, v["m_cold"] * cp
+th = v["t_hot_in"] - v["loss"] * (v["t_hot_in"] - 20.0) / ch
+ua = v["UA0"] * v["m_hot"] ** v["n"]
+cmin, cmax = min(ch, cc), max(ch, cc)
+cr, ntu = cmin / cmax, ua / cmin
+eps = (1 - math.exp(-ntu * (1 - cr))) / (1 - cr * math.exp(-ntu * (1 - cr)))
+q = eps * cmin * (th - v["t_cold_in"])
+with open(sys.argv[2], "w") as f:
+    f.write("t_hot_out,t_cold_out,q_kw\n")
+    f.write("%.9f,%.9f,%.9f\n" % (th - q / ch, v["t_cold_in"] + q / cc, q / 1000))
+"#;
+
+const TEMPLATE: &str = "UA0 = {{UA0}}\nn = {{n}}\nloss = {{loss}}\nm_hot = {{m_hot}}\n\
+m_cold = {{m_cold}}\nt_hot_in = {{t_hot_in}}\nt_cold_in = {{t_cold_in}}\n";
+
+const MODEL_TOML: &str = r#"description = "counter-flow heat exchanger"
+program = "python3"
+args = ["{{config_dir}}/hx.py", "params.in", "out.csv"]
+runs_root = "runs"
+timeout_s = 30
+fingerprint_files = ["hx.py"]
+
+[[templates]]
+source = "params.in.tmpl"
+destination = "params.in"
+
+[output]
+file = "out.csv"
+parser = "csv"
+names = ["t_hot_out", "t_cold_out", "q_kw"]
+
+[[params]]
+name = "UA0"
+lower = 1000.0
+upper = 20000.0
+initial = 3000.0
+scale = "log"
+
+[[params]]
+name = "n"
+lower = 0.2
+upper = 1.0
+initial = 0.5
+
+[[params]]
+name = "loss"
+lower = 0.0
+upper = 500.0
+initial = 100.0
+
+[[scenarios]]
+label = "low"
+variables = { m_hot = 0.5, m_cold = 0.6, t_hot_in = 70.0, t_cold_in = 12.0 }
+
+[[scenarios]]
+label = "mid"
+variables = { m_hot = 1.0, m_cold = 0.8, t_hot_in = 80.0, t_cold_in = 15.0 }
+
+[[scenarios]]
+label = "high"
+variables = { m_hot = 2.0, m_cold = 1.5, t_hot_in = 85.0, t_cold_in = 15.0 }
+
+[[scenarios]]
+label = "unbalanced"
+variables = { m_hot = 1.5, m_cold = 0.4, t_hot_in = 60.0, t_cold_in = 10.0 }
+"#;
+
+/// The truth the measurements are made at.
+const TRUTH: [(&str, f64); 3] = [("UA0", 5000.0), ("n", 0.6), ("loss", 150.0)];
+
+/// The model's directory (`hx.py`, its template and `model.toml`) and noise-free
+/// measurements of every scenario at the truth, made by running the model itself.
+fn setup(name: &str) -> (PathBuf, PathBuf, PathBuf) {
+    let dir = tmp(name);
+    std::fs::write(dir.join("hx.py"), MODEL_PY).unwrap();
+    std::fs::write(dir.join("params.in.tmpl"), TEMPLATE).unwrap();
+    let config = dir.join("model.toml");
+    std::fs::write(&config, MODEL_TOML).unwrap();
+    let scenarios = [
+        ("low", [0.5, 0.6, 70.0, 12.0]),
+        ("mid", [1.0, 0.8, 80.0, 15.0]),
+        ("high", [2.0, 1.5, 85.0, 15.0]),
+        ("unbalanced", [1.5, 0.4, 60.0, 10.0]),
+    ];
+    let mut rows = String::from("scenario,output,value\n");
+    for (label, [mh, mc, th, tc]) in scenarios {
+        let input = dir.join(format!("truth-{label}.in"));
+        let mut text: String = TRUTH.iter().map(|(k, v)| format!("{k} = {v}\n")).collect();
+        text += &format!("m_hot = {mh}\nm_cold = {mc}\nt_hot_in = {th}\nt_cold_in = {tc}\n");
+        std::fs::write(&input, text).unwrap();
+        let output = dir.join(format!("truth-{label}.csv"));
+        let o = std::process::Command::new("python3")
+            .arg(dir.join("hx.py"))
+            .arg(&input)
+            .arg(&output)
+            .output()
+            .expect("python3 runs");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let out = std::fs::read_to_string(&output).unwrap();
+        let mut lines = out.lines();
+        let names: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let values: Vec<&str> = lines.next().unwrap().split(',').collect();
+        for (n, v) in names.iter().zip(values) {
+            rows += &format!("{label},{n},{v}\n");
+        }
+    }
+    let measurements = dir.join("measurements.csv");
+    std::fs::write(&measurements, rows).unwrap();
+    (dir, config, measurements)
+}
+
+fn calibrate(config: &Path, measurements: &Path, out: &Path) -> std::process::Command {
+    let mut c = kalibre();
+    c.args(["calibrate", "--model", "command", "--config"])
+        .arg(config)
+        .arg("--measurements")
+        .arg(measurements)
+        .arg("--out")
+        .arg(out)
+        .args(["--seed", "1", "--threads", "2", "--quiet"]);
+    c
+}
+
+fn report(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+/// The Gaussian-process loop alone (no polish on the model) finds the heat exchanger's
+/// parameters from its four scenarios, and a second run replays every run from the
+/// journal.
+#[test]
+fn a_model_of_your_own_is_calibrated_and_resumed() {
+    let (dir, config, measurements) = setup("own-model");
+    let out = dir.join("out");
+    let o = run(&mut calibrate(&config, &measurements, &out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("in the outputs' units"), "{said}");
+    assert!(!said.contains(" C\n") && !said.contains("aisle"), "{said}");
+    let r = report(&out);
+    let initial = r["initial"]["mae_c"].as_f64().unwrap();
+    let best = r["best"]["mae_c"].as_f64().unwrap();
+    assert!(best < 0.01 * initial, "MAE {initial} -> {best}");
+    for (name, truth) in TRUTH {
+        let got = r["best"]["params"][name].as_f64().unwrap();
+        assert!(
+            (got - truth).abs() <= 0.03 * truth,
+            "{name}: {got} against the truth {truth}"
+        );
+    }
+    assert_eq!(r["model"]["kind"], "command");
+    let total = r["runs"]["total"].as_u64().unwrap();
+    // Resumed: every run is the journal's.
+    let o = run(&mut calibrate(&config, &measurements, &out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let again = report(&out);
+    assert_eq!(again["runs"]["new"], 0, "{}", again["runs"]);
+    assert_eq!(again["runs"]["cached"].as_u64().unwrap(), total);
+    assert_eq!(again["best"]["params"], r["best"]["params"]);
+    // An edited model script is another model: its runs are not replayed.
+    let script = dir.join("hx.py");
+    let text = std::fs::read_to_string(&script).unwrap();
+    std::fs::write(&script, text + "# edited\n").unwrap();
+    let o = run(&mut calibrate(&config, &measurements, &out));
+    assert_input_error(&o, &format!("holds {total} runs of another model"));
+}
+
+/// What does not fit a model of your own is refused before any run, by name.
+#[test]
+fn a_model_of_your_own_refuses_what_does_not_fit() {
+    let (dir, config, measurements) = setup("own-model-refusals");
+    let out = dir.join("out");
+    let o = run(kalibre()
+        .args(["calibrate", "--config"])
+        .arg(&config)
+        .arg("--measurements")
+        .arg(&measurements)
+        .arg("--out")
+        .arg(&out));
+    assert_input_error(
+        &o,
+        "--measurements calibrates a model of your own: add --model command",
+    );
+    let o = run(calibrate(&config, &measurements, &out).args(["--rise-weight", "0"]));
+    assert_input_error(&o, "--rise-weight is about a hall");
+    let o = run(calibrate(&config, &measurements, &out).args(["--alpha", "per-server"]));
+    assert_input_error(&o, "--alpha is about a hall");
+    let typo = dir.join("typo.csv");
+    let text = std::fs::read_to_string(&measurements).unwrap();
+    std::fs::write(&typo, text.replace("\nmid,", "\nmdi,")).unwrap();
+    let o = run(&mut calibrate(&config, &typo, &out));
+    assert_input_error(&o, "line 5, column scenario: unknown scenario `mdi`");
+    assert!(stderr(&o).contains("did you mean `mid`?"), "{}", stderr(&o));
+    // A program that is not there is named before any run, not once per run.
+    let missing = dir.join("missing.toml");
+    std::fs::write(&missing, MODEL_TOML.replace("\"python3\"", "\"python33\"")).unwrap();
+    let o = run(&mut calibrate(&missing, &measurements, &out));
+    assert_input_error(&o, "`python33` is not an executable in PATH");
+    // A hall and a model of your own at once: clap says they conflict.
+    let o = run(calibrate(&config, &measurements, &out)
+        .arg("--hall")
+        .arg(dir.join("hall.json")));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    // Nothing ran.
+    assert!(!out.join("runs.jsonl").exists());
+}
+
+/// The temperature-rise prior turned off (`--rise-weight 0`) binds nothing, so no
+/// prior-data conflict is reported; with its weight on, the same narrow range binds.
+#[test]
+fn a_prior_turned_off_binds_nothing() {
+    let dir = tmp("prior-off");
+    let summary = |weight: &str, out: &str| {
+        let o = run(on_dataset("calibrate", "of-dev-clean")
+            .args(QUICK_CALIBRATION)
+            .args(["--rise-range", "5,6", "--rise-weight", weight, "--out"])
+            .arg(dir.join(out)));
+        assert!(o.status.success(), "{}", stderr(&o));
+        let html = std::fs::read_to_string(dir.join(out).join("report.html")).unwrap();
+        (String::from_utf8_lossy(&o.stdout).into_owned(), html)
+    };
+    let (on, on_html) = summary("1", "on");
+    assert!(on.contains("the temperature-rise prior binds"), "{on}");
+    assert!(on_html.contains("The temperature-rise prior binds"));
+    let (off, off_html) = summary("0", "off");
+    assert!(!off.contains("prior binds"), "{off}");
+    assert!(!off_html.contains("prior binds"));
+}
