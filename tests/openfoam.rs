@@ -394,6 +394,11 @@ fn a_solve_killed_from_outside_is_solved_again() {
     assert_eq!(timings.killed_attempts.len(), 1, "{timings:?}");
     let kept = &timings.killed_attempts[0];
     assert!(kept.join("logs/solve").is_dir(), "{}", kept.display());
+    // Journaled with the run's outputs.
+    assert_eq!(
+        out.extras.get(kalibre_dc::openfoam::KILLED_ATTEMPTS_KEY),
+        Some(&vec![1.0])
+    );
     // The same solve, not killed, reads the same: the retry is a full solve.
     let (again, _) = model.evaluate_timed(state, &params).unwrap();
     assert_eq!(again.values, out.values);

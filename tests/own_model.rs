@@ -18,6 +18,8 @@ for line in open(sys.argv[1]):
     if "=" in line:
         k, x = line.split("=")
         v[k.strip()] = float(x)
+if v["m_hot"] <= 0:
+    sys.exit("m_hot must be positive")
 cp = 4180.0
 ch, cc = v["m_hot"] * cp, v["m_cold"] * cp
 th = v["t_hot_in"] - v["loss"] * (v["t_hot_in"] - 20.0) / ch
@@ -206,6 +208,11 @@ fn a_model_of_your_own_refuses_what_does_not_fit() {
     assert_input_error(&o, "--rise-weight is about a hall");
     let o = run(calibrate(&config, &measurements, &out).args(["--alpha", "per-server"]));
     assert_input_error(&o, "--alpha is about a hall");
+    // Given at its hall default, a hall flag is still a hall's.
+    let o = run(calibrate(&config, &measurements, &out).args(["--rise-range", "5,20"]));
+    assert_input_error(&o, "--rise-range is about a hall");
+    let o = run(calibrate(&config, &measurements, &out).args(["--focus", "1"]));
+    assert_input_error(&o, "--focus weighs a hall surrogate's runs");
     let typo = dir.join("typo.csv");
     let text = std::fs::read_to_string(&measurements).unwrap();
     std::fs::write(&typo, text.replace("\nmid,", "\nmdi,")).unwrap();
@@ -225,6 +232,52 @@ fn a_model_of_your_own_refuses_what_does_not_fit() {
     assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
     // Nothing ran.
     assert!(!out.join("runs.jsonl").exists());
+}
+
+/// A scenario the model fails at every design point gives the surrogate nothing to learn
+/// there: the calibration ends saying so, with the model's own reason, not blaming the
+/// surrogate; every run is journaled as it ran.
+#[test]
+fn a_scenario_that_always_fails_is_named_with_its_reason() {
+    let (dir, _, measurements) = setup("own-model-dead-scenario");
+    let config = dir.join("broken.toml");
+    let broken = "\n[[scenarios]]\nlabel = \"broken\"\nvariables = { m_hot = 0.0, m_cold = 0.6, \
+                  t_hot_in = 70.0, t_cold_in = 12.0 }\n";
+    std::fs::write(&config, MODEL_TOML.to_string() + broken).unwrap();
+    let with_broken = dir.join("with-broken.csv");
+    let text = std::fs::read_to_string(&measurements).unwrap();
+    std::fs::write(&with_broken, text + "broken,t_hot_out,30\n").unwrap();
+    let out = dir.join("out");
+    let o = run(&mut calibrate(&config, &with_broken, &out));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("snapshot `broken` failed at every design point")
+            && err.contains("m_hot must be positive"),
+        "{err}"
+    );
+    assert!(!err.contains("surrogate, fitted"), "{err}");
+    let journal = std::fs::read_to_string(out.join("runs.jsonl")).unwrap();
+    assert!(
+        journal.lines().any(|l| l.contains("\"failed\"")),
+        "{journal}"
+    );
+}
+
+/// A model of your own's report is not a hall's: `simulate --params` says so by name
+/// instead of failing to parse its record.
+#[test]
+fn a_model_of_your_own_report_is_not_taken_for_a_halls() {
+    let (dir, config, measurements) = setup("own-model-report");
+    let out = dir.join("out");
+    let o = run(calibrate(&config, &measurements, &out).args(["--iterations", "1"]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(on_dataset("simulate", "of-dev-clean")
+        .arg("--params")
+        .arg(out.join("report.json"))
+        .arg("--out")
+        .arg(dir.join("pred.csv")));
+    assert_input_error(&o, "the calibration of a model of your own");
 }
 
 /// The temperature-rise prior turned off (`--rise-weight 0`) binds nothing, so no

@@ -60,6 +60,18 @@ impl CalibratedModel {
         let bad = |pointer: &str, e: &dyn std::fmt::Display| {
             CliError::Input(format!("{}: {pointer}: {e}", report_path.display()))
         };
+        // A model of your own's record (`kalibre calibrate --measurements`) names its
+        // model.toml and no hall: its parameters are not a hall's to simulate or diagnose.
+        if let Some(config) = m.get("config").and_then(|c| c.as_str()) {
+            return Err(bad(
+                "/model",
+                &format!(
+                    "the calibration of a model of your own ({config}, with --measurements), \
+                     not of a hall: simulate and diagnose take a hall's calibration; run that \
+                     model at its parameters with the program of {config}"
+                ),
+            ));
+        }
         let record: Self = serde_json::from_value(m.clone())
             .map_err(|e| bad("/model", &format!("not a kalibre model record: {e}")))?;
         // Checked here so that an edited record is blamed, not a `--grid-m` never given.

@@ -11,6 +11,7 @@ mod inlets;
 mod likelihood;
 mod openfoam_args;
 mod out_dir;
+mod params_file;
 mod plausible;
 mod same_file;
 mod simulate;

@@ -4,8 +4,6 @@
 use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
-use kalibre_core::calibrate::REPORT_SCHEMA;
-use kalibre_core::ParamSpace;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::sim::{coldest_under_read, setpoint_headroom_c, SimConfig};
 use kalibre_dc::snapshots::{self, number, AIR_C_RANGE};
@@ -14,6 +12,7 @@ use kalibre_dc::HallModel;
 use super::calibrated_model::{grid_or_recorded, CalibratedModel};
 use super::inlets::{inlet_line, under_read_note};
 use super::openfoam_args::OpenFoamArgs;
+pub(super) use super::params_file::{load_params, read_params_file};
 use super::what_if::WhatIfArgs;
 use super::{io_err, say, CliError, CliResult};
 
@@ -147,88 +146,6 @@ pub(super) fn inlet_limit_c(args: &SimulateArgs) -> CliResult<f64> {
             AIR_C_RANGE.end()
         ))),
     }
-}
-
-/// Reads a `--params` file: a JSON object, or a calibration's `report.json` with the model
-/// it recorded (if any).
-pub(super) fn read_params_file(
-    path: &Path,
-) -> CliResult<(serde_json::Value, Option<CalibratedModel>)> {
-    let file = path.display().to_string();
-    let text =
-        std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
-    let json: serde_json::Value = serde_json::from_str(&text)
-        .map_err(|e| CliError::Input(format!("{file}: not valid JSON: {e}")))?;
-    // A parameter named twice would keep its last value without a word.
-    if let Some((field, message)) = kalibre_dc::json_keys::duplicate_key_problem(&text) {
-        return Err(CliError::Input(format!("{file}: {field}: {message}")));
-    }
-    // Only a report (one with `best`) records a model; a plain object is all parameters.
-    let recorded = match json.get("best") {
-        Some(_) => {
-            match json.get("schema") {
-                Some(serde_json::Value::String(s)) if s == REPORT_SCHEMA => {}
-                None => {}
-                Some(other) => {
-                    return Err(CliError::Input(format!(
-                        "{file}: /schema: expected \"{REPORT_SCHEMA}\", found {other}"
-                    )))
-                }
-            }
-            CalibratedModel::of_report(path, json.get("model"))?
-        }
-        None => None,
-    };
-    Ok((json, recorded))
-}
-
-/// Parameter values by name from a JSON object or a report's `best.params` (`json`, read
-/// from `path`).
-pub(super) fn load_params(
-    path: &Path,
-    json: &serde_json::Value,
-    space: &ParamSpace,
-) -> CliResult<Vec<f64>> {
-    let file = path.display().to_string();
-    let (map, pointer) = match json.get("best").and_then(|b| b.get("params")) {
-        Some(p) => (p, "/best/params"),
-        None => (json, ""),
-    };
-    let map = map.as_object().ok_or_else(|| {
-        CliError::Input(format!(
-            "{file}: {}: expected an object of parameter name -> value",
-            if pointer.is_empty() { "/" } else { pointer }
-        ))
-    })?;
-    let mut values = space.initial();
-    for (name, v) in map {
-        let i = space.index_of(name).ok_or_else(|| {
-            CliError::Input(format!(
-                "{file}: {pointer}/{name}: unknown parameter (known: {})",
-                super::some_names(&space.names())
-            ))
-        })?;
-        let x = v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
-            CliError::Input(format!(
-                "{file}: {pointer}/{name}: expected a finite number"
-            ))
-        })?;
-        values[i] = x;
-    }
-    // A report names every parameter it calibrated: one missing is an edit, not a value
-    // to take from the hall (a hand-written object may leave some at their initial).
-    if !pointer.is_empty() {
-        if let Some(missing) = space.names().iter().find(|n| !map.contains_key(*n)) {
-            return Err(CliError::Input(format!(
-                "{file}: {pointer}: no value of `{missing}` (a calibration report has every \
-                 calibrated parameter; is it of another hall?)"
-            )));
-        }
-    }
-    space
-        .check_physical(&values)
-        .map_err(|e| CliError::Input(format!("{file}: {e}")))?;
-    Ok(values)
 }
 
 /// Refuses snapshots whose `--vtk` files would be one file (labels that differ only in

@@ -322,7 +322,16 @@ where
                 None => design_units[initial_idx].clone(),
             };
             let start_params = space.from_unit(&start)?;
-            contract::check_surrogate(&self.surrogate, obs, &start_params, iteration)?;
+            // A snapshot whose design runs all failed gave the surrogate nothing to learn
+            // there; a surrogate that then predicts nothing for it is not the fault.
+            contract::check_surrogate(&self.surrogate, obs, &start_params, iteration).map_err(
+                |e| match &dead_snapshots {
+                    Some(dead) => Error::NoSuccessfulRun(format!(
+                        "{dead}, so the surrogate has nothing to learn there"
+                    )),
+                    None => e,
+                },
+            )?;
             if let Some(reg) = self.regularizer {
                 contract::check_regularizer(reg, &start_params)?;
             }

@@ -212,45 +212,6 @@ impl<S> ExternalCommand<S> {
         self.dirs.remove_interrupted()
     }
 
-    /// Checks, before any run, that the program can be found: an absolute path must be an
-    /// executable file, a bare name one in `PATH` (unless the model's `env` sets its own
-    /// `PATH`, which only a run resolves). Every run would otherwise fail the same way,
-    /// one after another (a setup failure is never retried, but each run meets it).
-    /// A relative path with a directory is left to the run.
-    pub fn check_program(&self) -> Result<(), ExternalError> {
-        let program = Path::new(&self.program);
-        let missing = |reason: String| ExternalError::Setting {
-            key: "program".into(),
-            reason,
-        };
-        if program.is_absolute() {
-            return match std::fs::metadata(program) {
-                Ok(m) if m.is_file() && is_executable(&m) => Ok(()),
-                Ok(m) if m.is_file() => Err(missing(format!(
-                    "`{}` is not executable (chmod +x it, or name its interpreter as the \
-                     program)",
-                    program.display()
-                ))),
-                Ok(_) => Err(missing(format!("`{}` is not a file", program.display()))),
-                Err(e) => Err(missing(format!("`{}`: {e}", program.display()))),
-            };
-        }
-        if program.components().count() > 1 || self.env.iter().any(|(k, _)| k == "PATH") {
-            return Ok(());
-        }
-        let path = std::env::var_os("PATH").unwrap_or_default();
-        let found = std::env::split_paths(&path).any(|dir| {
-            std::fs::metadata(dir.join(program)).is_ok_and(|m| m.is_file() && is_executable(&m))
-        });
-        match found {
-            true => Ok(()),
-            false => Err(missing(format!(
-                "`{}` is not an executable in PATH (a typo, or not installed?)",
-                program.display()
-            ))),
-        }
-    }
-
     /// The wall-clock limit of one attempt.
     pub fn timeout(&self) -> Duration {
         self.timeout
@@ -591,19 +552,5 @@ impl<S: TemplateScenario + Sync> Model for ExternalCommand<S> {
     /// The scenario's variables: a scenario edited under its label is run again.
     fn scenario_key(&self, scenario: &S) -> String {
         crate::scenario_digest(&format!("{:?}", scenario.variables()))
-    }
-}
-
-/// Whether a file's permissions let someone run it.
-fn is_executable(meta: &std::fs::Metadata) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        meta.permissions().mode() & 0o111 != 0
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = meta;
-        true
     }
 }

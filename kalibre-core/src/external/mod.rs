@@ -19,6 +19,7 @@ mod config;
 mod groups;
 mod parse;
 mod process;
+mod program;
 mod run;
 mod rundir;
 mod template;

@@ -30,7 +30,9 @@ pub use case::{remove_interrupted_runs, CaseDir, MeshSummary};
 pub use geometry::{
     CaseExtras, CaseGeometry, CellRange, FacePatch, GapPatches, PanelPlane, RackGap, ServerPatches,
 };
-pub use model::{OpenFoamModel, RunTimings, SERVER_INTAKE_KEY, SUPPORTED_EFFECTS};
+pub use model::{
+    OpenFoamModel, RunTimings, KILLED_ATTEMPTS_KEY, SERVER_INTAKE_KEY, SUPPORTED_EFFECTS,
+};
 pub use params::{RunInputs, M3_S_PER_CFM};
 pub use results::{log_verdict, probe_window, ProbeWindow};
 pub use servers::server_air_from_intakes;

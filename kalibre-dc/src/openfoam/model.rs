@@ -36,6 +36,10 @@ const GENERATOR: &str = "kalibre-dc-openfoam/3";
 /// as the sensors.
 pub const SERVER_INTAKE_KEY: &str = "server_intake_c";
 
+/// The name under which a run's [`Outputs::extras`] count the attempts at it that were
+/// killed from outside kalibre before it ran through (absent when none was).
+pub const KILLED_ATTEMPTS_KEY: &str = "killed_attempts";
+
 /// What a meshed case samples beyond the sensors, in its directory name only: a case
 /// meshed before its `controlDict` sampled the server intakes lacks them, while the
 /// sensors' readings (and so the fingerprint) are unchanged.
@@ -349,7 +353,7 @@ impl OpenFoamModel {
             u128::from_str_radix(&self.fingerprint[GENERATOR.len() + 1..], 16).unwrap_or(0),
             |h, p| h.rotate_left(13) ^ u128::from(p.to_bits()),
         );
-        let attempts = self.settings.killed_retries + 1;
+        let attempts = self.settings.killed_retries.saturating_add(1);
         let mut killed = Vec::new();
         loop {
             let dir = self
@@ -376,7 +380,13 @@ impl OpenFoamModel {
                 }
             }
             return match result {
-                Ok((outputs, mut timings)) => {
+                Ok((mut outputs, mut timings)) => {
+                    // Journaled with the run: an outside kill it outlived is not lost.
+                    if !killed.is_empty() {
+                        outputs
+                            .extras
+                            .insert(KILLED_ATTEMPTS_KEY.into(), vec![killed.len() as f64]);
+                    }
                     timings.killed_attempts = killed;
                     Ok((outputs, timings))
                 }

@@ -16,7 +16,7 @@ use super::OpenFoamError;
 /// | `average_from` | 0.5 | probes are averaged over iterations in (`average_from` x `iterations`, `iterations`] |
 /// | `probe_every` | 5 | probe sampling interval (iterations) |
 /// | `np` | 1 | processes: 1 runs serially, more runs `decomposePar` then `mpirun -np N` |
-/// | `timeout` | 600 s | wall-clock limit per run (all steps), after which the process group is killed |
+/// | `timeout` | 600 s | wall-clock limit per attempt at a run (all its steps), after which the process group is killed |
 /// | `killed_retries` | 1 | times a solve killed from outside (SIGKILL or SIGTERM not sent by kalibre: the out-of-memory killer, an administrator) is solved again, in a fresh directory; a timeout, a divergence or a crash is not |
 /// | `energy_tolerance` | 0.05 | largest accepted relative error of the energy balance |
 /// | `project_dir` | `/usr/share/openfoam` | `WM_PROJECT_DIR` given to every OpenFOAM program |

@@ -34,20 +34,24 @@ fn refuse_hall_flags(args: &CalibrateArgs) -> CliResult {
         ("--paper-surrogate", args.paper_surrogate),
         ("--local-recirculation", args.local_recirculation),
         ("--influence-edges", args.influence_edges),
-        ("--epochs", args.epochs != super::DEFAULT_EPOCHS),
-        (
-            "--rise-weight",
-            args.rise_weight != super::DEFAULT_RISE_WEIGHT,
-        ),
-        ("--rise-range", args.rise_range != super::DEFAULT_RISE_RANGE),
+        ("--epochs", args.epochs.is_some()),
+        ("--rise-weight", args.rise_weight.is_some()),
+        ("--rise-range", args.rise_range.is_some()),
     ];
-    match given.iter().find(|(_, g)| *g) {
-        Some((flag, _)) => Err(CliError::Input(format!(
+    if let Some((flag, _)) = given.iter().find(|(_, g)| *g) {
+        return Err(CliError::Input(format!(
             "{flag} is about a hall (its simulator, surrogate or servers); --measurements \
              calibrates a model of your own"
-        ))),
-        None => Ok(()),
+        )));
     }
+    if args.focus.is_some() {
+        return Err(CliError::Input(
+            "--focus weighs a hall surrogate's runs; the Gaussian process of --measurements \
+             weighs every run alike"
+                .into(),
+        ));
+    }
+    Ok(())
 }
 
 /// Runs the generic calibration.
@@ -103,6 +107,8 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     let space = &cfg.space;
     let mut core = settings.core.clone();
     core.regularizer_weight = 0.0;
+    // The Gaussian process weighs every run alike (its docs say why): no focus weights.
+    core.focus = None;
     // The noisy copies of the design runs help a graph learn its form; to a Gaussian
     // process they are flat plateaus around each run that cost its fit (cubic in the
     // samples) and teach it nothing.
@@ -116,6 +122,7 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
             iterations: args.iterations,
             polish_iterations: core.polish_iterations,
             polish_max_params: settings.polish_max_params,
+            style: Style::Generic,
         },
         args.quiet,
     );
@@ -141,7 +148,7 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     })?;
     let wall_s = started.elapsed().as_secs_f64();
     super::warn_skipped_journal_lines(&journal, &report);
-    super::summary::warn_unreached(&journal, &report);
+    super::summary::warn_unreached(&journal, &report, Style::Generic);
     let failed_at_bounds = (report.runs.failed > 0)
         .then(|| {
             super::failed_at_bounds::clause(

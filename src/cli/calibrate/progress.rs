@@ -7,6 +7,7 @@ use std::io::{IsTerminal, Write};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+use super::summary::Style;
 use indicatif::{FormattedDuration, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kalibre_core::{Event, Observe};
 
@@ -31,6 +32,8 @@ pub(super) struct Plan {
     pub(super) polish_iterations: usize,
     /// Most parameters for which the polish runs.
     pub(super) polish_max_params: usize,
+    /// What is calibrated, for the unit of the best MAE.
+    pub(super) style: Style,
 }
 
 impl Plan {
@@ -137,7 +140,7 @@ impl Progress {
              elapsed\n",
             self.runs.position(),
             self.runs.length().unwrap_or(0),
-            best.map_or("-".into(), |b| format!("{b:.3} C")),
+            self.plan.style.error(best),
             // As the bar's `elapsed_precise`.
             FormattedDuration(self.runs.elapsed())
         );
@@ -173,7 +176,7 @@ impl Observe for Progress {
                 };
                 self.runs.set_message(format!(
                     "{phase} | best MAE {}",
-                    best.map_or("-".into(), |b| format!("{b:.3} C"))
+                    self.plan.style.error(*best)
                 ));
                 drop(phase);
                 drop(best);
@@ -222,6 +225,7 @@ mod tests {
         iterations: 0,
         polish_iterations: 0,
         polish_max_params: 64,
+        style: Style::Hall,
     };
 
     fn record(iteration: usize, training_samples: usize, mae_c: f64) -> IterationRecord {
@@ -291,6 +295,7 @@ mod tests {
             iterations: 10,
             polish_iterations: 8,
             polish_max_params: 64,
+            style: Style::Hall,
         };
         let out = Shared::default();
         let p = Progress::with(plan, false, Some((Box::new(out.clone()), Duration::ZERO)));

@@ -47,18 +47,18 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         )));
     }
     let (lo, hi) = args
-        .rise_range
+        .rise_range()
         .split_once(',')
         .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)))
         .ok_or_else(|| {
             CliError::Input(format!(
                 "--rise-range: expected LOW,HIGH in C (e.g. 5,15), got `{}`",
-                args.rise_range
+                args.rise_range()
             ))
         })?;
     let penalty = PenaltySettings::default()
         .with_range_c(lo, hi)
-        .with_weight(args.rise_weight)
+        .with_weight(args.rise_weight())
         .check()
         .map_err(|e| CliError::Input(format!("--rise-range/--rise-weight: {e}")))?;
     let de = DifferentialEvolution::builder()
@@ -88,7 +88,7 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         max_wall_s: args.max_wall_s,
         max_parallel_runs: args.parallel_runs,
         // 0 turns an option off; anything else is checked below with the loop's own rules.
-        focus: (args.focus != 0.0).then_some(args.focus),
+        focus: (args.focus() != 0.0).then_some(args.focus()),
         explore_on_repeat: (args.explore != 0.0).then_some(args.explore),
         trust_region: (args.trust_region != 0.0).then_some(args.trust_region),
         output_correction: args.output_correction,
@@ -130,14 +130,14 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         replay_failed: args.replay_failed,
         ..HallCalibrationSettings::default()
     };
-    if !(1..=MAX_EPOCHS).contains(&args.epochs) {
+    if !(1..=MAX_EPOCHS).contains(&args.epochs()) {
         return Err(CliError::Input(format!(
             "--epochs: must be in 1..={MAX_EPOCHS}, got {}",
-            args.epochs
+            args.epochs()
         )));
     }
     s.surrogate =
-        (s.surrogate.with_epochs(args.epochs)).with_trainable_adjacency(args.trainable_adjacency);
+        (s.surrogate.with_epochs(args.epochs())).with_trainable_adjacency(args.trainable_adjacency);
     let grid_check = args
         .grid_check
         .clone()

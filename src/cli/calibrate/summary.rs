@@ -12,7 +12,8 @@ pub(super) enum Style {
 }
 
 impl Style {
-    fn error(self, v: Option<f64>) -> String {
+    /// An error as the summary shows it, with its unit where it has one.
+    pub(super) fn error(self, v: Option<f64>) -> String {
         let unit = match self {
             Style::Hall => " C",
             Style::Generic => "",
@@ -322,7 +323,7 @@ fn intakes_line(i: &Intakes) -> Option<String> {
 /// A journal holding a better point than this calibration reached (it stopped sooner than
 /// the calibration that wrote the journal): said on stderr, since `report.json` now holds
 /// the worse answer.
-pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report) {
+pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report, style: Style) {
     let Some(u) = &report.unreached else {
         return;
     };
@@ -331,15 +332,15 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report) {
     };
     eprintln!(
         "kalibre: warning: {}: {} journaled run(s) of this model were not used by this \
-         calibration (it stopped: {}); among them, line {} has MAE {:.3} C, better than \
-         its best, {:.3} C. They are kept: the settings that made them (with a larger \
+         calibration (it stopped: {}); among them, line {} has MAE {}, better than \
+         its best, {}. They are kept: the settings that made them (with a larger \
          budget, --max-runs, --iterations or --max-wall-s, where it stopped early) replay \
          them without running the model again",
         journal.display(),
         u.runs,
         report.stop_reason,
         best.line,
-        best.mae_c,
-        report.best.mae_c
+        style.error(Some(best.mae_c)),
+        style.error(Some(report.best.mae_c))
     );
 }
