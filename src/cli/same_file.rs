@@ -51,3 +51,21 @@ pub(crate) fn refuse_same_files(
     }
     Ok(())
 }
+
+/// Refuses `out`'s files `out_files` (named `--out's NAME`) where one of them is one of
+/// `inputs`: an input kept in `--out` under an output's name would be replaced by it.
+pub(crate) fn refuse_inputs_in_out(
+    out: &Path,
+    out_files: &[&str],
+    inputs: &[(&str, Option<&Path>)],
+) -> CliResult {
+    let paths: Vec<(String, PathBuf)> = out_files
+        .iter()
+        .map(|name| (format!("--out's {name}"), out.join(name)))
+        .collect();
+    let outputs: Vec<(&str, Option<&Path>)> = paths
+        .iter()
+        .map(|(what, path)| (what.as_str(), Some(path.as_path())))
+        .collect();
+    refuse_same_files(&outputs, inputs)
+}

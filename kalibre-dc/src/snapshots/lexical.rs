@@ -30,6 +30,23 @@ impl LineCounter {
     }
 }
 
+/// Reads the next record of `reader` (over `bytes`, from `file`) into `record` and returns
+/// its physical line, or `None` at the end; an unreadable record is an error naming its
+/// line.
+pub(super) fn next_record(
+    reader: &mut csv::Reader<&[u8]>,
+    record: &mut csv::ByteRecord,
+    lines: &mut LineCounter,
+    bytes: &[u8],
+    file: &str,
+) -> crate::Result<Option<u64>> {
+    let more = reader.read_byte_record(record).map_err(|e| {
+        let line = lines.line_at(bytes, e.position().map_or(0, csv::Position::byte));
+        crate::Error::format(file, format!("line {line}"), format!("unreadable CSV: {e}"))
+    })?;
+    Ok(more.then(|| lines.line_at(bytes, record.position().map_or(0, csv::Position::byte))))
+}
+
 /// A finite decimal number: optional sign, digits with an optional fraction, an optional
 /// exponent. Rejects `nan`, `inf`, hex, empty text and values that overflow to infinity.
 pub(crate) fn parse_decimal(text: &str) -> Option<f64> {

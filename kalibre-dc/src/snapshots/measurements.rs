@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::hints;
-use super::lexical::{parse_decimal, show, LineCounter};
+use super::lexical::{next_record, parse_decimal, show, LineCounter};
 use crate::{Error, Result};
 
 const HEADER: [&str; 3] = ["scenario", "output", "value"];
@@ -67,15 +67,7 @@ pub fn parse_measurements(
     let mut lines = LineCounter::default();
     let mut header_seen = false;
     let mut rows = 0usize;
-    loop {
-        let more = reader.read_byte_record(&mut record).map_err(|e| {
-            let line = lines.line_at(bytes, e.position().map_or(0, csv::Position::byte));
-            Error::format(file, format!("line {line}"), format!("unreadable CSV: {e}"))
-        })?;
-        if !more {
-            break;
-        }
-        let line = lines.line_at(bytes, record.position().map_or(0, csv::Position::byte));
+    while let Some(line) = next_record(&mut reader, &mut record, &mut lines, bytes, file)? {
         let at = |column: Option<usize>| match column {
             Some(c) => format!("line {line}, column {}", HEADER[c]),
             None => format!("line {line}"),

@@ -7,7 +7,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::lexical::{parse_decimal, show, LineCounter};
+use super::lexical::{next_record, parse_decimal, show, LineCounter};
 use super::{air_c_problem, hints, number, HallSnapshot, OperatingState, MAX_POWER_W};
 use crate::hall::Hall;
 use crate::{Error, Result};
@@ -51,16 +51,7 @@ fn parse(hall: &Hall, bytes: &[u8], file: &str, need_readings: bool) -> Result<V
     let mut order: Vec<Acc> = Vec::new();
     let mut by_label: HashMap<String, usize> = HashMap::new();
     let mut lines = LineCounter::default();
-    loop {
-        let more = reader.read_byte_record(&mut record).map_err(|e| {
-            let line = lines.line_at(bytes, e.position().map_or(0, csv::Position::byte));
-            Error::format(file, format!("line {line}"), format!("unreadable CSV: {e}"))
-        })?;
-        if !more {
-            break;
-        }
-        let byte = record.position().map_or(0, csv::Position::byte);
-        let line = lines.line_at(bytes, byte);
+    while let Some(line) = next_record(&mut reader, &mut record, &mut lines, bytes, file)? {
         let row = Row::new(file, line, &record)?;
         // Only a quote lets a field hold a line end: one opened and never closed reads the
         // lines after it into this field, which no count of fields would explain.

@@ -85,16 +85,9 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     let observations = observations(&cfg, measurements)?;
     let _lock = super::super::out_dir::lock(&args.out, "calibrate")?;
     super::super::out_dir::check_files(&args.out, &OUT_FILES)?;
-    let outputs: Vec<(String, std::path::PathBuf)> = OUT_FILES
-        .iter()
-        .map(|name| (format!("--out's {name}"), args.out.join(name)))
-        .collect();
-    let outputs: Vec<(&str, Option<&Path>)> = outputs
-        .iter()
-        .map(|(what, path)| (what.as_str(), Some(path.as_path())))
-        .collect();
-    super::super::same_file::refuse_same_files(
-        &outputs,
+    super::super::same_file::refuse_inputs_in_out(
+        &args.out,
+        &OUT_FILES,
         &[
             ("the --config file", Some(config)),
             ("the --measurements file", Some(measurements)),

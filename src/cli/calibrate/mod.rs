@@ -10,7 +10,7 @@ mod progress;
 mod settings;
 mod summary;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use kalibre_core::calibrate::Report;
@@ -273,17 +273,9 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         &args.out,
         &[&OUT_FILES[..], &[super::hall_changes::RUNS_HALL]].concat(),
     )?;
-    // An input kept in --out under an output's name would be replaced by it.
-    let outputs: Vec<(String, PathBuf)> = OUT_FILES
-        .iter()
-        .map(|name| (format!("--out's {name}"), args.out.join(name)))
-        .collect();
-    let outputs: Vec<(&str, Option<&Path>)> = outputs
-        .iter()
-        .map(|(what, path)| (what.as_str(), Some(path.as_path())))
-        .collect();
-    super::same_file::refuse_same_files(
-        &outputs,
+    super::same_file::refuse_inputs_in_out(
+        &args.out,
+        &OUT_FILES,
         &[
             ("the --hall file", Some(args.hall_path())),
             ("the --snapshots file", Some(args.snapshots_path())),
