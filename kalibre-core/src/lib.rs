@@ -111,6 +111,7 @@ mod error;
 pub mod external;
 mod fsio;
 pub mod gp;
+mod linalg;
 mod model;
 mod number;
 pub mod observe;

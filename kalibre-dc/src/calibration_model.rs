@@ -185,11 +185,7 @@ where
     let penalty = TemperatureRisePenalty::new(hall, layout, &scenarios, settings.penalty)?;
     let store = match journal {
         Some(path) => {
-            let store = if settings.replay_failed {
-                RunStore::open_replaying_failures(path, model.fingerprint())?
-            } else {
-                RunStore::open(path, model.fingerprint())?
-            };
+            let store = RunStore::open_with(path, model.fingerprint(), settings.replay_failed)?;
             let load = store.load_report();
             if load.other_fingerprint > 0 {
                 return Err(Error::OtherModelJournal {

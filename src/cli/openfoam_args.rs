@@ -54,12 +54,12 @@ impl OpenFoamArgs {
             ("--of-timeout-s", self.of_timeout_s.is_some()),
             ("--of-killed-retries", self.of_killed_retries.is_some()),
         ];
-        match given.iter().find(|(_, g)| *g) {
-            Some((flag, _)) if !openfoam => Err(CliError::Input(format!(
-                "{flag} is an OpenFOAM option: add --model openfoam"
-            ))),
-            _ => Ok(()),
+        if openfoam {
+            return Ok(());
         }
+        super::simulate::refuse_given(&given, |flag| {
+            format!("{flag} is an OpenFOAM option: add --model openfoam")
+        })
     }
 
     /// The adapter's settings; meshed cases and runs go in `root`.

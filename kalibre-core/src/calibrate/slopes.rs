@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::robust::measured_rows;
 use super::state::{BestPoint, State};
-use crate::search::{cholesky, cholesky_solve};
+use crate::linalg::{cholesky, cholesky_solve};
 use crate::{Observations, ParamSpace, Surrogate};
 
 /// The polish's Jacobian stands for the best run's when taken this close to it (max norm,

@@ -43,7 +43,7 @@ use serde::{Deserialize, Serialize};
 use super::numerical::{output_change, Numerics};
 use super::robust::{measured_rows, residuals, RobustFit};
 use super::state::BestPoint;
-use crate::search::{cholesky, cholesky_solve};
+use crate::linalg::{cholesky, cholesky_solve};
 use crate::{Observations, ParamSpace};
 
 /// A parameter counts as identified when one standard deviation is at most this fraction

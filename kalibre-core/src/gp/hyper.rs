@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use super::linalg::{cholesky_jittered, forward_solve, log_det};
+use crate::linalg::{cholesky_jittered, forward_solve, log_det};
 
 /// Length scales (unit box) on the grid `2^(LOG2_MIN + i / 2)`, `i = 0..GRID`: from 1/32
 /// (shorter would only model the gaps between a few runs) to 32 (an input the outputs

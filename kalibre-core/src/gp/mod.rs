@@ -6,7 +6,6 @@
 //! extrapolates along their linear trend, and gives exact gradients.
 
 mod hyper;
-mod linalg;
 mod prepare;
 
 use std::time::Instant;

@@ -3,8 +3,8 @@
 //! hyperparameters are chosen.
 
 use super::hyper;
-use super::linalg::{backward_solve, cholesky_jittered, forward_solve};
 use super::{ScenarioModel, AFFINE_RMS, TREND_RIDGE_REL};
+use crate::linalg::{backward_solve, cholesky_jittered, forward_solve};
 use crate::{Error, ParamSpace, Result, Sample};
 
 /// One scenario's data while fitting.

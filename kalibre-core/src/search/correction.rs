@@ -9,6 +9,8 @@
 //! the fit is the minimum-norm one: directions no run has explored keep the surrogate's
 //! own slopes.
 
+use crate::linalg::{cholesky, cholesky_solve};
+
 /// Length scale (root-mean-square distance per coordinate, unit box) of the weights of
 /// the runs in the linear fit: far runs say little about slopes at the best point.
 pub const CORRECTION_LENGTH_UNIT: f64 = 0.05;
@@ -197,39 +199,6 @@ impl OutputCorrection {
             }
         }
     }
-}
-
-/// Lower Cholesky factor of the symmetric positive definite `k x k` matrix `a` (row
-/// major); none when it is not positive definite.
-pub(crate) fn cholesky(a: &[f64], k: usize) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; k * k];
-    for i in 0..k {
-        for j in 0..=i {
-            let s: f64 = a[i * k + j] - (0..j).map(|m| l[i * k + m] * l[j * k + m]).sum::<f64>();
-            if i == j {
-                if !s.is_finite() || s <= 0.0 {
-                    return None;
-                }
-                l[i * k + i] = s.sqrt();
-            } else {
-                l[i * k + j] = s / l[j * k + j];
-            }
-        }
-    }
-    Some(l)
-}
-
-/// Solves `L L^T x = b` with the factor from [`cholesky`].
-pub(crate) fn cholesky_solve(l: &[f64], k: usize, b: &[f64]) -> Vec<f64> {
-    let mut y = vec![0.0; k];
-    for i in 0..k {
-        y[i] = (b[i] - (0..i).map(|m| l[i * k + m] * y[m]).sum::<f64>()) / l[i * k + i];
-    }
-    let mut x = vec![0.0; k];
-    for i in (0..k).rev() {
-        x[i] = (y[i] - (i + 1..k).map(|m| l[m * k + i] * x[m]).sum::<f64>()) / l[i * k + i];
-    }
-    x
 }
 
 #[cfg(test)]

@@ -15,7 +15,6 @@ mod problem;
 mod spg;
 
 pub use adam::{Adam, AdamBuilder, AdamSolver, MAX_ADAM_STEPS};
-pub(crate) use correction::{cholesky, cholesky_solve};
 pub use correction::{OutputCorrection, CORRECTION_LENGTH_UNIT, CORRECTION_RIDGE_REL};
 pub use de::{
     DeSolver, DifferentialEvolution, DifferentialEvolutionBuilder, PopulationEval,

@@ -217,6 +217,16 @@ impl RunStore {
         Self::open_impl(path.as_ref(), fingerprint.into(), false)
     }
 
+    /// [`Self::open`], or [`Self::open_replaying_failures`] when `replay_failures` (as a
+    /// calibration's `--replay-failed` chooses).
+    pub fn open_with(
+        path: impl AsRef<Path>,
+        fingerprint: impl Into<String>,
+        replay_failures: bool,
+    ) -> Result<Self> {
+        Self::open_impl(path.as_ref(), fingerprint.into(), replay_failures)
+    }
+
     /// [`Self::open`], but a run journaled only as failed is replayed as that failure
     /// rather than run again ([`LoadReport::failed_replayed`] counts them): for failures
     /// that recur at the same point (a solver that diverges at a corner of the box),

@@ -13,6 +13,7 @@ use kalibre_core::{
     Calibrator, GaussianProcess, Model, Observations, Observe, OutputInfo, RunStore, Snapshot,
 };
 
+use super::super::simulate::refuse_given;
 use super::super::{io_err, with_threads, CliError, CliResult};
 use super::progress::{Plan, Progress};
 use super::summary::{print_summary, Style};
@@ -38,12 +39,12 @@ fn refuse_hall_flags(args: &CalibrateArgs) -> CliResult {
         ("--rise-weight", args.rise_weight.is_some()),
         ("--rise-range", args.rise_range.is_some()),
     ];
-    if let Some((flag, _)) = given.iter().find(|(_, g)| *g) {
-        return Err(CliError::Input(format!(
+    refuse_given(&given, |flag| {
+        format!(
             "{flag} is about a hall (its simulator, surrogate or servers); --measurements \
              calibrates a model of your own"
-        )));
-    }
+        )
+    })?;
     if args.focus.is_some() {
         return Err(CliError::Input(
             "--focus weighs a hall surrogate's runs; the Gaussian process of --measurements \
@@ -242,11 +243,8 @@ fn open_journal(
     replay_failed: bool,
 ) -> CliResult<RunStore> {
     let fingerprint = cfg.command.fingerprint();
-    let store = match replay_failed {
-        true => RunStore::open_replaying_failures(journal, fingerprint),
-        false => RunStore::open(journal, fingerprint),
-    }
-    .map_err(|e| CliError::Input(e.to_string()))?;
+    let store = RunStore::open_with(journal, fingerprint, replay_failed)
+        .map_err(|e| CliError::Input(e.to_string()))?;
     let other = store.load_report().other_fingerprint;
     if other > 0 {
         return Err(CliError::Input(format!(

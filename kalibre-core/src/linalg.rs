@@ -1,6 +1,7 @@
-//! The little dense linear algebra the Gaussian process needs: a Cholesky factor that
-//! raises its jitter instead of failing, and triangular solves with many right-hand
-//! sides. Row-major `Vec<f64>`, sequential loops: the same bits at any thread count.
+//! The crate's little dense Cholesky algebra: a factor (plain, or with a jitter raised
+//! until it works, as the Gaussian process needs), one-right-hand-side solves for the
+//! loop's small systems, and triangular solves with many right-hand sides. Row-major
+//! `Vec<f64>`, sequential loops: the same bits at any thread count.
 
 /// Jitter added to the diagonal, in turn, until the factorisation succeeds. The kernel's
 /// diagonal is 1 plus the nugget, so these are relative to the signal variance.
@@ -9,7 +10,7 @@ const JITTERS: [f64; 7] = [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2, 1.0];
 /// Lower Cholesky factor `l` (row-major `n x n`, upper part zero) of `a + jitter I`, with
 /// the smallest jitter of [`JITTERS`] that works; `None` when even the largest fails
 /// (a non-finite matrix).
-pub(super) fn cholesky_jittered(a: &[f64], n: usize) -> Option<(Vec<f64>, f64)> {
+pub(crate) fn cholesky_jittered(a: &[f64], n: usize) -> Option<(Vec<f64>, f64)> {
     let mut l = vec![0.0; n * n];
     for &jitter in &JITTERS {
         if cholesky_into(a, n, jitter, &mut l) {
@@ -17,6 +18,26 @@ pub(super) fn cholesky_jittered(a: &[f64], n: usize) -> Option<(Vec<f64>, f64)> 
         }
     }
     None
+}
+
+/// Lower Cholesky factor of the symmetric positive definite `k x k` matrix `a` (row
+/// major); none when it is not positive definite.
+pub(crate) fn cholesky(a: &[f64], k: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; k * k];
+    cholesky_into(a, k, 0.0, &mut l).then_some(l)
+}
+
+/// Solves `L L^T x = b` with the factor from [`cholesky`].
+pub(crate) fn cholesky_solve(l: &[f64], k: usize, b: &[f64]) -> Vec<f64> {
+    let mut y = vec![0.0; k];
+    for i in 0..k {
+        y[i] = (b[i] - (0..i).map(|m| l[i * k + m] * y[m]).sum::<f64>()) / l[i * k + i];
+    }
+    let mut x = vec![0.0; k];
+    for i in (0..k).rev() {
+        x[i] = (y[i] - (i + 1..k).map(|m| l[m * k + i] * x[m]).sum::<f64>()) / l[i * k + i];
+    }
+    x
 }
 
 /// Factors `a + jitter I` into `l`; false when a pivot is not positive and finite.
@@ -42,13 +63,13 @@ fn cholesky_into(a: &[f64], n: usize, jitter: f64, l: &mut [f64]) -> bool {
 }
 
 /// `2 sum ln l_ii`: the log-determinant of the factored matrix.
-pub(super) fn log_det(l: &[f64], n: usize) -> f64 {
+pub(crate) fn log_det(l: &[f64], n: usize) -> f64 {
     2.0 * (0..n).map(|i| l[i * n + i].ln()).sum::<f64>()
 }
 
 /// Solves `l y = b` in place for `m` right-hand sides (`b` row-major `n x m`: one row per
 /// equation, so each update runs along a contiguous row).
-pub(super) fn forward_solve(l: &[f64], n: usize, b: &mut [f64], m: usize) {
+pub(crate) fn forward_solve(l: &[f64], n: usize, b: &mut [f64], m: usize) {
     for i in 0..n {
         let (done, rest) = b.split_at_mut(i * m);
         let row = &mut rest[..m];
@@ -66,7 +87,7 @@ pub(super) fn forward_solve(l: &[f64], n: usize, b: &mut [f64], m: usize) {
 }
 
 /// Solves `l^T x = y` in place for `m` right-hand sides (row-major `n x m`).
-pub(super) fn backward_solve(l: &[f64], n: usize, y: &mut [f64], m: usize) {
+pub(crate) fn backward_solve(l: &[f64], n: usize, y: &mut [f64], m: usize) {
     for i in (0..n).rev() {
         let (head, done) = y.split_at_mut((i + 1) * m);
         let row = &mut head[i * m..];
