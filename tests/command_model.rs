@@ -309,18 +309,23 @@ fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
     assert_eq!(failed, 3, "the upper bounds at each of 3 snapshots: {runs}");
     assert!(
         stdout.contains(&format!(
-            "note: 3 of {} model runs failed (their reasons are in runs.jsonl)",
+            "note: 3 of {} model runs failed (each one's reason is in runs.jsonl)",
             runs["total"]
         )),
         "{stdout}"
     );
     // Each failed at the upper bounds: the note says which bound, and to narrow it.
+    // The most common reason is quoted, so that it is seen without reading the journal.
+    assert!(
+        stdout.contains("; all 3 failed runs in the journal: model run failed: "),
+        "{stdout}"
+    );
     assert!(
         stdout.contains(
             "; all 3 failed runs in the journal sit at a bound, 3 of them at alpha/web = 3 \
              (upper), alpha/db = 3 (upper), alpha/gpu = 3 (upper); if the model cannot run \
-             there, narrow that bound in hall.json"
-        ),
+             there, narrow that bound in "
+        ) && stdout.contains("hall.json, as a resume runs failed points again"),
         "{stdout}"
     );
     assert_eq!(failures(), 3);

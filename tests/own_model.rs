@@ -264,6 +264,86 @@ fn a_scenario_that_always_fails_is_named_with_its_reason() {
     );
 }
 
+/// Each parameter's relative error against the truth in a report.
+fn relative_errors(r: &serde_json::Value) -> Vec<f64> {
+    let params = r["best"]["params"].as_object().expect("named parameters");
+    TRUTH
+        .iter()
+        .map(|(name, truth)| (params[*name].as_f64().unwrap() - truth).abs() / truth)
+        .collect()
+}
+
+/// Measurements of different precision (the temperatures to 0.01 K, the heat flow to
+/// 5 kW, and off by that much): with their `sd` column the loop weighs each residual by
+/// it (weighted least squares) and finds the parameters closer than the same values
+/// unweighted, whose misfit the heat flow's error pulls. The journal keeps the model's
+/// outputs as they ran, so the weighted calibration repeats no run of the unweighted one.
+#[test]
+fn measurements_are_weighed_by_their_sd() {
+    let (dir, config, measurements) = setup("own-model-sd");
+    let text = std::fs::read_to_string(&measurements).unwrap();
+    let (mut plain, mut weighted) = (String::new(), String::new());
+    let mut sign = 1.0;
+    for (i, line) in text.lines().enumerate() {
+        if i == 0 {
+            plain += "scenario,output,value\n";
+            weighted += "scenario,output,value,sd\n";
+            continue;
+        }
+        let f: Vec<&str> = line.split(',').collect();
+        let (value, sd) = if f[1] == "q_kw" {
+            sign = -sign;
+            (f[2].parse::<f64>().unwrap() + 5.0 * sign, 5.0)
+        } else {
+            (f[2].parse::<f64>().unwrap(), 0.01)
+        };
+        plain += &format!("{},{},{value}\n", f[0], f[1]);
+        weighted += &format!("{},{},{value},{sd}\n", f[0], f[1]);
+    }
+    let (plain_csv, weighted_csv) = (dir.join("plain.csv"), dir.join("weighted.csv"));
+    std::fs::write(&plain_csv, plain).unwrap();
+    std::fs::write(&weighted_csv, weighted).unwrap();
+    let out = dir.join("out");
+    let o = run(&mut calibrate(&config, &plain_csv, &out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let unweighted = relative_errors(&report(&out));
+    let o = run(&mut calibrate(&config, &weighted_csv, &out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("divided by its measurement's sd"), "{said}");
+    assert!(
+        said.contains("each output in its own units") && said.contains("q_kw"),
+        "{said}"
+    );
+    let r = report(&out);
+    assert_eq!(r["model"]["errors_in"], "sd");
+    // The residual rows are values in the outputs' units, as the file gave them.
+    let given = std::fs::read_to_string(&weighted_csv).unwrap();
+    for row in r["residuals"].as_array().unwrap() {
+        let line = format!(
+            "{},{},{}",
+            row["snapshot"].as_str().unwrap(),
+            row["sensor"].as_str().unwrap(),
+            row["measured_c"]
+        );
+        assert!(
+            given.lines().any(|l| l.starts_with(&line)),
+            "{line} in {given}"
+        );
+    }
+    // The design points are the same, so at least the design is replayed.
+    assert!(r["runs"]["cached"].as_u64().unwrap() >= 16, "{}", r["runs"]);
+    let weighted = relative_errors(&r);
+    let worst = |e: &[f64]| e.iter().cloned().fold(0.0, f64::max);
+    assert!(
+        worst(&weighted) < 0.5 * worst(&unweighted),
+        "relative parameter errors, weighted {weighted:?}, unweighted {unweighted:?}"
+    );
+    // Weighed right, the temperatures are fitted within a few of their sds.
+    let best = r["best"]["mae_c"].as_f64().unwrap();
+    assert!(best < 5.0, "MAE {best} sd");
+}
+
 /// A model of your own's report is not a hall's: `simulate --params` says so by name
 /// instead of failing to parse its record.
 #[test]

@@ -29,6 +29,9 @@ pub struct Snapshot<S> {
 pub struct Observations<S> {
     outputs: Vec<OutputInfo>,
     snapshots: Vec<Snapshot<S>>,
+    /// Each measurement's scale (its standard uncertainty), per snapshot and output;
+    /// `None`: every residual counts in the outputs' own units.
+    scales: Option<Vec<Vec<f64>>>,
 }
 
 impl<S> Observations<S> {
@@ -86,7 +89,88 @@ impl<S> Observations<S> {
                 )));
             }
         }
-        Ok(Observations { outputs, snapshots })
+        Ok(Observations {
+            outputs,
+            snapshots,
+            scales: None,
+        })
+    }
+
+    /// The observations with each measurement's scale: `scales[snapshot][output]`, in the
+    /// output's units (its standard uncertainty, say). The loop then weighs each residual
+    /// by its scale (weighted least squares): it sees the model's outputs and the
+    /// measurements divided by them, so its errors are in scale units, and outputs of
+    /// different units (a pressure in Pa beside a temperature in C) count alike. The
+    /// journal keeps the model's outputs as they ran, so a change of scales repeats no
+    /// run. Every scale must be finite and positive, where measured or not.
+    ///
+    /// ```
+    /// use kalibre_core::{Observations, OutputInfo, Snapshot};
+    /// let outputs = vec![
+    ///     OutputInfo { name: "t_out_c".into(), group: String::new() },
+    ///     OutputInfo { name: "dp_pa".into(), group: String::new() },
+    /// ];
+    /// let snap = Snapshot { label: "winter".into(), scenario: (), measured: vec![Some(30.1), Some(1250.0)] };
+    /// let obs = Observations::new(outputs, vec![snap])?.with_scales(vec![vec![0.5, 200.0]])?;
+    /// assert_eq!(obs.normalised().snapshots()[0].measured, vec![Some(60.2), Some(6.25)]);
+    /// # Ok::<(), kalibre_core::Error>(())
+    /// ```
+    pub fn with_scales(mut self, scales: Vec<Vec<f64>>) -> Result<Self> {
+        if scales.len() != self.snapshots.len() {
+            return Err(Error::Mismatch(format!(
+                "{} rows of scales for {} snapshots",
+                scales.len(),
+                self.snapshots.len()
+            )));
+        }
+        for (snap, row) in self.snapshots.iter().zip(&scales) {
+            if row.len() != self.outputs.len() {
+                return Err(Error::Mismatch(format!(
+                    "snapshot `{}` has {} scales for {} outputs",
+                    snap.label,
+                    row.len(),
+                    self.outputs.len()
+                )));
+            }
+            if let Some((k, v)) = row
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !(v.is_finite() && **v > 0.0))
+            {
+                return Err(Error::Mismatch(format!(
+                    "snapshot `{}`, output `{}`: scale {v} is not a finite positive number",
+                    snap.label, self.outputs[k].name
+                )));
+            }
+        }
+        self.scales = Some(scales);
+        Ok(self)
+    }
+
+    /// Each measurement's scale, `[snapshot][output]`, if given ([`Self::with_scales`]).
+    pub fn scales(&self) -> Option<&[Vec<f64>]> {
+        self.scales.as_deref()
+    }
+
+    /// The observations as the loop sees them: each measurement divided by its scale
+    /// (and no scales left), or a copy where there are none.
+    pub fn normalised(&self) -> Self
+    where
+        S: Clone,
+    {
+        let mut snapshots = self.snapshots.clone();
+        if let Some(scales) = &self.scales {
+            for (snap, row) in snapshots.iter_mut().zip(scales) {
+                for (m, scale) in snap.measured.iter_mut().zip(row) {
+                    *m = m.map(|v| v / scale);
+                }
+            }
+        }
+        Observations {
+            outputs: self.outputs.clone(),
+            snapshots,
+            scales: None,
+        }
     }
 
     /// Output descriptions.
@@ -138,5 +222,36 @@ mod tests {
         let e = Observations::new(vec![output("a"), output("")], snap()).unwrap_err();
         assert!(e.to_string().contains("output 1 has an empty name"), "{e}");
         Observations::new(vec![output("a"), output("b")], snap()).expect("distinct names");
+    }
+
+    #[test]
+    fn scales_must_fit_the_measurements_and_be_positive() {
+        let obs = || {
+            Observations::new(
+                vec![output("a"), output("b")],
+                vec![Snapshot {
+                    label: "t0".into(),
+                    scenario: (),
+                    measured: vec![Some(20.0), None],
+                }],
+            )
+            .unwrap()
+        };
+        let e = obs().with_scales(vec![]).unwrap_err();
+        assert!(
+            e.to_string().contains("0 rows of scales for 1 snapshots"),
+            "{e}"
+        );
+        let e = obs().with_scales(vec![vec![1.0]]).unwrap_err();
+        assert!(e.to_string().contains("1 scales for 2 outputs"), "{e}");
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let e = obs().with_scales(vec![vec![1.0, bad]]).unwrap_err();
+            assert!(e.to_string().contains("output `b`: scale"), "{bad}: {e}");
+        }
+        let scaled = obs().with_scales(vec![vec![4.0, 2.0]]).unwrap();
+        assert_eq!(scaled.scales(), Some(&[vec![4.0, 2.0]][..]));
+        let n = scaled.normalised();
+        assert_eq!(n.snapshots()[0].measured, vec![Some(5.0), None]);
+        assert!(n.scales().is_none());
     }
 }

@@ -102,15 +102,26 @@ fn config_errors_name_the_key() {
         assert!(text.contains(from), "the example lacks `{from}`");
         assert_eq!(key_of(text.replace(from, to)), key, "{from} -> {to}");
     }
-    // A placeholder no scenario provides names its template.
+    // A placeholder no scenario provides names its template, and the first scenario
+    // that lacks it (others may set it).
     std::fs::write(dir.join("params.in.tmpl"), "k = {{k}}\nx = {{ambient}}\n").unwrap();
     match CommandModelConfig::load(&file).unwrap_err() {
         ExternalError::Template {
-            file, placeholder, ..
+            file: template,
+            placeholder,
+            reason,
+            ..
         } => {
             assert!(
-                file.ends_with("params.in.tmpl") && placeholder == "ambient",
-                "{file} {placeholder}"
+                template.ends_with("params.in.tmpl") && placeholder == "ambient",
+                "{template} {placeholder}"
+            );
+            assert!(
+                reason.ends_with(&format!(
+                    "in scenario `winter` (scenarios[0].variables of {})",
+                    file.display()
+                )),
+                "{reason}"
             );
         }
         e => panic!("{e}"),

@@ -68,6 +68,19 @@ fn polish_reaches_the_least_squares_optimum_the_loop_stopped_short_of() {
         .filter_map(|h| h.best_mae_c)
         .collect();
     assert!(best.windows(2).all(|w| w[1] <= w[0]), "{best:?}");
+    // The summary's "found in": a polish record, or a point the polish ran between its
+    // records (a finite-difference probe, numbered but with no record of its own).
+    let said = |iteration: usize| {
+        let mut r = polished.clone();
+        r.best.iteration = iteration;
+        r.best_found_in()
+    };
+    let loop_said = "the polish, after the loop's 1 iteration";
+    assert_eq!(said(steps[0].iteration), loop_said);
+    let gap = (2..).find(|i| polished.history.iter().all(|h| h.iteration != *i));
+    assert_eq!(said(gap.unwrap()), loop_said);
+    assert_eq!(said(1), "iteration 1");
+    assert_eq!(said(0), "the initial design");
 }
 
 #[test]

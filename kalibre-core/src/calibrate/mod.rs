@@ -154,7 +154,16 @@ where
 
     fn run_with(&mut self, store: &RunStore, st: &Settings, t_start: Instant) -> Result<Report> {
         let space = self.space;
-        let obs = self.observations;
+        // With scales the loop works in scale units throughout: the measurements here,
+        // the model's outputs in the runner.
+        let normalised;
+        let obs = match self.observations.scales() {
+            Some(_) => {
+                normalised = self.observations.normalised();
+                &normalised
+            }
+            None => self.observations,
+        };
         let names = space.names();
         let output_names = obs.output_names();
         let n_snap = obs.snapshots().len();
@@ -175,6 +184,7 @@ where
             output_names: &output_names,
             observers: &self.observers,
             pool: pool.as_ref(),
+            scales: self.observations.scales(),
         };
         let judge = self.regularizer.filter(|_| st.prior_in_best);
         let mut state = State::judged_with(judge.map(|r| (r, st.regularizer_weight)));
@@ -465,6 +475,7 @@ where
                 let (checks, outputs) = numerical::run_variants(
                     &self.numerical_variants,
                     obs,
+                    self.observations.scales(),
                     &b.outputs,
                     &b.params,
                     deadline,
@@ -522,6 +533,7 @@ where
             (Some(b), _) => numerical::run_variants(
                 &self.numerical_variants,
                 obs,
+                self.observations.scales(),
                 &b.outputs,
                 &b.params,
                 deadline,
@@ -579,7 +591,11 @@ where
         })?;
         let prior = state.prior.map(|_| best.rank - best.score);
         let prior = prior.filter(|p| p.is_finite());
-        let residuals = report::residual_rows(obs, &best.outputs, numerical_weights.as_deref());
+        let residuals = report::residual_rows(
+            self.observations,
+            &best.outputs,
+            numerical_weights.as_deref(),
+        );
         Ok(Report {
             schema: REPORT_SCHEMA.into(),
             seed: st.seed,
@@ -604,7 +620,14 @@ where
             stop_reason: stop,
             runs: state.counts,
             journal: store.path().map(|_| store.load_report().clone()),
-            unreached: unreached::summarise(store, obs, &self.validator, &names, &scenario_keys),
+            unreached: unreached::summarise(
+                store,
+                obs,
+                &self.validator,
+                &names,
+                &scenario_keys,
+                self.observations.scales(),
+            ),
             wall_s: t_start.elapsed().as_secs_f64(),
             model: None,
         })

@@ -81,6 +81,7 @@ pub(crate) struct Numerics<'a> {
 pub(crate) fn run_variants<M: Model>(
     variants: &[(String, Result<&M, String>)],
     obs: &Observations<M::Scenario>,
+    scales: Option<&[Vec<f64>]>,
     best_outputs: &[Vec<f64>],
     params: &[f64],
     deadline: Option<std::time::Instant>,
@@ -114,11 +115,12 @@ pub(crate) fn run_variants<M: Model>(
         let runs: Result<Vec<Vec<f64>>, String> = obs
             .snapshots()
             .iter()
-            .map(|snap| {
+            .enumerate()
+            .map(|(i, snap)| {
                 model
                     .evaluate(&snap.scenario, params)
                     .and_then(|o| check_outputs(o, &names))
-                    .map(|o| o.values)
+                    .map(|o| super::runner::scaled(o, scales.map(|sc| &sc[i][..])).values)
                     .map_err(|e| format!("snapshot `{}`: {e}", snap.label))
             })
             .collect();

@@ -255,6 +255,8 @@ pub struct Residual {
 
 /// The best run's residual rows: every measured output of every snapshot, with its
 /// numerical weight when the polish weighed them (`weights` in the same row order).
+/// `outputs` are as the loop saw them; with scales ([`crate::Observations::with_scales`])
+/// the rows are still the measured and predicted values, in the outputs' units.
 pub(crate) fn residual_rows<S>(
     obs: &crate::Observations<S>,
     outputs: &[Vec<f64>],
@@ -262,8 +264,16 @@ pub(crate) fn residual_rows<S>(
 ) -> Vec<Residual> {
     let mut weights = weights.into_iter().flatten().copied();
     let mut rows = Vec::new();
-    for (snap, pred) in obs.snapshots().iter().zip(outputs) {
-        for ((info, m), p) in obs.outputs().iter().zip(&snap.measured).zip(pred) {
+    for (s, (snap, pred)) in obs.snapshots().iter().zip(outputs).enumerate() {
+        let scale = |k: usize| obs.scales().map_or(1.0, |sc| sc[s][k]);
+        for (k, ((info, m), p)) in obs
+            .outputs()
+            .iter()
+            .zip(&snap.measured)
+            .zip(pred)
+            .enumerate()
+        {
+            let p = &(p * scale(k));
             if let Some(m) = m {
                 rows.push(Residual {
                     snapshot: snap.label.clone(),
@@ -391,16 +401,22 @@ impl Report {
             .iter()
             .filter(|h| h.training_samples > 0)
             .count();
+        let last_loop_iteration = (self.history.iter())
+            .filter(|h| h.training_samples > 0)
+            .map(|h| h.iteration)
+            .max()
+            .unwrap_or(0);
+        let s = if loop_iterations == 1 { "" } else { "s" };
+        let polish = format!("the polish, after the loop's {loop_iterations} iteration{s}");
         match self
             .history
             .iter()
             .find(|h| h.iteration == self.best.iteration)
         {
-            Some(h) if h.training_samples == 0 => {
-                let s = if loop_iterations == 1 { "" } else { "s" };
-                format!("the polish, after the loop's {loop_iterations} iteration{s}")
-            }
+            Some(h) if h.training_samples == 0 => polish,
             None if self.best.iteration == 0 => "the initial design".to_string(),
+            // A point the polish ran between its records (a finite-difference probe).
+            None if self.best.iteration > last_loop_iteration && last_loop_iteration > 0 => polish,
             _ => format!("iteration {}", self.best.iteration),
         }
     }

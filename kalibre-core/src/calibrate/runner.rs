@@ -26,6 +26,9 @@ pub(crate) struct Runner<'r, M: Model> {
     pub output_names: &'r [String],
     pub observers: &'r [Box<dyn Observe + 'r>],
     pub pool: Option<&'r rayon::ThreadPool>,
+    /// Each measurement's scale ([`Observations::with_scales`]): the loop sees the
+    /// outputs divided by it; the journal keeps them as they ran.
+    pub scales: Option<&'r [Vec<f64>]>,
 }
 
 impl<M: Model> Runner<'_, M> {
@@ -111,7 +114,7 @@ impl<M: Model> Runner<'_, M> {
                 wall_s: rec.wall_s,
             });
             return Ok(RunResult {
-                result,
+                result: result.map(|o| scaled(o, self.scales.map(|sc| &sc[s][..]))),
                 cached: true,
             });
         }
@@ -159,10 +162,25 @@ impl<M: Model> Runner<'_, M> {
             )));
         }
         Ok(RunResult {
-            result,
+            result: result.map(|o| scaled(o, self.scales.map(|sc| &sc[s][..]))),
             cached: false,
         })
     }
+}
+
+/// `outputs` (values and spread) divided by their measurements' `scales`, if any.
+pub(crate) fn scaled(mut outputs: Outputs, scales: Option<&[f64]>) -> Outputs {
+    if let Some(scales) = scales {
+        for (v, scale) in outputs.values.iter_mut().zip(scales) {
+            *v /= scale;
+        }
+        if let Some(spread) = &mut outputs.spread {
+            for (v, scale) in spread.iter_mut().zip(scales) {
+                *v /= scale;
+            }
+        }
+    }
+    outputs
 }
 
 /// The snapshots at which every point of `results` (one row per point, one run per

@@ -50,6 +50,7 @@ pub(crate) fn summarise<S, V: Validator>(
     validator: &V,
     names: &[String],
     scenario_keys: &[String],
+    scales: Option<&[Vec<f64>]>,
 ) -> Option<UnreachedRuns> {
     let unreached = store.unreached();
     if unreached.is_empty() {
@@ -84,13 +85,21 @@ pub(crate) fn summarise<S, V: Validator>(
     let mut complete_points = 0;
     let mut best: Option<UnreachedBest> = None;
     for (params, line, runs) in &points {
-        let Some(outputs) = runs
+        let Some(mut outputs) = runs
             .iter()
             .map(|r| r.and_then(|r| r.outputs.clone()))
             .collect::<Option<Vec<Vec<f64>>>>()
         else {
             continue;
         };
+        // Journaled as they ran; judged, as the loop judged its runs, in scale units.
+        if let Some(scales) = scales {
+            for (row, sc) in outputs.iter_mut().zip(scales) {
+                for (v, s) in row.iter_mut().zip(sc) {
+                    *v /= s;
+                }
+            }
+        }
         if check_prediction_shape(observations, &outputs).is_err() {
             continue;
         }

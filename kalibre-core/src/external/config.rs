@@ -464,6 +464,22 @@ impl CommandModelConfig {
             let s = NamedScenario { label, values };
             command.check_scenario(&s).map_err(|e| match e {
                 ExternalError::Setting { reason, .. } => cx.err(format!("{p}.variables"), reason),
+                // A placeholder this scenario leaves unset: named with the scenario, since
+                // the others may well set it.
+                ExternalError::Template {
+                    file,
+                    line,
+                    placeholder,
+                    reason,
+                } => ExternalError::Template {
+                    file,
+                    line,
+                    placeholder,
+                    reason: format!(
+                        "{reason}, in scenario `{}` ({p}.variables of {})",
+                        s.label, cx.file
+                    ),
+                },
                 e => e,
             })?;
             scenarios.push(s);

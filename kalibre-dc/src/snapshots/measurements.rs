@@ -13,6 +13,10 @@
 //! Scenarios are the `[[scenarios]]` labels of `model.toml`, outputs its `output.names`.
 //! An output may be missing from a scenario (not measured there); a scenario with no row
 //! is not calibrated against (the caller says so).
+//!
+//! A fourth column `sd` gives each measurement's standard uncertainty, in the output's
+//! units (`scenario,output,value,sd`); then every row has one, finite and positive, and
+//! the loop weighs each residual by it.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -21,21 +25,31 @@ use super::hints;
 use super::lexical::{next_record, parse_decimal, show, LineCounter};
 use crate::{Error, Result};
 
-const HEADER: [&str; 3] = ["scenario", "output", "value"];
+const HEADER: [&str; 4] = ["scenario", "output", "value", "sd"];
 
-/// A value and the line it was read on.
-type Read = (f64, u64);
+/// A value, its standard uncertainty if given, and the line it was read on.
+type Read = (f64, Option<f64>, u64);
 
 /// The measurements of each scenario, in the order the scenarios were given: `None` for
 /// a scenario with no row, else one entry per output (`None`: not measured there).
 pub type ScenarioMeasurements = Vec<Option<Vec<Option<f64>>>>;
+
+/// What `measurements.csv` holds: the values and, with an `sd` column, each one's
+/// standard uncertainty (in the same places as the values).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measurements {
+    /// The measured values.
+    pub values: ScenarioMeasurements,
+    /// Each value's standard uncertainty, where the file has an `sd` column.
+    pub sd: Option<ScenarioMeasurements>,
+}
 
 /// Reads `measurements.csv` against the scenario labels and output names of a model.
 pub fn load_measurements(
     path: &Path,
     scenarios: &[String],
     outputs: &[String],
-) -> Result<ScenarioMeasurements> {
+) -> Result<Measurements> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     parse_measurements(&bytes, &path.display().to_string(), scenarios, outputs)
 }
@@ -46,7 +60,7 @@ pub fn parse_measurements(
     file: &str,
     scenarios: &[String],
     outputs: &[String],
-) -> Result<ScenarioMeasurements> {
+) -> Result<Measurements> {
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
@@ -65,9 +79,11 @@ pub fn parse_measurements(
     let mut values: Vec<Option<Vec<Option<Read>>>> = vec![None; scenarios.len()];
     let mut record = csv::ByteRecord::new();
     let mut lines = LineCounter::default();
-    let mut header_seen = false;
+    // The columns of the header: 3, or 4 with `sd`.
+    let mut columns = 0usize;
     let mut rows = 0usize;
     while let Some(line) = next_record(&mut reader, &mut record, &mut lines, bytes, file)? {
+        let last = columns.max(3) - 1;
         let at = |column: Option<usize>| match column {
             Some(c) => format!("line {line}, column {}", HEADER[c]),
             None => format!("line {line}"),
@@ -75,37 +91,39 @@ pub fn parse_measurements(
         let mut fields = Vec::with_capacity(record.len());
         for (k, f) in record.iter().enumerate() {
             let text = std::str::from_utf8(f)
-                .map_err(|_| Error::format(file, at(Some(k.min(2))), "expected UTF-8 text"))?;
+                .map_err(|_| Error::format(file, at(Some(k.min(last))), "expected UTF-8 text"))?;
             fields.push(text);
         }
         if let Some(c) = fields.iter().position(|f| f.contains(['\n', '\r'])) {
             return Err(Error::format(
                 file,
-                at(Some(c.min(2))),
+                at(Some(c.min(last))),
                 "a quoted value runs on past its line: is a closing `\"` missing?",
             ));
         }
-        if !header_seen {
-            if fields != HEADER {
+        if columns == 0 {
+            if fields != HEADER[..3] && fields != HEADER {
                 return Err(Error::format(
                     file,
                     at(None),
                     format!(
-                        "expected the header `scenario,output,value`, found `{}`{}",
+                        "expected the header `scenario,output,value` (or \
+                         `scenario,output,value,sd`), found `{}`{}",
                         show(&fields.join(",")),
                         hints::header(&fields)
                     ),
                 ));
             }
-            header_seen = true;
+            columns = fields.len();
             continue;
         }
-        if fields.len() != 3 {
+        if fields.len() != columns {
             return Err(Error::format(
                 file,
                 at(None),
                 format!(
-                    "expected 3 fields (scenario,output,value), found {}{}",
+                    "expected {columns} fields ({}), found {}{}",
+                    HEADER[..columns].join(","),
                     fields.len(),
                     hints::field_count(&fields)
                 ),
@@ -151,8 +169,24 @@ pub fn parse_measurements(
                 ),
             )
         })?;
+        let sd = match fields.get(3) {
+            None => None,
+            Some(text) => Some(parse_decimal(text).filter(|v| *v > 0.0).ok_or_else(|| {
+                Error::format(
+                    file,
+                    at(Some(3)),
+                    format!(
+                        "expected the standard uncertainty of output `{}` of scenario `{}`, a \
+                         finite positive decimal number in the output's units, found `{}`",
+                        show(output),
+                        show(label),
+                        show(text)
+                    ),
+                )
+            })?),
+        };
         let slot = &mut values[s].get_or_insert_with(|| vec![None; outputs.len()])[k];
-        if let Some((_, first)) = *slot {
+        if let Some((_, _, first)) = *slot {
             return Err(Error::format(
                 file,
                 at(Some(1)),
@@ -163,10 +197,10 @@ pub fn parse_measurements(
                 ),
             ));
         }
-        *slot = Some((v, line));
+        *slot = Some((v, sd, line));
         rows += 1;
     }
-    if !header_seen {
+    if columns == 0 {
         return Err(Error::format(
             file,
             "line 1",
@@ -180,10 +214,18 @@ pub fn parse_measurements(
             "no data rows after the header; expected at least one measurement",
         ));
     }
-    Ok(values
-        .into_iter()
-        .map(|s| s.map(|row| row.into_iter().map(|v| v.map(|(x, _)| x)).collect()))
-        .collect())
+    let pick = |f: fn(&Read) -> Option<f64>| -> ScenarioMeasurements {
+        (values.iter())
+            .map(|s| {
+                s.as_ref()
+                    .map(|row| row.iter().map(|v| v.as_ref().and_then(f)).collect())
+            })
+            .collect()
+    };
+    Ok(Measurements {
+        values: pick(|r| Some(r.0)),
+        sd: (columns == 4).then(|| pick(|r| r.1)),
+    })
 }
 
 #[cfg(test)]
@@ -194,7 +236,7 @@ mod tests {
         list.iter().map(|s| s.to_string()).collect()
     }
 
-    fn parse(text: &str) -> Result<ScenarioMeasurements> {
+    fn parse_full(text: &str) -> Result<Measurements> {
         parse_measurements(
             text.as_bytes(),
             "m.csv",
@@ -203,12 +245,58 @@ mod tests {
         )
     }
 
+    fn parse(text: &str) -> Result<ScenarioMeasurements> {
+        parse_full(text).map(|m| m.values)
+    }
+
     #[test]
     fn rows_land_by_scenario_and_output() {
-        let m = parse("scenario,output,value\r\nsummer,t_out,30.5\nwinter,t_in,5\n").unwrap();
+        let m = parse_full("scenario,output,value\r\nsummer,t_out,30.5\nwinter,t_in,5\n").unwrap();
+        assert_eq!(m.sd, None);
+        let m = m.values;
         assert_eq!(m[0], Some(vec![Some(5.0), None]));
         assert_eq!(m[1], Some(vec![None, Some(30.5)]));
         assert_eq!(m[2], None);
+    }
+
+    #[test]
+    fn an_sd_column_lands_beside_its_values() {
+        let m = parse_full("scenario,output,value,sd\nsummer,t_out,30.5,0.2\nwinter,t_in,5,1e-3\n")
+            .unwrap();
+        assert_eq!(m.values[1], Some(vec![None, Some(30.5)]));
+        let sd = m.sd.expect("an sd column");
+        assert_eq!(sd[0], Some(vec![Some(1e-3), None]));
+        assert_eq!(sd[1], Some(vec![None, Some(0.2)]));
+        assert_eq!(sd[2], None);
+        for (text, needle) in [
+            (
+                "scenario,output,value,sd\nwinter,t_in,1\n",
+                "line 2: expected 4 fields",
+            ),
+            (
+                "scenario,output,value,sd\nwinter,t_in,1,0\n",
+                "line 2, column sd: expected the standard uncertainty",
+            ),
+            (
+                "scenario,output,value,sd\nwinter,t_in,1,-2\n",
+                "line 2, column sd",
+            ),
+            (
+                "scenario,output,value,sd\nwinter,t_in,1,nan\n",
+                "line 2, column sd",
+            ),
+            (
+                "scenario,output,value,sd\nwinter,t_in,1,\n",
+                "line 2, column sd",
+            ),
+            (
+                "scenario,output,value,sigma\n",
+                "line 1: expected the header",
+            ),
+        ] {
+            let e = parse(text).unwrap_err().to_string();
+            assert!(e.contains("m.csv") && e.contains(needle), "{needle}: {e}");
+        }
     }
 
     #[test]

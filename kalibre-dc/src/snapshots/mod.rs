@@ -14,7 +14,7 @@ use kalibre_core::{Observations, OutputInfo, Snapshot};
 use crate::hall::Hall;
 use crate::{Error, Result};
 
-pub use measurements::{load_measurements, parse_measurements, ScenarioMeasurements};
+pub use measurements::{load_measurements, parse_measurements, Measurements, ScenarioMeasurements};
 pub use plausible::{
     implausible_rises, implausible_setpoints, readings_above_supply, readings_below_supply,
     stuck_sensors, ColdReading, HotReading, ImplausibleRise, ImplausibleSetpoint, StuckSensor,

@@ -1,26 +1,34 @@
-//! Failed runs at a bound of the box. A model that cannot run at a corner (OpenFOAM
-//! misses its energy balance where servers draw many times the supply) fails there on
-//! every resume, since a resume runs failed points again: "fix what failed" then means
-//! narrowing that bound in hall.json, or resuming with `--replay-failed`, and the
-//! summary says so.
+//! Why the journal's runs failed, and those at a bound of the box. The summary names the
+//! most common reason, so that a timeout or a crash is seen without reading the journal.
+//! A model that cannot run at a corner (OpenFOAM misses its energy balance where servers
+//! draw many times the supply) fails there on every resume, since a resume runs failed
+//! points again: "fix what failed" then means narrowing that bound where the parameters
+//! are given (hall.json, or model.toml's `[[params]]`), or resuming with
+//! `--replay-failed`, and the summary says so.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use kalibre_core::ParamSpace;
 
-/// Of the failed runs of the model `fingerprint` in `journal`, those at a bound of
-/// `space`: how many, and the bound most of them share, as a clause for the summary's
-/// note. `None` when no failed run sits at a bound.
-/// `replayed`: this calibration replayed them (`--replay-failed`) rather than run them.
+/// The longest reason the summary quotes.
+const REASON_CHARS: usize = 160;
+
+/// Of the failed runs of the model `fingerprint` in `journal`: the most common reason,
+/// and those at a bound of `space` (how many, and the bound most of them share), as
+/// clauses for the summary's note. `None` when the journal holds no failed run of it.
+/// `bounds_in` names where the bounds are given (`hall.json`); `replayed`: this
+/// calibration replayed the failures (`--replay-failed`) rather than run them.
 pub(super) fn clause(
     journal: &Path,
     fingerprint: &str,
     space: &ParamSpace,
+    bounds_in: &str,
     replayed: bool,
 ) -> Option<String> {
     let text = std::fs::read_to_string(journal).ok()?;
     let names = space.names();
+    let mut reasons: BTreeMap<String, usize> = BTreeMap::new();
     let mut failed = 0usize;
     let mut at_bound = 0usize;
     // (parameter, side) -> (runs there, its value)
@@ -31,6 +39,10 @@ pub(super) fn clause(
         };
         if run["status"] != "failed" || run["fingerprint"] != fingerprint {
             continue;
+        }
+        if let Ok(e) = serde_json::from_value::<kalibre_core::ModelError>(run["error"].clone()) {
+            let reason: String = e.to_string().chars().take(REASON_CHARS).collect();
+            *reasons.entry(reason).or_default() += 1;
         }
         let same_names = run["param_names"].as_array().is_some_and(|n| {
             n.iter()
@@ -60,7 +72,24 @@ pub(super) fn clause(
         }
         at_bound += usize::from(here);
     }
-    let most = bounds.values().map(|(n, _)| *n).max()?;
+    // The most common reason; of equals, the first in order.
+    let common = reasons
+        .iter()
+        .fold(None::<(&String, usize)>, |best, (r, n)| match best {
+            Some((_, m)) if m >= *n => best,
+            _ => Some((r, *n)),
+        })
+        .map(|(reason, n)| {
+            let of = if n == failed {
+                format!("all {failed}")
+            } else {
+                format!("{n} of the {failed}")
+            };
+            format!("{of} failed runs in the journal: {reason}")
+        });
+    let Some(most) = bounds.values().map(|(n, _)| *n).max() else {
+        return common;
+    };
     // Every bound that many of them share (at a corner of the box, all of its bounds).
     let shared: Vec<String> = bounds
         .iter()
@@ -79,15 +108,21 @@ pub(super) fn clause(
         n => format!("{} and {} more", shared[..3].join(", "), n - 3),
     };
     let remedy = if replayed {
-        "narrow that bound in hall.json (this resume replayed them, --replay-failed)"
+        format!("narrow that bound in {bounds_in} (this resume replayed them, --replay-failed)")
     } else {
-        "narrow that bound in hall.json, as a resume runs failed points again (or resume \
-         with --replay-failed)"
+        format!(
+            "narrow that bound in {bounds_in}, as a resume runs failed points again (or \
+             resume with --replay-failed)"
+        )
     };
-    Some(format!(
+    let at = format!(
         "{which} sit at a bound, {most} of them at {listed}; if the model cannot run there, \
          {remedy}"
-    ))
+    );
+    Some(match common {
+        Some(common) => format!("{common}; {at}"),
+        None => at,
+    })
 }
 
 #[cfg(test)]
@@ -105,7 +140,7 @@ mod tests {
         let line = |status: &str, fp: &str, params: [f64; 2]| {
             format!(
                 "{{\"status\":\"{status}\",\"fingerprint\":\"{fp}\",\"param_names\":[\"a\",\"b\"],\
-                 \"params\":[{},{}]}}\n",
+                 \"params\":[{},{}],\"error\":{{\"kind\":\"timeout\",\"seconds\":3.0}}}}\n",
                 params[0], params[1]
             )
         };
@@ -121,18 +156,29 @@ mod tests {
             line("failed", "other", [0.1, 0.0]),
         ]);
         assert_eq!(
-            clause(&journal, "m", &space, false).as_deref(),
+            clause(&journal, "m", &space, "hall.json", false).as_deref(),
             Some(
-                "1 of the 2 failed runs in the journal sit at a bound, 1 of them at a = 3 \
-                 (upper); if the model cannot run there, narrow that bound in hall.json, as a \
-                 resume runs failed points again (or resume with --replay-failed)"
+                "all 2 failed runs in the journal: model run timed out after 3 s; 1 of the 2 \
+                 failed runs in the journal sit at a bound, 1 of them at a = 3 (upper); if the \
+                 model cannot run there, narrow that bound in hall.json, as a resume runs \
+                 failed points again (or resume with --replay-failed)"
             )
         );
-        assert!(clause(&journal, "m", &space, true).unwrap().ends_with(
-            "narrow that bound in hall.json (this resume replayed them, --replay-failed)"
-        ));
+        assert!(
+            clause(&journal, "m", &space, "model.toml's [[params]]", true)
+                .unwrap()
+                .ends_with(
+                    "narrow that bound in model.toml's [[params]] (this resume replayed them, \
+                 --replay-failed)"
+                )
+        );
         write(&[line("failed", "m", [1.0, 0.4])]);
-        assert_eq!(clause(&journal, "m", &space, false), None);
+        assert_eq!(
+            clause(&journal, "m", &space, "hall.json", false).as_deref(),
+            Some("all 1 failed runs in the journal: model run timed out after 3 s")
+        );
+        write(&[line("ok", "m", [1.0, 0.4])]);
+        assert_eq!(clause(&journal, "m", &space, "hall.json", false), None);
         std::fs::remove_file(&journal).unwrap();
     }
 }

@@ -84,6 +84,8 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         )));
     }
     let observations = observations(&cfg, measurements)?;
+    let scaled = observations.scales().is_some();
+    let style = Style::Generic { scaled };
     let _lock = super::super::out_dir::lock(&args.out, "calibrate")?;
     super::super::out_dir::check_files(&args.out, &OUT_FILES)?;
     super::super::same_file::refuse_inputs_in_out(
@@ -116,13 +118,13 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
             iterations: args.iterations,
             polish_iterations: core.polish_iterations,
             polish_max_params: settings.polish_max_params,
-            style: Style::Generic,
+            style,
         },
         args.quiet,
     );
     let started = Instant::now();
-    let report = with_threads(args.threads, || {
-        Calibrator::new(
+    let (report, per_output) = with_threads(args.threads, || {
+        let mut calibrator = Calibrator::new(
             &cfg.command,
             GaussianProcess::new(space.clone()),
             &observations,
@@ -131,8 +133,12 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         .with_settings(core)
         .with_searcher(settings.searcher.clone())
         .with_store(store)
-        .with_observer(move |e: &kalibre_core::Event<'_>| progress.observe(e))
-        .run()
+        .with_observer(move |e: &kalibre_core::Event<'_>| progress.observe(e));
+        let report = calibrator.run()?;
+        let per_output = calibrator
+            .store()
+            .map(|store| per_output_errors(&cfg, &observations, store, &report));
+        Ok((report, per_output.flatten()))
     })?
     .map_err(|e| match e {
         kalibre_core::Error::InvalidSetting { name, reason } => super::settings::flag_error(
@@ -142,13 +148,14 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     })?;
     let wall_s = started.elapsed().as_secs_f64();
     super::warn_skipped_journal_lines(&journal, &report);
-    super::summary::warn_unreached(&journal, &report, Style::Generic);
+    super::summary::warn_unreached(&journal, &report, style);
     let failed_at_bounds = (report.runs.failed > 0)
         .then(|| {
             super::failed_at_bounds::clause(
                 &journal,
                 &cfg.command.fingerprint(),
                 space,
+                &format!("{}'s [[params]]", config.display()),
                 args.replay_failed,
             )
         })
@@ -158,6 +165,8 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         "kind": "command",
         "config": config.display().to_string(),
         "fingerprint": cfg.command.fingerprint(),
+        "errors_in": if scaled { "sd" } else { "outputs' units" },
+        "per_output": per_output.as_deref().map(per_output_json),
     }));
     let report_path = args.out.join("report.json");
     let json = serde_json::to_string_pretty(&report)
@@ -166,14 +175,113 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     print_summary(
         &report,
         wall_s,
-        Style::Generic,
+        style,
         None,
         None,
         None,
         failed_at_bounds.as_deref(),
     );
+    if let Some(rows) = &per_output {
+        print_per_output(rows);
+    }
     println!("wrote {}, {}", report_path.display(), journal.display());
     Ok(())
+}
+
+/// One output's error at the best parameters, in its own units.
+struct OutputError {
+    name: String,
+    mae: f64,
+    max_abs: f64,
+    measured: usize,
+}
+
+/// Each measured output's error at the report's best parameters, in the output's own
+/// units, from the journal's runs there; `None` if a run there is missing or failed.
+fn per_output_errors(
+    cfg: &CommandModelConfig,
+    observations: &Observations<NamedScenario>,
+    store: &RunStore,
+    report: &kalibre_core::calibrate::Report,
+) -> Option<Vec<OutputError>> {
+    let names = cfg.space.names();
+    let params = report.best.params.values();
+    let mut sums: Vec<(f64, f64, usize)> = vec![(0.0, 0.0, 0); observations.outputs().len()];
+    for snap in observations.snapshots() {
+        let key = cfg.command.scenario_key(&snap.scenario);
+        let (_, rec) = store.get_keyed(&snap.label, &key, &names, &params)?;
+        let outputs = rec.result().ok()?;
+        for ((m, v), acc) in snap.measured.iter().zip(&outputs.values).zip(&mut sums) {
+            if let Some(m) = m {
+                let e = (v - m).abs();
+                *acc = (acc.0 + e, acc.1.max(e), acc.2 + 1);
+            }
+        }
+    }
+    Some(
+        (observations.outputs().iter())
+            .zip(sums)
+            .filter(|(_, (_, _, n))| *n > 0)
+            .map(|(o, (sum, max_abs, n))| OutputError {
+                name: o.name.clone(),
+                mae: sum / n as f64,
+                max_abs,
+                measured: n,
+            })
+            .collect(),
+    )
+}
+
+/// The outputs the summary's table shows; `report.json` has them all.
+const PER_OUTPUT_SHOWN: usize = 20;
+
+/// The per-output table of the summary: outputs in different units each in their own.
+fn print_per_output(rows: &[OutputError]) {
+    println!("  at the best parameters, each output in its own units:");
+    println!(
+        "    {:<24} {:>12} {:>12} {:>9}",
+        "output", "MAE", "max abs", "measured"
+    );
+    for r in rows.iter().take(PER_OUTPUT_SHOWN) {
+        println!(
+            "    {:<24} {:>12} {:>12} {:>9}",
+            r.name,
+            significant(r.mae),
+            significant(r.max_abs),
+            r.measured
+        );
+    }
+    if rows.len() > PER_OUTPUT_SHOWN {
+        println!(
+            "    ... and {} more (report.json, model.per_output)",
+            rows.len() - PER_OUTPUT_SHOWN
+        );
+    }
+}
+
+/// `v` to 4 significant digits, in plain notation where that stays short.
+fn significant(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || (1e-3..1e6).contains(&a) {
+        let decimals = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// The per-output errors as `report.json` keeps them.
+fn per_output_json(rows: &[OutputError]) -> serde_json::Value {
+    rows.iter()
+        .map(|r| {
+            serde_json::json!({
+                "output": r.name,
+                "mae": r.mae,
+                "max_abs": r.max_abs,
+                "measured": r.measured,
+            })
+        })
+        .collect()
 }
 
 /// The measurements of `cfg`'s scenarios: those with no row are left out (and said so),
@@ -184,7 +292,8 @@ fn observations(
 ) -> CliResult<Observations<NamedScenario>> {
     let labels: Vec<String> = cfg.scenarios.iter().map(|s| s.label.clone()).collect();
     let outputs = cfg.command.output_names().to_vec();
-    let measured = kalibre_dc::snapshots::load_measurements(measurements, &labels, &outputs)?;
+    let read = kalibre_dc::snapshots::load_measurements(measurements, &labels, &outputs)?;
+    let measured = read.values;
     let unmeasured: Vec<String> = labels
         .iter()
         .zip(&measured)
@@ -230,8 +339,81 @@ fn observations(
             group: String::new(),
         })
         .collect();
-    Observations::new(infos, snapshots)
-        .map_err(|e| CliError::Input(format!("{}: {e}", measurements.display())))
+    let in_file =
+        |e: kalibre_core::Error| CliError::Input(format!("{}: {e}", measurements.display()));
+    let observations = Observations::new(infos, snapshots).map_err(in_file)?;
+    match read.sd {
+        None => {
+            if let Some(note) = mixed_sizes_note(&observations) {
+                eprintln!("kalibre: note: {}: {note}", measurements.display());
+            }
+            Ok(observations)
+        }
+        Some(sd) => observations
+            .with_scales(scales(&sd, outputs.len()))
+            .map_err(in_file),
+    }
+}
+
+/// How far apart the outputs' typical sizes must be for the summary to say that the
+/// largest will decide the fit.
+const MIXED_SIZES_RATIO: f64 = 100.0;
+
+/// Said when the measured outputs differ in size by [`MIXED_SIZES_RATIO`] or more and
+/// no `sd` column weighs them: unweighted, the largest outputs' errors decide the fit.
+fn mixed_sizes_note(observations: &Observations<NamedScenario>) -> Option<String> {
+    let sizes: Vec<(&str, f64)> = (observations.outputs().iter().enumerate())
+        .filter_map(|(k, o)| {
+            let values: Vec<f64> = (observations.snapshots().iter())
+                .filter_map(|s| s.measured[k])
+                .map(f64::abs)
+                .collect();
+            let mean = values.iter().sum::<f64>() / values.len().max(1) as f64;
+            (mean > 0.0).then_some((o.name.as_str(), mean))
+        })
+        .collect();
+    let cmp = |a: &&(&str, f64), b: &&(&str, f64)| a.1.total_cmp(&b.1);
+    let small = sizes.iter().min_by(cmp)?;
+    let large = sizes.iter().max_by(cmp)?;
+    (large.1 >= MIXED_SIZES_RATIO * small.1).then(|| {
+        format!(
+            "the outputs differ in size by {:.0}x (`{}` about {}, `{}` about {}): the loop \
+             minimises the error over every output alike, so the largest outputs decide the \
+             fit. Give each measurement's standard uncertainty in an `sd` column \
+             (`scenario,output,value,sd`, docs/models.md) to weigh them by it",
+            large.1 / small.1,
+            large.0,
+            significant(large.1),
+            small.0,
+            significant(small.1)
+        )
+    })
+}
+
+/// The loop's scales from the file's `sd` column, for the scenarios measured: each
+/// measurement's own, and where an output is not measured in a scenario (its residual
+/// never counts there), the mean of that output's sds elsewhere, so that the surrogate
+/// sees its runs on the same scale.
+fn scales(sd: &kalibre_dc::snapshots::ScenarioMeasurements, n_outputs: usize) -> Vec<Vec<f64>> {
+    let rows: Vec<&Vec<Option<f64>>> = sd.iter().flatten().collect();
+    let typical: Vec<f64> = (0..n_outputs)
+        .map(|k| {
+            let given: Vec<f64> = rows.iter().filter_map(|r| r[k]).collect();
+            if given.is_empty() {
+                1.0
+            } else {
+                given.iter().sum::<f64>() / given.len() as f64
+            }
+        })
+        .collect();
+    rows.iter()
+        .map(|r| {
+            r.iter()
+                .zip(&typical)
+                .map(|(v, t)| v.unwrap_or(*t))
+                .collect()
+        })
+        .collect()
 }
 
 /// The run journal, refused when it holds runs of another model: the command's program,
@@ -257,4 +439,56 @@ fn open_journal(
         )));
     }
     Ok(store)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn observations(rows: &[[Option<f64>; 2]]) -> Observations<NamedScenario> {
+        let outputs = ["t_end_c", "q_loss_wh"]
+            .iter()
+            .map(|n| OutputInfo {
+                name: n.to_string(),
+                group: String::new(),
+            })
+            .collect();
+        let snapshots = (rows.iter().enumerate())
+            .map(|(i, r)| Snapshot {
+                label: format!("s{i}"),
+                scenario: NamedScenario::new(format!("s{i}")),
+                measured: r.to_vec(),
+            })
+            .collect();
+        Observations::new(outputs, snapshots).unwrap()
+    }
+
+    #[test]
+    fn outputs_of_very_different_sizes_are_noted_by_name() {
+        let mixed = observations(&[[Some(18.0), Some(5000.0)], [Some(-19.0), Some(22000.0)]]);
+        let note = mixed_sizes_note(&mixed).expect("a note");
+        assert!(
+            note.contains("differ in size by 730x")
+                && note.contains("`q_loss_wh` about 13500")
+                && note.contains("`t_end_c` about 18.50")
+                && note.contains("an `sd` column"),
+            "{note}"
+        );
+        let alike = observations(&[[Some(18.0), Some(1000.0)], [Some(20.0), None]]);
+        assert_eq!(mixed_sizes_note(&alike), None);
+        let one_measured = observations(&[[Some(18.0), None]]);
+        assert_eq!(mixed_sizes_note(&one_measured), None);
+    }
+
+    #[test]
+    fn unmeasured_outputs_take_their_typical_sd() {
+        let sd = vec![
+            Some(vec![Some(0.5), None]),
+            None,
+            Some(vec![Some(1.5), Some(200.0)]),
+        ];
+        assert_eq!(scales(&sd, 2), vec![vec![0.5, 200.0], vec![1.5, 200.0]]);
+        let none_given = vec![Some(vec![Some(0.5), None])];
+        assert_eq!(scales(&none_given, 2), vec![vec![0.5, 1.0]]);
+    }
 }

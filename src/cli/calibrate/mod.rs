@@ -330,7 +330,19 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     warn_skipped_journal_lines(&journal, &report);
     warn_unreached(&journal, &report, summary::Style::Hall);
     let failed_at_bounds = (report.runs.failed > 0)
-        .then(|| failed_at_bounds::clause(&journal, &fingerprint, &space, args.replay_failed))
+        .then(|| {
+            let bounds_in = args
+                .hall
+                .as_deref()
+                .map_or_else(|| "hall.json".to_string(), |h| h.display().to_string());
+            failed_at_bounds::clause(
+                &journal,
+                &fingerprint,
+                &space,
+                &bounds_in,
+                args.replay_failed,
+            )
+        })
         .flatten();
     let mut report = report;
     let mut record = model_record(&args, &hall, &settings, fingerprint)?;

@@ -4,11 +4,12 @@
 use kalibre_core::calibrate::Report;
 
 /// What is calibrated: a hall (errors in C, per aisle, a temperature-rise prior) or a
-/// model of your own (errors in its outputs' units, which kalibre does not know).
+/// model of your own (errors in its outputs' units, which kalibre does not know, or with
+/// `scaled` in units of each measurement's `sd`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Style {
     Hall,
-    Generic,
+    Generic { scaled: bool },
 }
 
 impl Style {
@@ -16,7 +17,8 @@ impl Style {
     pub(super) fn error(self, v: Option<f64>) -> String {
         let unit = match self {
             Style::Hall => " C",
-            Style::Generic => "",
+            Style::Generic { scaled: false } => "",
+            Style::Generic { scaled: true } => " sd",
         };
         v.filter(|v| v.is_finite())
             .map_or("-".into(), |v| format!("{v:.3}{unit}"))
@@ -105,7 +107,7 @@ fn print_uncertainty(report: &Report, style: Style) {
 fn repeated_residual_note(report: &Report, style: Style) -> Option<String> {
     match style {
         Style::Hall => report.repeated_residual_note(),
-        Style::Generic => {
+        Style::Generic { .. } => {
             let icc = report
                 .residual_icc
                 .filter(|r| *r > kalibre_core::calibrate::REPEATED_RESIDUAL_ICC)?;
@@ -179,12 +181,18 @@ pub(super) fn print_summary(
     let fmt_c = |v| style.error(v);
     println!();
     println!("calibration summary");
-    if style == Style::Generic {
-        println!(
+    match style {
+        Style::Generic { scaled: false } => println!(
             "  {:<28} mean absolute error over every measured output and scenario, in the \
              outputs' units",
             "MAE"
-        );
+        ),
+        Style::Generic { scaled: true } => println!(
+            "  {:<28} mean absolute error over every measured output and scenario, each \
+             divided by its measurement's sd",
+            "MAE"
+        ),
+        Style::Hall => {}
     }
     println!(
         "  {:<28} {}",
@@ -267,9 +275,9 @@ pub(super) fn print_summary(
         // a corner of the box, or the truth) the loop searches blind, and the fit can be
         // poor for that reason, not the model's form.
         println!(
-            "  note: {} of {} model runs failed (their reasons are in runs.jsonl); the loop \
-             learned from the rest, so a poor fit may be the failures' doing. Fix what failed \
-             and calibrate again into this --out: failed runs run again (unless \
+            "  note: {} of {} model runs failed (each one's reason is in runs.jsonl); the \
+             loop learned from the rest, so a poor fit may be the failures' doing. Fix what \
+             failed and calibrate again into this --out: failed runs run again (unless \
              --replay-failed), the rest are replayed{}",
             report.runs.failed,
             report.runs.total,
