@@ -344,8 +344,9 @@ fn measurements_are_weighed_by_their_sd() {
     assert!(best < 5.0, "MAE {best} sd");
 }
 
-/// A model of your own's report is not a hall's: `simulate --params` says so by name
-/// instead of failing to parse its record.
+/// A model of your own's report is not a hall's: `simulate --params` with a hall says so
+/// by name instead of failing to parse its record, and without a hall runs the model of
+/// your own at it.
 #[test]
 fn a_model_of_your_own_report_is_not_taken_for_a_halls() {
     let (dir, config, measurements) = setup("own-model-report");
@@ -358,6 +359,59 @@ fn a_model_of_your_own_report_is_not_taken_for_a_halls() {
         .arg("--out")
         .arg(dir.join("pred.csv")));
     assert_input_error(&o, "the calibration of a model of your own");
+    assert!(stderr(&o).contains("kalibre simulate --model command --config"));
+
+    // Without a hall, simulate runs the model of your own at each scenario: at the
+    // report's best parameters it gives the best run's outputs, so their error against
+    // the measurements is the report's best MAE.
+    let pred = dir.join("pred.csv");
+    let simulate = |extra: &[&str]| {
+        let mut c = kalibre();
+        c.args(["simulate", "--model", "command", "--config"])
+            .arg(&config)
+            .arg("--params")
+            .arg(out.join("report.json"))
+            .arg("--out")
+            .arg(&pred)
+            .args(extra);
+        run(&mut c)
+    };
+    let o = simulate(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let read = |path: &Path| -> Vec<(String, f64)> {
+        let text = std::fs::read_to_string(path).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(lines.next(), Some("scenario,output,value"));
+        lines
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (format!("{},{}", f[0], f[1]), f[2].parse().unwrap())
+            })
+            .collect()
+    };
+    let (predicted, measured) = (read(&pred), read(&measurements));
+    assert_eq!(predicted.len(), 12, "4 scenarios x 3 outputs");
+    let mae = measured
+        .iter()
+        .map(|(key, m)| {
+            let p = predicted.iter().find(|(k, _)| k == key).expect(key).1;
+            (p - m).abs()
+        })
+        .sum::<f64>()
+        / measured.len() as f64;
+    let best = report(&out)["best"]["mae_c"].as_f64().unwrap();
+    assert!(
+        (mae - best).abs() <= 1e-6 * best.max(1e-9),
+        "{mae} against the report's {best}"
+    );
+    // A hall's flags are refused by name, and half a hall is not taken for a model.
+    let o = simulate(&["--vtk", dir.join("vtk").to_str().unwrap()]);
+    assert_input_error(&o, "--vtk is about a hall");
+    let o = simulate(&["--hall", "hall.json"]);
+    assert_input_error(
+        &o,
+        "a hall's simulation needs --hall hall.json and --snapshots",
+    );
 }
 
 /// The temperature-rise prior turned off (`--rise-weight 0`) binds nothing, so no

@@ -67,8 +67,10 @@ impl CalibratedModel {
                 "/model",
                 &format!(
                     "the calibration of a model of your own ({config}, with --measurements), \
-                     not of a hall: simulate and diagnose take a hall's calibration; run that \
-                     model at its parameters with the program of {config}"
+                     not of a hall: diagnose takes a hall's calibration, and `kalibre simulate \
+                     --model command --config {config} --params {}` (no --hall) runs that \
+                     model at its parameters",
+                    report_path.display()
                 ),
             ));
         }

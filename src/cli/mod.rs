@@ -17,6 +17,7 @@ mod same_file;
 mod simulate;
 mod simulate_command;
 mod simulate_openfoam;
+mod simulate_own;
 mod synth;
 mod what_if;
 

@@ -14,6 +14,17 @@ use super::{CliError, CliResult};
 pub(in crate::cli) fn read_params_file(
     path: &Path,
 ) -> CliResult<(serde_json::Value, Option<CalibratedModel>)> {
+    let json = read_params_json(path)?;
+    // Only a report (one with `best`) records a model; a plain object is all parameters.
+    let recorded = match json.get("best") {
+        Some(_) => CalibratedModel::of_report(path, json.get("model"))?,
+        None => None,
+    };
+    Ok((json, recorded))
+}
+
+/// A `--params` file's JSON: no key given twice, and a report's schema ours.
+pub(in crate::cli) fn read_params_json(path: &Path) -> CliResult<serde_json::Value> {
     let file = path.display().to_string();
     let text =
         std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
@@ -23,23 +34,18 @@ pub(in crate::cli) fn read_params_file(
     if let Some((field, message)) = kalibre_dc::json_keys::duplicate_key_problem(&text) {
         return Err(CliError::Input(format!("{file}: {field}: {message}")));
     }
-    // Only a report (one with `best`) records a model; a plain object is all parameters.
-    let recorded = match json.get("best") {
-        Some(_) => {
-            match json.get("schema") {
-                Some(serde_json::Value::String(s)) if s == REPORT_SCHEMA => {}
-                None => {}
-                Some(other) => {
-                    return Err(CliError::Input(format!(
-                        "{file}: /schema: expected \"{REPORT_SCHEMA}\", found {other}"
-                    )))
-                }
+    if json.get("best").is_some() {
+        match json.get("schema") {
+            Some(serde_json::Value::String(s)) if s == REPORT_SCHEMA => {}
+            None => {}
+            Some(other) => {
+                return Err(CliError::Input(format!(
+                    "{file}: /schema: expected \"{REPORT_SCHEMA}\", found {other}"
+                )))
             }
-            CalibratedModel::of_report(path, json.get("model"))?
         }
-        None => None,
-    };
-    Ok((json, recorded))
+    }
+    Ok(json)
 }
 
 /// Parameter values by name from a JSON object or a report's `best.params` (`json`, read

@@ -22,12 +22,13 @@ const HEAT_SOURCE_MIN_SHARE: f64 = 0.02;
 /// Options of `kalibre simulate`.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// The hall (`hall.json`).
+    /// The hall (`hall.json`). Without `--hall` and `--snapshots`, `--model command
+    /// --config model.toml` runs a model of your own at each of its `[[scenarios]]`.
     #[arg(long)]
-    pub(super) hall: PathBuf,
+    pub(super) hall: Option<PathBuf>,
     /// Operating conditions (`snapshots.csv`); sensor readings in it are optional and ignored.
     #[arg(long)]
-    pub(super) snapshots: PathBuf,
+    pub(super) snapshots: Option<PathBuf>,
     /// Parameter values: a JSON file holding an object `{ "alpha/<type>": 0.12, ... }`,
     /// or a calibration's `report.json` (its best parameters, and the alpha mode and grid
     /// it ran with).
@@ -273,8 +274,8 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
     super::same_file::refuse_same_files(
         &outputs,
         &[
-            ("the --hall file", Some(args.hall.as_path())),
-            ("the --snapshots file", Some(args.snapshots.as_path())),
+            ("the --hall file", args.hall.as_deref()),
+            ("the --snapshots file", args.snapshots.as_deref()),
             ("the --params file", args.params.as_deref()),
             ("the --config file", args.config.as_deref()),
             ("the run journal beside --params", journal.as_deref()),
@@ -318,13 +319,27 @@ pub fn run(args: SimulateArgs) -> CliResult {
     }
     refuse_overwriting_inputs(&args, &[])?;
     super::say_to_stderr_if_stdout(&args.out);
+    let (hall_path, snaps_path) = match (&args.hall, &args.snapshots) {
+        (Some(h), Some(s)) => (h.clone(), s.clone()),
+        (None, None) if args.model() == SimulateModel::Command => {
+            return super::simulate_own::run(&args)
+        }
+        _ => {
+            return Err(CliError::Input(
+                "a hall's simulation needs --hall hall.json and --snapshots snapshots.csv; a \
+                 model of your own runs at its [[scenarios]] with --model command --config \
+                 model.toml and neither"
+                    .into(),
+            ))
+        }
+    };
     // Before anything is written, so a bad factor never replaces a good `--out`.
     super::calibrate::check_grid_factors(&args.grid_check)?;
     inlet_limit_c(&args)?;
-    let hall = Hall::load(&args.hall)?;
+    let hall = Hall::load(&hall_path)?;
     kalibre_dc::effects::EffectRegistry::builtin()
-        .check_hall(&hall, &args.hall.display().to_string())?;
-    let mut snaps = snapshots::load_states(&hall, &args.snapshots)?;
+        .check_hall(&hall, &hall_path.display().to_string())?;
+    let mut snaps = snapshots::load_states(&hall, &snaps_path)?;
     // After the inputs (their errors first), before the solves.
     for (flag, path) in [
         ("--out", Some(&args.out)),
@@ -336,10 +351,10 @@ pub fn run(args: SimulateArgs) -> CliResult {
         }
     }
     // Before any what-if: the warning is about the files.
-    super::plausible::warn_setpoints(&args.snapshots, &hall, snaps.iter().map(|s| &s.state));
+    super::plausible::warn_setpoints(&snaps_path, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
-    super::plausible::warn_alpha_units(&args.hall, &hall);
-    super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
+    super::plausible::warn_alpha_units(&hall_path, &hall);
+    super::plausible::warn_implausible_rises(&hall_path, &snaps_path, &hall, states);
     if let Some(dir) = &args.vtk {
         check_vtk_names(&snaps)?;
         let files: Vec<(String, PathBuf)> = snaps
@@ -363,7 +378,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
         .refuse_unless(args.model() == SimulateModel::Openfoam)?;
     match args.model() {
         SimulateModel::Openfoam => {
-            return super::simulate_openfoam::run(&args, &hall, &snaps, file.as_ref())
+            return super::simulate_openfoam::run(&args, &hall_path, &hall, &snaps, file.as_ref())
         }
         SimulateModel::Command => {
             return super::simulate_command::run(&args, &hall, &snaps, file.as_ref())
@@ -420,13 +435,13 @@ pub fn run(args: SimulateArgs) -> CliResult {
         None => args.grid_m,
     };
     let config = sim_config(grid_m)?;
-    check_model_cells(&hall, &args.hall, config.cell_m, args.grid_m.is_some())?;
-    super::plausible::warn_off_grid(&args.hall, &hall, config.cell_m);
+    check_model_cells(&hall, &hall_path, config.cell_m, args.grid_m.is_some())?;
+    super::plausible::warn_off_grid(&hall_path, &hall, config.cell_m);
     // Before any solve: a factor whose grid is the model's own in this room, or too
     // fine to build, would otherwise fail (or check nothing) after the predictions.
     super::calibrate::check_finer_grids(&hall, config.cell_m, &args.grid_check)?;
     let model = HallModel::new(&hall, config)
-        .map_err(|e| e.in_hall_file(&args.hall.display().to_string()))?;
+        .map_err(|e| e.in_hall_file(&hall_path.display().to_string()))?;
     let space = model.layout().space();
     let params = match (&args.params, &file) {
         (Some(p), Some((json, _))) => load_params(p, json, space)?,

@@ -2,6 +2,7 @@
 //! parameters or any others, what-ifs included; the predicted sensor readings, and every
 //! server's air with the intakes counted against the limit.
 
+use std::path::Path;
 use std::time::Instant;
 
 use kalibre_core::Model;
@@ -41,6 +42,7 @@ fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {
 /// snapshot's intakes against the limit with the setpoint headroom.
 pub(super) fn run(
     args: &SimulateArgs,
+    hall_path: &Path,
     hall: &Hall,
     snaps: &[HallSnapshot],
     file: Option<&(serde_json::Value, Option<CalibratedModel>)>,
@@ -78,9 +80,9 @@ pub(super) fn run(
             .map_or_else(|| "openfoam".into(), |d| d.join("openfoam")),
     };
     let settings = of_args.settings(&root, grid_or_recorded(args.grid_m, of_recorded))?;
-    super::openfoam_args::check_mesh(&hall, &args.hall, settings.grid_m, args.grid_m.is_some())?;
+    super::openfoam_args::check_mesh(&hall, hall_path, settings.grid_m, args.grid_m.is_some())?;
     let model = OpenFoamModel::new(&hall, settings)
-        .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?;
+        .map_err(|e| of_err(e.in_hall_file(&hall_path.display().to_string())))?;
     super::out_dir::note_interrupted_runs(remove_interrupted_runs(&model.settings().cache_root));
     let space = model.layout().space();
     let params = match (&args.params, file) {
