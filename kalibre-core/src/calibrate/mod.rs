@@ -31,7 +31,7 @@ pub use settings::{Settings, MIN_FOCUS, MIN_ROBUST_NU, MIN_TRUST_REGION};
 pub use slopes::UncertaintySlopes;
 pub use uncertainty::{
     ParamUncertainty, CONVERGED_SHIFT_STDS, IDENTIFIED_REL_STD, REPEATED_RESIDUAL_ICC,
-    UNCERTAINTY_MAX_PARAMS,
+    SETTLED_REL_SHIFT, UNCERTAINTY_MAX_PARAMS,
 };
 pub use unreached::{UnreachedBest, UnreachedRuns};
 

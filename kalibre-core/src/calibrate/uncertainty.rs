@@ -57,6 +57,10 @@ const FREE_STD_UNIT: f64 = 0.5;
 /// A parameter whose Gauss-Newton shift exceeds this many standard deviations is not at
 /// the data's optimum, so its value is not claimed.
 pub const CONVERGED_SHIFT_STDS: f64 = 2.0;
+/// A shift within this share of the value is settled whatever the spread: a noise-free
+/// fit's spread can be smaller than the model's own numerical precision, and a shift at
+/// that precision says nothing about convergence.
+pub const SETTLED_REL_SHIFT: f64 = 1e-4;
 
 /// How well the measurements determine one parameter at the best run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -103,10 +107,14 @@ impl ParamUncertainty {
     }
 
     /// Whether the best run sits where the linearised data point: the shift within
-    /// [`CONVERGED_SHIFT_STDS`] standard deviations (false without a spread or a shift).
+    /// [`CONVERGED_SHIFT_STDS`] standard deviations, or within [`SETTLED_REL_SHIFT`] of
+    /// the value (false without a spread or a shift).
     pub fn settled(&self) -> bool {
         match (self.shift, self.std) {
-            (Some(d), Some(sd)) => d.abs() <= CONVERGED_SHIFT_STDS * sd,
+            (Some(d), Some(sd)) => {
+                d.abs() <= CONVERGED_SHIFT_STDS * sd
+                    || d.abs() <= SETTLED_REL_SHIFT * self.value.abs()
+            }
             _ => false,
         }
     }
@@ -448,6 +456,19 @@ mod tests {
             assert!(p.identified, "{p:?}");
             assert!(shift.abs() <= std, "{p:?}");
         }
+    }
+
+    #[test]
+    fn a_shift_at_the_models_precision_is_settled_whatever_the_spread() {
+        // A noise-free fit: the spread is 2e-6 of the value and the shift 6e-6, three
+        // spreads but far below any precision the value is quoted to.
+        let (s, obs, space) = setup([0.6, 0.4]);
+        let mut p = estimate_at(&s, &obs, &space, [0.6, 0.4]).remove(0);
+        p.std = Some(2e-6 * p.value);
+        p.shift = Some(6e-6 * p.value);
+        assert!(p.settled(), "{p:?}");
+        p.shift = Some(2e-3 * p.value);
+        assert!(!p.settled(), "{p:?}");
     }
 
     #[test]

@@ -60,12 +60,13 @@ fn print_uncertainty(report: &Report, style: Style) {
         ""
     };
     println!(
-        "  {:<28} {} of {} (one standard deviation{with_numerics} within {:.0}%, and the data point within {:.0} of them)",
+        "  {:<28} {} of {} (one standard deviation{with_numerics} within {:.0}%, and the data point within {:.0} of them or {:.2}% of the value)",
         "parameters identified",
         u.len() - poor.len(),
         u.len(),
         100.0 * kalibre_core::calibrate::IDENTIFIED_REL_STD,
-        kalibre_core::calibrate::CONVERGED_SHIFT_STDS
+        kalibre_core::calibrate::CONVERGED_SHIFT_STDS,
+        100.0 * kalibre_core::calibrate::SETTLED_REL_SHIFT
     );
     // The uncertainty leaves out what equal bounds fix; said, so none seems forgotten.
     let fixed: Vec<&str> = (report.best.params.0.iter())
