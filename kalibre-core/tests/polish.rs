@@ -214,3 +214,36 @@ fn the_report_says_when_the_residual_repeats_at_the_same_outputs() {
     let r = icc(&noisy);
     assert!(r < REPEATED_RESIDUAL_ICC, "{r}");
 }
+
+/// A model that fails just beyond the truth (`a > 1.75`, truth 1.7): once the best point
+/// is within a difference step of the edge, the forward difference in `a` fails. The
+/// polish takes it on the other side instead of leaving `a` where it is, and reaches the
+/// truth (it stalled at a = 1.718, MAE 0.023, taking a zero slope for `a`).
+#[test]
+fn a_difference_that_fails_is_taken_on_the_other_side() {
+    let model = Poly::failing(FailZone {
+        a_err: 1.75,
+        b_nan: f64::NEG_INFINITY,
+    });
+    let (obs, space) = (observations(), space());
+    let settings = Settings {
+        seed: 5,
+        max_iterations: 1,
+        polish_iterations: 10,
+        ..Settings::default()
+    };
+    let report = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_settings(settings)
+        .run()
+        .unwrap();
+    assert!(
+        report.runs.failed > 0,
+        "the edge was reached: {:?}",
+        report.runs
+    );
+    assert!(report.best.mae_c < 1e-4, "best MAE {}", report.best.mae_c);
+    for (name, truth) in ["a", "b"].iter().zip(TRUTH) {
+        let got = report.best.params.get(name).unwrap();
+        assert!((got - truth).abs() < 1e-3, "{name}: {got} vs {truth}");
+    }
+}

@@ -209,25 +209,61 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 model_s += t.elapsed().as_secs_f64();
                 let mut cols = Vec::with_capacity(dim);
                 let mut complete = true;
+                let all_ran = |res: &[RunResult]| -> Option<Vec<Vec<f64>>> {
+                    res.iter()
+                        .map(|r| r.result.as_ref().ok().map(|o| o.values.clone()))
+                        .collect()
+                };
+                let column = |out: &[Vec<f64>], step: f64| -> Vec<f64> {
+                    (residuals(obs, out).iter().zip(&r0))
+                        .map(|(r, r0)| (r0 - r) / step)
+                        .collect()
+                };
+                let mut failed = Vec::new();
                 for (i, res) in results.into_iter().enumerate() {
-                    let ok: Option<Vec<Vec<f64>>> = res
-                        .iter()
-                        .map(|r: &RunResult| r.result.as_ref().ok().map(|o| o.values.clone()))
-                        .collect();
-                    // A failed difference leaves its parameter where it is (a zero column).
-                    let col = match &ok {
-                        Some(out) => residuals(obs, out)
-                            .iter()
-                            .zip(&r0)
-                            .map(|(r, r0)| (r0 - r) / steps[i])
-                            .collect(),
+                    cols.push(match all_ran(&res) {
+                        Some(out) => column(&out, steps[i]),
                         None => {
-                            complete = false;
+                            failed.push(i);
                             vec![0.0; r0.len()]
                         }
-                    };
-                    cols.push(col);
+                    });
                     state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res)?;
+                }
+                // A difference that failed (the model cannot run just beyond the best
+                // point: a diverging solver at the box's edge, say) is taken on the other
+                // side, so that the polish does not stall there for want of that slope.
+                let other_side: Vec<(usize, Vec<f64>)> = failed
+                    .iter()
+                    .filter_map(|&i| {
+                        let mut u = u0.clone();
+                        u[i] = u0[i] - steps[i];
+                        (0.0..=1.0).contains(&u[i]).then_some((i, u))
+                    })
+                    .collect();
+                if !other_side.is_empty()
+                    && self
+                        .budget_spent(state, other_side.len() * n_snap)
+                        .is_none()
+                {
+                    let phys: Vec<Vec<f64>> = (other_side.iter())
+                        .map(|(_, u)| space.from_unit(u))
+                        .collect::<Result<_>>()?;
+                    let t = Instant::now();
+                    let results = self.runner.run(iteration, &phys)?;
+                    model_s += t.elapsed().as_secs_f64();
+                    for (((i, u), p), res) in other_side.iter().zip(&phys).zip(results) {
+                        if let Some(out) = all_ran(&res) {
+                            cols[*i] = column(&out, -steps[*i]);
+                            failed.retain(|f| f != i);
+                        }
+                        state.absorb(self.validator, obs, iteration, u, p, res)?;
+                    }
+                }
+                // A difference failed on both sides leaves its parameter where it is (a
+                // zero column).
+                if !failed.is_empty() {
+                    complete = false;
                 }
                 jac = Some(Linearisation {
                     jacobian: ModelJacobian {
