@@ -342,9 +342,10 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report, style: 
     eprintln!(
         "kalibre: warning: {}: {} journaled run(s) of this model were not used by this \
          calibration (it stopped: {}); among them, line {} has MAE {}, better than \
-         its best, {}. They are kept: the settings that made them (with a larger \
-         budget, --max-runs, --iterations or --max-wall-s, where it stopped early) replay \
-         them without running the model again",
+         its best, {}. They are kept: the calibration that made them (its budget, \
+         --max-runs, --iterations or --max-wall-s, where this one stopped early; or its \
+         seed, settings or initial values, where those changed since) replays them \
+         without running the model again",
         journal.display(),
         u.runs,
         report.stop_reason,
