@@ -186,6 +186,23 @@ fn a_model_of_your_own_is_calibrated_and_resumed() {
     std::fs::write(&script, text + "# edited\n").unwrap();
     let o = run(&mut calibrate(&config, &measurements, &out));
     assert_input_error(&o, &format!("holds {total} runs of another model"));
+    // ... and the refusal names what changed: the script (a fingerprint file), not the
+    // template.
+    let said = stderr(&o);
+    assert!(
+        said.contains("since they ran, these changed: ") && said.contains("hx.py"),
+        "{said}"
+    );
+    assert!(!said.contains("template"), "{said}");
+    let template = dir.join("params.in.tmpl");
+    let text = std::fs::read_to_string(&template).unwrap();
+    std::fs::write(&template, text + "# edited\n").unwrap();
+    let o = run(&mut calibrate(&config, &measurements, &out));
+    let said = stderr(&o);
+    assert!(
+        said.contains("hx.py") && said.contains("template "),
+        "{said}"
+    );
 }
 
 /// What does not fit a model of your own is refused before any run, by name.

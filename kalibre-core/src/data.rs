@@ -102,7 +102,10 @@ impl<S> Observations<S> {
     /// measurements divided by them, so its errors are in scale units, and outputs of
     /// different units (a pressure in Pa beside a temperature in C) count alike. The
     /// journal keeps the model's outputs as they ran, so a change of scales repeats no
-    /// run. Every scale must be finite and positive, where measured or not.
+    /// run. The surrogate is fitted to the scaled outputs too: a surrogate of a physical
+    /// form must allow for that, and one that pools snapshots whose scenarios compare
+    /// equal ([`crate::GaussianProcess`]) needs them on equal scales. Every scale must be
+    /// finite and positive, where measured or not.
     ///
     /// ```
     /// use kalibre_core::{Observations, OutputInfo, Snapshot};
@@ -141,6 +144,17 @@ impl<S> Observations<S> {
                     "snapshot `{}`, output `{}`: scale {v} is not a finite positive number",
                     snap.label, self.outputs[k].name
                 )));
+            }
+        }
+        for (snap, row) in self.snapshots.iter().zip(&scales) {
+            for ((m, scale), info) in snap.measured.iter().zip(row).zip(&self.outputs) {
+                if let Some(v) = m.filter(|v| !(v / scale).is_finite()) {
+                    return Err(Error::Mismatch(format!(
+                        "snapshot `{}`, output `{}`: measured value {v} over its scale {scale:e} \
+                         is not finite",
+                        snap.label, info.name
+                    )));
+                }
             }
         }
         self.scales = Some(scales);
@@ -248,6 +262,12 @@ mod tests {
             let e = obs().with_scales(vec![vec![1.0, bad]]).unwrap_err();
             assert!(e.to_string().contains("output `b`: scale"), "{bad}: {e}");
         }
+        let e = obs().with_scales(vec![vec![1e-310, 1.0]]).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("over its scale 1e-310 is not finite"),
+            "{e}"
+        );
         let scaled = obs().with_scales(vec![vec![4.0, 2.0]]).unwrap();
         assert_eq!(scaled.scales(), Some(&[vec![4.0, 2.0]][..]));
         let n = scaled.normalised();

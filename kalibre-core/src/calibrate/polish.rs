@@ -241,9 +241,11 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                         (0.0..=1.0).contains(&u[i]).then_some((i, u))
                     })
                     .collect();
+                // Only with room left for the step as well: a slope without a step to take
+                // would only end the polish.
                 if !other_side.is_empty()
                     && self
-                        .budget_spent(state, other_side.len() * n_snap)
+                        .budget_spent(state, (other_side.len() + 1) * n_snap)
                         .is_none()
                 {
                     let phys: Vec<Vec<f64>> = (other_side.iter())

@@ -416,7 +416,7 @@ impl Report {
             Some(h) if h.training_samples == 0 => polish,
             None if self.best.iteration == 0 => "the initial design".to_string(),
             // A point the polish ran between its records (a finite-difference probe).
-            None if self.best.iteration > last_loop_iteration && last_loop_iteration > 0 => polish,
+            None if self.best.iteration > last_loop_iteration => polish,
             _ => format!("iteration {}", self.best.iteration),
         }
     }

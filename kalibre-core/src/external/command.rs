@@ -8,6 +8,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use super::parse::OutputParser;
+use super::parts::Parts;
 use super::process::{STDERR_LOG, STDOUT_LOG};
 use super::rundir::RunDirs;
 use super::template::Template;
@@ -151,6 +152,8 @@ pub struct ExternalCommand<S = NamedScenario> {
     pub(crate) log_lines: usize,
     pub(crate) config_dir: Option<PathBuf>,
     pub(crate) fingerprint: String,
+    /// Each part of the fingerprint with its own digest ([`ExternalCommand::fingerprint_parts`]).
+    pub(crate) fingerprint_parts: Vec<(String, String)>,
     _scenario: PhantomData<fn(&S)>,
 }
 
@@ -197,6 +200,14 @@ impl<S> ExternalCommand<S> {
     /// Output names, in the order of the returned values.
     pub fn output_names(&self) -> &[String] {
         &self.output_names
+    }
+
+    /// The fingerprint's parts, each with its own digest: `program` (its path and, named
+    /// by path, its content), `args`, `env`, `template SOURCE`, `output`, `params`, and
+    /// each fingerprint file by its path. Kept beside a journal, they name what changed
+    /// when a later command's fingerprint differs ([`super::changed_parts`]).
+    pub fn fingerprint_parts(&self) -> &[(String, String)] {
+        &self.fingerprint_parts
     }
 
     /// Where run directories go.
@@ -363,8 +374,10 @@ impl CommandBuilder {
             return Err(set("program", "empty"));
         }
         let mut h = StableHasher::new();
+        let mut parts = Parts::default();
         h.field("kalibre.command/1")
             .field(self.program.as_os_str().as_encoded_bytes());
+        parts.field("program", self.program.as_os_str().as_encoded_bytes());
         // A program named by path is hashed, so editing the script invalidates old runs.
         if self.program.components().count() > 1 {
             let meta = std::fs::metadata(&self.program)
@@ -378,9 +391,11 @@ impl CommandBuilder {
             if meta.len() <= MAX_HASHED_PROGRAM {
                 let bytes = std::fs::read(&self.program)
                     .map_err(|e| ExternalError::io(&self.program, e))?;
+                parts.field("program", &bytes);
                 h.field(bytes);
             } else {
                 h.field(meta.len().to_le_bytes());
+                parts.field("program", meta.len().to_le_bytes());
             }
         }
         let timeout = self.timeout.ok_or_else(|| set("timeout_s", "required"))?;
@@ -410,6 +425,7 @@ impl CommandBuilder {
         for (i, a) in self.args.iter().enumerate() {
             let t = Template::parse(format!("args[{i}]"), a.clone())?;
             h.field(a);
+            parts.field("args", a);
             args.push(t);
         }
         let mut env = Vec::with_capacity(self.env.len());
@@ -424,6 +440,8 @@ impl CommandBuilder {
             }
             env.push((k.clone(), Template::parse(format!("env.{k}"), v.clone())?));
             h.field(k).field(v);
+            parts.field("env", k);
+            parts.field("env", v);
         }
 
         let reserved = [STDOUT_LOG, STDERR_LOG, RUN_RECORD];
@@ -460,6 +478,12 @@ impl CommandBuilder {
             };
             h.field(dest.as_os_str().as_encoded_bytes())
                 .field(template.text());
+            let part = match src {
+                TemplateSource::File(p) => format!("template {}", p.display()),
+                TemplateSource::Text(name, _) => format!("template {name}"),
+            };
+            parts.field(&part, dest.as_os_str().as_encoded_bytes());
+            parts.field(&part, template.text());
             templates.push(TemplateFile {
                 destination: dest.clone(),
                 template,
@@ -492,8 +516,16 @@ impl CommandBuilder {
         parser.check(&output_names)?;
         h.field(output_file.as_os_str().as_encoded_bytes())
             .field(parser.describe());
+        parts.field("output", output_file.as_os_str().as_encoded_bytes());
+        parts.field("output", parser.describe());
         for n in output_names.iter().chain(&self.param_names) {
             h.field(n);
+        }
+        for n in &output_names {
+            parts.field("output", n);
+        }
+        for n in &self.param_names {
+            parts.field("params", n);
         }
         for (i, f) in self.fingerprint_files.iter().enumerate() {
             let bytes = std::fs::read(f).map_err(|e| {
@@ -502,6 +534,7 @@ impl CommandBuilder {
                     format!("{}: {e}", f.display()),
                 )
             })?;
+            parts.field(&f.display().to_string(), &bytes);
             h.field(bytes);
         }
 
@@ -522,6 +555,7 @@ impl CommandBuilder {
             log_lines: self.log_lines,
             config_dir: self.config_dir,
             fingerprint: format!("command/{:032x}", h.finish()),
+            fingerprint_parts: parts.finish(),
             _scenario: PhantomData,
         })
     }

@@ -18,6 +18,7 @@ mod command;
 mod config;
 mod groups;
 mod parse;
+mod parts;
 mod process;
 mod program;
 mod run;
@@ -36,6 +37,7 @@ pub use command::{
 pub use config::CommandModelConfig;
 pub use groups::{end_runs_with_kalibre, set_stop_message, signal_runs, stopping, StopMessage};
 pub use parse::OutputParser;
+pub use parts::changed_parts;
 pub use process::{log_tail, run_process, ProcessEnd, ProcessOutcome, ProcessSpec};
 pub use rundir::{RunDir, RunDirs};
 pub use template::{Format, Template, TemplateValue, Variables};

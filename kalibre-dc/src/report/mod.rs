@@ -225,9 +225,9 @@ pub fn calibration_html(
             Some(u) => match (u.std, u.rel_std) {
                 (None, _) => "not determined by the measurements".to_string(),
                 (Some(_), Some(r)) if !u.settled() => format!(
-                    "&plusmn;{:.0}% (not settled: the measurements point {:+.0}% away)",
-                    100.0 * r,
-                    100.0 * u.rel_shift().unwrap_or(f64::NAN)
+                    "&plusmn;{}% (not settled: the measurements point {}% away)",
+                    percent(100.0 * r, false),
+                    percent(100.0 * u.rel_shift().unwrap_or(f64::NAN), true)
                 ),
                 (Some(_), Some(r)) if !u.identified => {
                     format!("&plusmn;{:.0}% (poorly identified)", 100.0 * r)
@@ -384,4 +384,36 @@ pub fn grid_weighting_text(report: &Report) -> Option<String> {
             weights.len()
         )
     })
+}
+
+/// A percentage as the uncertainty's notes give it: whole percents from 1 % up, two
+/// significant digits below (a shift of 0.04 % is not "0 %"), with a sign if `signed`.
+pub fn percent(pct: f64, signed: bool) -> String {
+    let a = pct.abs();
+    let text = if !a.is_finite() || a >= 1.0 || a == 0.0 {
+        format!("{a:.0}")
+    } else {
+        let decimals = (1 - a.log10().floor() as i32).clamp(1, 12) as usize;
+        format!("{a:.decimals$}")
+    };
+    match (signed, pct < 0.0) {
+        (true, true) => format!("-{text}"),
+        (true, false) => format!("+{text}"),
+        (false, _) => text,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::percent;
+
+    #[test]
+    fn small_percentages_keep_two_significant_digits() {
+        assert_eq!(percent(12.4, false), "12");
+        assert_eq!(percent(-3.0, true), "-3");
+        assert_eq!(percent(0.2, true), "+0.20");
+        assert_eq!(percent(0.0421, false), "0.042");
+        assert_eq!(percent(-0.00061, true), "-0.00061");
+        assert_eq!(percent(0.0, true), "+0");
+    }
 }

@@ -16,6 +16,25 @@ pub(super) fn field_count(fields: &[&str]) -> String {
     }
 }
 
+/// [`field_count`] for `measurements.csv`, whose header has `columns` fields (3, or 4
+/// with `sd`): a decimal comma in its value (or sd), or an sd under a 3-column header.
+pub(super) fn measurement_field_count(fields: &[&str], columns: usize) -> String {
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    let signed = |s: &str| digits(s.trim_start_matches(['-', '+']));
+    if fields.len() == columns + 1 && signed(fields[columns - 1]) && digits(fields[columns]) {
+        comma(
+            ": ",
+            fields[columns - 1],
+            fields[columns],
+            "reads as two fields",
+        )
+    } else if columns == 3 && fields.len() == 4 {
+        "; a standard uncertainty? name it in the header: scenario,output,value,sd".to_string()
+    } else {
+        String::new()
+    }
+}
+
 /// The hint for `a,b`, a value with a comma: a decimal comma, or with three digits after
 /// it a thousands separator as likely (`4,200` W).
 /// `lead` starts it (`: ` or `; `, as the message before it reads).

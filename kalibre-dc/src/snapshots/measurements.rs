@@ -125,7 +125,7 @@ pub fn parse_measurements(
                     "expected {columns} fields ({}), found {}{}",
                     HEADER[..columns].join(","),
                     fields.len(),
-                    hints::field_count(&fields)
+                    hints::measurement_field_count(&fields, columns)
                 ),
             ));
         }
@@ -272,6 +272,18 @@ mod tests {
             (
                 "scenario,output,value,sd\nwinter,t_in,1\n",
                 "line 2: expected 4 fields",
+            ),
+            (
+                "scenario,output,value,sd\nwinter,t_in,1,5,2\n",
+                "a decimal comma? `5,2`",
+            ),
+            (
+                "scenario,output,value\nwinter,t_in,30,5\n",
+                "a decimal comma? `30,5`",
+            ),
+            (
+                "scenario,output,value\nwinter,t_in,30,0.5\n",
+                "name it in the header: scenario,output,value,sd",
             ),
             (
                 "scenario,output,value,sd\nwinter,t_in,1,0\n",

@@ -40,10 +40,6 @@ pub(super) fn clause(
         if run["status"] != "failed" || run["fingerprint"] != fingerprint {
             continue;
         }
-        if let Ok(e) = serde_json::from_value::<kalibre_core::ModelError>(run["error"].clone()) {
-            let reason: String = e.to_string().chars().take(REASON_CHARS).collect();
-            *reasons.entry(reason).or_default() += 1;
-        }
         let same_names = run["param_names"].as_array().is_some_and(|n| {
             n.iter()
                 .map(|v| v.as_str())
@@ -53,6 +49,10 @@ pub(super) fn clause(
             continue;
         };
         failed += 1;
+        if let Ok(e) = serde_json::from_value::<kalibre_core::ModelError>(run["error"].clone()) {
+            let reason: String = e.to_string().chars().take(REASON_CHARS).collect();
+            *reasons.entry(reason).or_default() += 1;
+        }
         let mut here = false;
         for (i, (p, v)) in space.params().iter().zip(params).enumerate() {
             let Some(v) = v.as_f64() else { continue };
@@ -72,7 +72,7 @@ pub(super) fn clause(
         }
         at_bound += usize::from(here);
     }
-    // The most common reason; of equals, the first in order.
+    // The most common reason; of equals, the first in the reasons' alphabetical order.
     let common = reasons
         .iter()
         .fold(None::<(&String, usize)>, |best, (r, n)| match best {
@@ -80,12 +80,12 @@ pub(super) fn clause(
             _ => Some((r, *n)),
         })
         .map(|(reason, n)| {
-            let of = if n == failed {
-                format!("all {failed}")
-            } else {
-                format!("{n} of the {failed}")
+            let of = match (n, failed) {
+                (1, 1) => "the one failed run".to_string(),
+                (n, f) if n == f => format!("all {f} failed runs"),
+                (n, f) => format!("{n} of the {f} failed runs"),
             };
-            format!("{of} failed runs in the journal: {reason}")
+            format!("{of} in the journal: {reason}")
         });
     let Some(most) = bounds.values().map(|(n, _)| *n).max() else {
         return common;
@@ -175,7 +175,7 @@ mod tests {
         write(&[line("failed", "m", [1.0, 0.4])]);
         assert_eq!(
             clause(&journal, "m", &space, "hall.json", false).as_deref(),
-            Some("all 1 failed runs in the journal: model run timed out after 3 s")
+            Some("the one failed run in the journal: model run timed out after 3 s")
         );
         write(&[line("ok", "m", [1.0, 0.4])]);
         assert_eq!(clause(&journal, "m", &space, "hall.json", false), None);

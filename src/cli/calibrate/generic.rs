@@ -20,7 +20,11 @@ use super::summary::{print_summary, Style};
 use super::{CalibrateArgs, ModelArg};
 
 /// What a calibration of a model of your own writes in `--out`.
-const OUT_FILES: [&str; 2] = ["runs.jsonl", "report.json"];
+const OUT_FILES: [&str; 3] = ["runs.jsonl", "report.json", MODEL_PARTS];
+
+/// Beside the journal: the digest of each part of the model's fingerprint, so that a
+/// later command of another fingerprint is told which parts changed.
+const MODEL_PARTS: &str = "model-parts.json";
 
 /// Flags that describe a hall, its built-in simulator or its surrogate: refused here
 /// rather than ignored.
@@ -262,7 +266,10 @@ fn print_per_output(rows: &[OutputError]) {
 /// `v` to 4 significant digits, in plain notation where that stays short.
 fn significant(v: f64) -> String {
     let a = v.abs();
-    if v == 0.0 || (1e-3..1e6).contains(&a) {
+    if v == 0.0 {
+        return "0".into();
+    }
+    if (1e-3..1e6).contains(&a) {
         let decimals = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
         format!("{v:.decimals$}")
     } else {
@@ -425,20 +432,81 @@ fn open_journal(
     replay_failed: bool,
 ) -> CliResult<RunStore> {
     let fingerprint = cfg.command.fingerprint();
-    let store = RunStore::open_with(journal, fingerprint, replay_failed)
+    let store = RunStore::open_with(journal, fingerprint.clone(), replay_failed)
         .map_err(|e| CliError::Input(e.to_string()))?;
+    let parts_path = journal.with_file_name(MODEL_PARTS);
     let other = store.load_report().other_fingerprint;
     if other > 0 {
+        let what = match recorded_parts(&parts_path) {
+            Some((then, parts)) if then != fingerprint => {
+                let changed =
+                    kalibre_core::external::changed_parts(&parts, cfg.command.fingerprint_parts());
+                match changed.is_empty() {
+                    true => None,
+                    false => Some(format!(
+                        "since they ran, these changed: {}",
+                        changed
+                            .iter()
+                            .map(|c| part_in_words(c))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )),
+                }
+            }
+            _ => None,
+        };
+        let what = what.unwrap_or_else(|| {
+            "its program, arguments, templates, outputs, parameters, or a file of \
+             fingerprint_files changed since they ran"
+                .to_string()
+        });
         return Err(CliError::Input(format!(
-            "{}: holds {other} runs of another model: {} (its program, arguments, \
-             templates, outputs, parameters, or a file of fingerprint_files) changed since \
-             they ran. Calibrate into another --out, or move the journal away to run them \
-             anew",
+            "{}: holds {other} runs of another model than {}: {what}. Calibrate into another \
+             --out, or move the journal away to run them anew",
             journal.display(),
             config.display()
         )));
     }
+    let record = serde_json::json!({
+        "fingerprint": fingerprint,
+        "parts": cfg.command.fingerprint_parts().iter()
+            .map(|(n, d)| serde_json::json!({ "part": n, "digest": d }))
+            .collect::<Vec<_>>(),
+    });
+    let text = serde_json::to_string_pretty(&record)
+        .map_err(|e| CliError::Run(format!("{}: {e}", parts_path.display())))?;
+    kalibre_core::write_atomic(&parts_path, text + "\n").map_err(|e| io_err(&parts_path, e))?;
     Ok(store)
+}
+
+/// The fingerprint and parts `model-parts.json` recorded, if it is there and readable
+/// (a journal from before it was written has none: the message is then the general one).
+fn recorded_parts(path: &Path) -> Option<(String, Vec<(String, String)>)> {
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()?;
+    let fingerprint = json["fingerprint"].as_str()?.to_string();
+    let parts = (json["parts"].as_array()?.iter())
+        .map(|p| {
+            Some((
+                p["part"].as_str()?.to_string(),
+                p["digest"].as_str()?.to_string(),
+            ))
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some((fingerprint, parts))
+}
+
+/// A fingerprint part as the refusal names it.
+fn part_in_words(part: &str) -> String {
+    match part {
+        "program" => "the program".into(),
+        "args" => "the arguments".into(),
+        "env" => "the environment".into(),
+        "output" => "the output (file, parser or names)".into(),
+        "params" => "the parameters' names".into(),
+        p if p.starts_with("template ") => p.to_string(),
+        file => file.to_string(),
+    }
 }
 
 #[cfg(test)]

@@ -44,10 +44,10 @@ fn print_uncertainty(report: &Report, style: Style) {
                 });
             match (p.rel_std, p.rel_shift()) {
                 (Some(r), Some(d)) if !p.settled() => format!(
-                    "{} (+/-{:.0}%{grid}, not settled: the data point {:+.0}% away)",
+                    "{} (+/-{}%{grid}, not settled: the data point {}% away)",
                     p.name,
-                    100.0 * r,
-                    100.0 * d
+                    kalibre_dc::report::percent(100.0 * r, false),
+                    kalibre_dc::report::percent(100.0 * d, true)
                 ),
                 (Some(r), _) => format!("{} (+/-{:.0}%{grid})", p.name, 100.0 * r),
                 (None, _) => format!("{} (free)", p.name),
