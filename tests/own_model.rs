@@ -228,6 +228,8 @@ fn a_model_of_your_own_refuses_what_does_not_fit() {
     // Given at its hall default, a hall flag is still a hall's.
     let o = run(calibrate(&config, &measurements, &out).args(["--rise-range", "5,20"]));
     assert_input_error(&o, "--rise-range is about a hall");
+    let o = run(calibrate(&config, &measurements, &out).args(["--np", "2"]));
+    assert_input_error(&o, "--np is an OpenFOAM option: OpenFOAM solves a hall");
     let o = run(calibrate(&config, &measurements, &out).args(["--focus", "1"]));
     assert_input_error(&o, "--focus weighs a hall surrogate's runs");
     let typo = dir.join("typo.csv");

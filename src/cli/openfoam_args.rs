@@ -48,6 +48,12 @@ pub struct OpenFoamArgs {
 impl OpenFoamArgs {
     /// The first OpenFOAM option given, refused when the model is not OpenFOAM.
     pub fn refuse_unless(&self, openfoam: bool) -> CliResult {
+        self.refuse_unless_because(openfoam, "add --model openfoam")
+    }
+
+    /// [`Self::refuse_unless`], saying `why` of each flag given (for a model of your own,
+    /// which OpenFOAM does not solve, "add --model openfoam" would mislead).
+    pub fn refuse_unless_because(&self, openfoam: bool, why: &str) -> CliResult {
         let given = [
             ("--np", self.np.is_some()),
             ("--of-iterations", self.of_iterations.is_some()),
@@ -58,7 +64,7 @@ impl OpenFoamArgs {
             return Ok(());
         }
         super::simulate::refuse_given(&given, |flag| {
-            format!("{flag} is an OpenFOAM option: add --model openfoam")
+            format!("{flag} is an OpenFOAM option: {why}")
         })
     }
 

@@ -38,7 +38,10 @@ fn refuse_hall_flags(args: &SimulateArgs) -> CliResult {
              scenarios from model.toml: add one with the values to try"
         )));
     }
-    args.openfoam.refuse_unless(false)
+    args.openfoam.refuse_unless_because(
+        false,
+        "OpenFOAM solves a hall, and a model of your own runs its own program",
+    )
 }
 
 /// A CSV field, quoted where it must be.

@@ -73,7 +73,10 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
             "--model command needs --config model.toml (see docs/models.md)".into(),
         ));
     };
-    args.openfoam.refuse_unless(false)?;
+    args.openfoam.refuse_unless_because(
+        false,
+        "OpenFOAM solves a hall, and a model of your own runs its own program",
+    )?;
     refuse_hall_flags(args)?;
     let settings = super::settings::settings(args)?;
     let cfg = CommandModelConfig::load(config).map_err(|e| CliError::Input(e.to_string()))?;
