@@ -283,6 +283,20 @@ fn refuse_overwriting_inputs(args: &SimulateArgs, vtk_files: &[(String, PathBuf)
     )
 }
 
+/// The flags about a solve's fields, servers and grid, each with whether it was given:
+/// what the built-in simulator and OpenFOAM give and a command's readings do not.
+pub(super) fn field_and_grid_flags(args: &SimulateArgs) -> [(&'static str, bool); 7] {
+    [
+        ("--vtk", args.vtk.is_some()),
+        ("--heat-sources", args.heat_sources.is_some()),
+        ("--grid-check", !args.grid_check.is_empty()),
+        ("--servers", args.servers.is_some()),
+        ("--inlet-limit-c", args.inlet_limit_c.is_some()),
+        ("--grid-m", args.grid_m.is_some()),
+        ("--of-dir", args.of_dir.is_some()),
+    ]
+}
+
 impl SimulateArgs {
     /// The model to run: `--model`'s, else the built-in simulator.
     pub(super) fn model(&self) -> SimulateModel {

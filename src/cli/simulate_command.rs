@@ -18,15 +18,7 @@ use super::{io_err, say, CliError, CliResult};
 /// The built-in simulator's options that a command's runs do not have, by flag: a
 /// command returns its sensors only, not the air of every server nor the fields.
 fn refuse_builtin_only(args: &SimulateArgs) -> CliResult {
-    let given = [
-        ("--vtk", args.vtk.is_some()),
-        ("--heat-sources", args.heat_sources.is_some()),
-        ("--grid-check", !args.grid_check.is_empty()),
-        ("--servers", args.servers.is_some()),
-        ("--inlet-limit-c", args.inlet_limit_c.is_some()),
-        ("--grid-m", args.grid_m.is_some()),
-        ("--of-dir", args.of_dir.is_some()),
-    ];
+    let given = super::simulate::field_and_grid_flags(args);
     super::simulate::refuse_given(&given, |flag| {
         format!(
             "{flag} is not available with --model command: the command returns the sensors' \

@@ -17,15 +17,7 @@ use super::{io_err, say, CliError, CliResult};
 /// Flags about a hall (its servers, fields, grid, what-ifs) or OpenFOAM: refused here
 /// rather than ignored.
 fn refuse_hall_flags(args: &SimulateArgs) -> CliResult {
-    let given = [
-        ("--vtk", args.vtk.is_some()),
-        ("--heat-sources", args.heat_sources.is_some()),
-        ("--grid-check", !args.grid_check.is_empty()),
-        ("--servers", args.servers.is_some()),
-        ("--inlet-limit-c", args.inlet_limit_c.is_some()),
-        ("--grid-m", args.grid_m.is_some()),
-        ("--of-dir", args.of_dir.is_some()),
-    ];
+    let given = super::simulate::field_and_grid_flags(args);
     refuse_given(&given, |flag| {
         format!(
             "{flag} is about a hall; without --hall, simulate runs a model of your own at \
