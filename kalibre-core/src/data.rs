@@ -135,19 +135,14 @@ impl<S> Observations<S> {
                     self.outputs.len()
                 )));
             }
-            if let Some((k, v)) = row
-                .iter()
-                .enumerate()
-                .find(|(_, v)| !(v.is_finite() && **v > 0.0))
-            {
-                return Err(Error::Mismatch(format!(
-                    "snapshot `{}`, output `{}`: scale {v} is not a finite positive number",
-                    snap.label, self.outputs[k].name
-                )));
-            }
-        }
-        for (snap, row) in self.snapshots.iter().zip(&scales) {
             for ((m, scale), info) in snap.measured.iter().zip(row).zip(&self.outputs) {
+                if !(scale.is_finite() && *scale > 0.0) {
+                    return Err(Error::Mismatch(format!(
+                        "snapshot `{}`, output `{}`: scale {scale} is not a finite positive \
+                         number",
+                        snap.label, info.name
+                    )));
+                }
                 if let Some(v) = m.filter(|v| !(v / scale).is_finite()) {
                     return Err(Error::Mismatch(format!(
                         "snapshot `{}`, output `{}`: measured value {v} over its scale {scale:e} \

@@ -11,6 +11,7 @@ mod inlets;
 mod likelihood;
 mod openfoam_args;
 mod out_dir;
+mod own_model;
 mod params_file;
 mod plausible;
 mod same_file;
@@ -133,4 +134,18 @@ pub(crate) fn is_stdout(path: &std::path::Path) -> bool {
         let _ = path;
         false
     }
+}
+
+/// `v` to `digits` significant figures, without an exponent (a flow of 0.00356 m3/s
+/// reads as such, not as 0.0035550000000000004) unless it would take many digits.
+pub(crate) fn significant(v: f64, digits: usize) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return v.to_string();
+    }
+    if !(1e-4..1e6).contains(&v.abs()) {
+        let decimals = digits.saturating_sub(1);
+        return format!("{v:.decimals$e}");
+    }
+    let decimals = (digits as i32 - 1 - v.abs().log10().floor() as i32).max(0) as usize;
+    format!("{v:.decimals$}")
 }

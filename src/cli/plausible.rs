@@ -256,17 +256,9 @@ pub(crate) fn warn_what_if_beyond_halls<'a>(
     }
 }
 
-/// `v` to three significant figures, without an exponent (a flow of 0.00356 m3/s reads
-/// as such, not as 0.0035550000000000004) unless it would take many digits.
+/// `v` to three significant figures ([`super::significant`]).
 fn significant(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
-        return v.to_string();
-    }
-    if !(1e-4..1e6).contains(&v.abs()) {
-        return format!("{v:.2e}");
-    }
-    let decimals = (2 - v.abs().log10().floor() as i32).max(0) as usize;
-    format!("{v:.decimals$}")
+    super::significant(v, 3)
 }
 
 /// Warns when the built-in simulator's grid of `cell_m` moves equipment of the hall at
@@ -359,5 +351,16 @@ mod tests {
         assert_eq!(super::significant(51730.0), "51730");
         assert_eq!(super::significant(3.15), "3.15");
         assert_eq!(super::significant(12.34), "12.3");
+    }
+
+    #[test]
+    fn any_number_of_significant_figures() {
+        use crate::cli::significant;
+        assert_eq!(significant(0.0, 4), "0");
+        assert_eq!(significant(13500.0, 4), "13500");
+        assert_eq!(significant(18.5, 4), "18.50");
+        assert_eq!(significant(5.0002475, 4), "5.000");
+        assert_eq!(significant(3.0688e-7, 4), "3.069e-7");
+        assert_eq!(significant(f64::INFINITY, 4), "inf");
     }
 }

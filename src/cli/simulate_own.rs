@@ -6,7 +6,6 @@
 
 use std::time::Instant;
 
-use kalibre_core::external::CommandModelConfig;
 use kalibre_core::Model;
 
 use super::params_file::{load_params, read_params_json};
@@ -30,10 +29,7 @@ fn refuse_hall_flags(args: &SimulateArgs) -> CliResult {
              scenarios from model.toml: add one with the values to try"
         )));
     }
-    args.openfoam.refuse_unless_because(
-        false,
-        "OpenFOAM solves a hall, and a model of your own runs its own program",
-    )
+    super::own_model::refuse_openfoam_flags(&args.openfoam)
 }
 
 /// A CSV field, quoted where it must be.
@@ -55,17 +51,10 @@ pub(super) fn run(args: &SimulateArgs) -> CliResult {
             "--model command needs --config model.toml (see docs/models.md)".into(),
         ));
     };
-    let cfg = CommandModelConfig::load(path).map_err(|e| CliError::Input(e.to_string()))?;
-    cfg.command
-        .check_program()
-        .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
-    if cfg.scenarios.is_empty() {
-        return Err(CliError::Input(format!(
-            "{}: no [[scenarios]] to run the model at (each a `label` and its `variables`, \
-             docs/models.md)",
-            path.display()
-        )));
-    }
+    let cfg = super::own_model::load_config(
+        path,
+        " to run the model at (each a `label` and its `variables`, docs/models.md)",
+    )?;
     super::out_dir::check_out_file("--out", &args.out)?;
     let params = match &args.params {
         Some(file) => {

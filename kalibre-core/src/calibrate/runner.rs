@@ -32,6 +32,11 @@ pub(crate) struct Runner<'r, M: Model> {
 }
 
 impl<M: Model> Runner<'_, M> {
+    /// Snapshot `s`'s outputs as the loop compares them ([`scaled`]).
+    fn scaled(&self, s: usize, outputs: Outputs) -> Outputs {
+        scaled(outputs, self.scales.map(|sc| &sc[s][..]))
+    }
+
     /// Runs every point at every snapshot; `out[point][snapshot]`, in order whatever the
     /// thread count.
     pub fn run(&self, iteration: usize, points: &[Vec<f64>]) -> Result<Vec<Vec<RunResult>>> {
@@ -114,7 +119,7 @@ impl<M: Model> Runner<'_, M> {
                 wall_s: rec.wall_s,
             });
             return Ok(RunResult {
-                result: result.map(|o| scaled(o, self.scales.map(|sc| &sc[s][..]))),
+                result: result.map(|o| self.scaled(s, o)),
                 cached: true,
             });
         }
@@ -162,7 +167,7 @@ impl<M: Model> Runner<'_, M> {
             )));
         }
         Ok(RunResult {
-            result: result.map(|o| scaled(o, self.scales.map(|sc| &sc[s][..]))),
+            result: result.map(|o| self.scaled(s, o)),
             cached: false,
         })
     }
@@ -171,16 +176,19 @@ impl<M: Model> Runner<'_, M> {
 /// `outputs` (values and spread) divided by their measurements' `scales`, if any.
 pub(crate) fn scaled(mut outputs: Outputs, scales: Option<&[f64]>) -> Outputs {
     if let Some(scales) = scales {
-        for (v, scale) in outputs.values.iter_mut().zip(scales) {
-            *v /= scale;
-        }
+        divide(&mut outputs.values, scales);
         if let Some(spread) = &mut outputs.spread {
-            for (v, scale) in spread.iter_mut().zip(scales) {
-                *v /= scale;
-            }
+            divide(spread, scales);
         }
     }
     outputs
+}
+
+/// Each of `values` divided by its scale: one snapshot's outputs in scale units.
+pub(crate) fn divide(values: &mut [f64], scales: &[f64]) {
+    for (v, scale) in values.iter_mut().zip(scales) {
+        *v /= scale;
+    }
 }
 
 /// The snapshots at which every point of `results` (one row per point, one run per

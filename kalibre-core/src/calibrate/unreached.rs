@@ -93,12 +93,8 @@ pub(crate) fn summarise<S, V: Validator>(
             continue;
         };
         // Journaled as they ran; judged, as the loop judged its runs, in scale units.
-        if let Some(scales) = scales {
-            for (row, sc) in outputs.iter_mut().zip(scales) {
-                for (v, s) in row.iter_mut().zip(sc) {
-                    *v /= s;
-                }
-            }
+        for (row, sc) in outputs.iter_mut().zip(scales.into_iter().flatten()) {
+            super::runner::divide(row, sc);
         }
         if check_prediction_shape(observations, &outputs).is_err() {
             continue;

@@ -5,34 +5,35 @@
 /// Why a data row has other than 4 fields, where the fields show it: a decimal comma
 /// (`17,5` read as two fields), or columns an export added. Empty when nothing shows.
 pub(super) fn field_count(fields: &[&str]) -> String {
+    split_decimal(fields, 4).unwrap_or_else(|| {
+        if fields.len() > 4 {
+            "; an export's extra columns? kalibre reads exactly snapshot,kind,id,value".into()
+        } else {
+            String::new()
+        }
+    })
+}
+
+/// The hint for one field too many whose last two read as a number split at a comma
+/// (`30,5`), in a file of `columns` columns whose last is a number.
+fn split_decimal(fields: &[&str], columns: usize) -> Option<String> {
     let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
     let signed = |s: &str| digits(s.trim_start_matches(['-', '+']));
-    if fields.len() == 5 && signed(fields[3]) && digits(fields[4]) {
-        comma(": ", fields[3], fields[4], "reads as two fields")
-    } else if fields.len() > 4 {
-        "; an export's extra columns? kalibre reads exactly snapshot,kind,id,value".to_string()
-    } else {
-        String::new()
-    }
+    let (a, b) = (fields.get(columns - 1)?, fields.get(columns)?);
+    (fields.len() == columns + 1 && signed(a) && digits(b))
+        .then(|| comma(": ", a, b, "reads as two fields"))
 }
 
 /// [`field_count`] for `measurements.csv`, whose header has `columns` fields (3, or 4
 /// with `sd`): a decimal comma in its value (or sd), or an sd under a 3-column header.
 pub(super) fn measurement_field_count(fields: &[&str], columns: usize) -> String {
-    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
-    let signed = |s: &str| digits(s.trim_start_matches(['-', '+']));
-    if fields.len() == columns + 1 && signed(fields[columns - 1]) && digits(fields[columns]) {
-        comma(
-            ": ",
-            fields[columns - 1],
-            fields[columns],
-            "reads as two fields",
-        )
-    } else if columns == 3 && fields.len() == 4 {
-        "; a standard uncertainty? name it in the header: scenario,output,value,sd".to_string()
-    } else {
-        String::new()
-    }
+    split_decimal(fields, columns).unwrap_or_else(|| {
+        if columns == 3 && fields.len() == 4 {
+            "; a standard uncertainty? name it in the header: scenario,output,value,sd".into()
+        } else {
+            String::new()
+        }
+    })
 }
 
 /// The hint for `a,b`, a value with a comma: a decimal comma, or with three digits after

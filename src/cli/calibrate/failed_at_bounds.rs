@@ -75,11 +75,8 @@ pub(super) fn clause(
     // The most common reason; of equals, the first in the reasons' alphabetical order.
     let common = reasons
         .iter()
-        .fold(None::<(&String, usize)>, |best, (r, n)| match best {
-            Some((_, m)) if m >= *n => best,
-            _ => Some((r, *n)),
-        })
-        .map(|(reason, n)| {
+        .max_by(|(ra, na), (rb, nb)| na.cmp(nb).then(rb.cmp(ra)))
+        .map(|(reason, &n)| {
             let of = match (n, failed) {
                 (1, 1) => "the one failed run".to_string(),
                 (n, f) if n == f => format!("all {f} failed runs"),

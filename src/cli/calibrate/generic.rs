@@ -13,8 +13,9 @@ use kalibre_core::{
     Calibrator, GaussianProcess, Model, Observations, Observe, OutputInfo, RunStore, Snapshot,
 };
 
+use super::super::own_model;
 use super::super::simulate::refuse_given;
-use super::super::{io_err, with_threads, CliError, CliResult};
+use super::super::{io_err, significant, with_threads, CliError, CliResult};
 use super::progress::{Plan, Progress};
 use super::summary::{print_summary, Style};
 use super::{CalibrateArgs, ModelArg};
@@ -73,23 +74,14 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
             "--model command needs --config model.toml (see docs/models.md)".into(),
         ));
     };
-    args.openfoam.refuse_unless_because(
-        false,
-        "OpenFOAM solves a hall, and a model of your own runs its own program",
-    )?;
+    own_model::refuse_openfoam_flags(&args.openfoam)?;
     refuse_hall_flags(args)?;
     let settings = super::settings::settings(args)?;
-    let cfg = CommandModelConfig::load(config).map_err(|e| CliError::Input(e.to_string()))?;
-    cfg.command
-        .check_program()
-        .map_err(|e| CliError::Input(format!("{}: {e}", config.display())))?;
-    if cfg.scenarios.is_empty() {
-        return Err(CliError::Input(format!(
-            "{}: no [[scenarios]]: a model of your own is calibrated against measurements \
-             of its scenarios, each a `label` and its `variables` (docs/models.md)",
-            config.display()
-        )));
-    }
+    let cfg = own_model::load_config(
+        config,
+        ": a model of your own is calibrated against measurements of its scenarios, each a \
+         `label` and its `variables` (docs/models.md)",
+    )?;
     let observations = observations(&cfg, measurements)?;
     let scaled = observations.scales().is_some();
     let style = Style::Generic { scaled };
@@ -253,8 +245,8 @@ fn print_per_output(rows: &[OutputError]) {
         println!(
             "    {:<24} {:>12} {:>12} {:>9}",
             r.name,
-            significant(r.mae),
-            significant(r.max_abs),
+            significant(r.mae, 4),
+            significant(r.max_abs, 4),
             r.measured
         );
     }
@@ -263,20 +255,6 @@ fn print_per_output(rows: &[OutputError]) {
             "    ... and {} more (report.json, model.per_output)",
             rows.len() - PER_OUTPUT_SHOWN
         );
-    }
-}
-
-/// `v` to 4 significant digits, in plain notation where that stays short.
-fn significant(v: f64) -> String {
-    let a = v.abs();
-    if v == 0.0 {
-        return "0".into();
-    }
-    if (1e-3..1e6).contains(&a) {
-        let decimals = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
-        format!("{v:.decimals$}")
-    } else {
-        format!("{v:.3e}")
     }
 }
 
@@ -393,9 +371,9 @@ fn mixed_sizes_note(observations: &Observations<NamedScenario>) -> Option<String
              (`scenario,output,value,sd`, docs/models.md) to weigh them by it",
             large.1 / small.1,
             large.0,
-            significant(large.1),
+            significant(large.1, 4),
             small.0,
-            significant(small.1)
+            significant(small.1, 4)
         )
     })
 }
@@ -444,17 +422,10 @@ fn open_journal(
             Some((then, parts)) if then != fingerprint => {
                 let changed =
                     kalibre_core::external::changed_parts(&parts, cfg.command.fingerprint_parts());
-                match changed.is_empty() {
-                    true => None,
-                    false => Some(format!(
-                        "since they ran, these changed: {}",
-                        changed
-                            .iter()
-                            .map(|c| part_in_words(c))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    )),
-                }
+                (!changed.is_empty()).then(|| {
+                    let named: Vec<String> = changed.iter().map(|c| part_in_words(c)).collect();
+                    format!("since they ran, these changed: {}", named.join(", "))
+                })
             }
             _ => None,
         };
@@ -507,8 +478,8 @@ fn part_in_words(part: &str) -> String {
         "env" => "the environment".into(),
         "output" => "the output (file, parser or names)".into(),
         "params" => "the parameters' names".into(),
-        p if p.starts_with("template ") => p.to_string(),
-        file => file.to_string(),
+        // `template SOURCE`, or a fingerprint file by its path: as named.
+        other => other.to_string(),
     }
 }
 
