@@ -13,7 +13,7 @@ mod polish;
 mod propose;
 mod report;
 mod robust;
-mod runner;
+pub(crate) mod runner;
 mod settings;
 mod slopes;
 mod state;

@@ -40,7 +40,7 @@ pub fn measured_rows<S>(obs: &Observations<S>) -> Vec<RowInfo> {
 }
 
 /// Stacks per-snapshot blocks (`outputs x cols`) into the measured rows.
-fn stack_blocks<S>(
+pub(crate) fn stack_blocks<S>(
     obs: &Observations<S>,
     blocks: &[Array2<f64>],
     what: &str,

@@ -73,18 +73,23 @@
 //! # }
 //! ```
 
+mod candidate;
 mod heldout;
 mod identify;
 mod input;
 mod jackknife;
 pub(crate) mod linalg;
+mod linearise;
 mod outcome;
 pub(crate) mod robust;
 mod settings;
 mod weights;
 
+pub(crate) use candidate::group_candidates;
+pub use candidate::{CandidateEffect, CandidateParam};
 pub use heldout::HeldOutScheme;
 pub use input::{measured_rows, Hypothesis, HypothesisParam, Residuals, RowInfo};
+pub use linearise::{linearise, LineariseSettings, Linearised};
 pub use outcome::{Diagnosis, HypothesisResult, UnexplainedOutput, DIAGNOSIS_SCHEMA};
 pub use settings::DiagnoseSettings;
 

@@ -14,6 +14,7 @@ use toml::{Table, Value};
 use super::command::{ExternalCommand, FailureKind, KeepRuns, RetryPolicy};
 use super::parse::OutputParser;
 use super::{ExternalError, NamedScenario};
+use crate::diagnose::{group_candidates, CandidateEffect, CandidateParam};
 use crate::{Param, ParamSpace, Scale};
 
 /// The most `retries` a `model.toml` may ask for: a run that fails that often will not
@@ -25,8 +26,11 @@ pub const MAX_RETRIES: u32 = 100;
 pub struct CommandModelConfig {
     /// The model.
     pub command: ExternalCommand<NamedScenario>,
-    /// The calibrated parameters, in the order the model takes them.
+    /// The parameters, in the order the model takes them; a candidate effect's are fixed
+    /// at their `absent` values.
     pub space: ParamSpace,
+    /// The candidate effects (`[[params]]` with `absent`), which `kalibre diagnose` tests.
+    pub candidates: Vec<CandidateEffect>,
     /// The scenarios (operating conditions) listed in the file.
     pub scenarios: Vec<NamedScenario>,
 }
@@ -418,26 +422,33 @@ impl CommandModelConfig {
         if params.is_empty() {
             return Err(cx.err("params", "at least one [[params]] is needed"));
         }
+        let mut candidates = Vec::new();
         for (i, t) in params.iter().enumerate() {
             let p = format!("params[{i}]");
-            cx.keys(t, &p, &["name", "lower", "upper", "initial", "scale"])?;
+            cx.keys(
+                t,
+                &p,
+                &[
+                    "name", "lower", "upper", "initial", "scale", "absent", "effect",
+                ],
+            )?;
+            if let Some(c) = candidate_param(&cx, t, &p, space.dim())? {
+                let name = c.1.name.clone();
+                // Held where the effect is absent: a fixed parameter, on a linear scale
+                // since an absent value of 0 has no logarithm.
+                Param::new(name, c.1.absent, c.1.absent, c.1.absent, Scale::Linear)
+                    .and_then(|param| space.push(param))
+                    .map_err(|e| cx.err(p.clone(), e.to_string()))?;
+                candidates.push(c);
+                continue;
+            }
             let name = cx.req_str(t, &p, "name")?;
-            let scale = match cx.str(t, &p, "scale")?.as_deref() {
-                None | Some("linear") => Scale::Linear,
-                Some("log") => Scale::Log,
-                Some(s) => {
-                    return Err(cx.err(
-                        format!("{p}.scale"),
-                        format!("`{s}` is not `linear` or `log`"),
-                    ))
-                }
-            };
             let param = Param::new(
                 name,
                 cx.req_num(t, &p, "lower")?,
                 cx.req_num(t, &p, "upper")?,
                 cx.req_num(t, &p, "initial")?,
-                scale,
+                param_scale(&cx, t, &p)?,
             )
             .and_then(|param| space.push(param))
             .map_err(|e| cx.err(p.clone(), e.to_string()));
@@ -487,7 +498,87 @@ impl CommandModelConfig {
         Ok(CommandModelConfig {
             command,
             space,
+            candidates: group_candidates(candidates),
             scenarios,
         })
     }
+}
+
+/// `params[i].scale`: `linear` (the default) or `log`.
+fn param_scale(cx: &Ctx<'_>, t: &Table, p: &str) -> Result<Scale, ExternalError> {
+    match cx.str(t, p, "scale")?.as_deref() {
+        None | Some("linear") => Ok(Scale::Linear),
+        Some("log") => Ok(Scale::Log),
+        Some(s) => Err(cx.err(
+            format!("{p}.scale"),
+            format!("`{s}` is not `linear` or `log`"),
+        )),
+    }
+}
+
+/// A `[[params]]` entry with `absent`: a candidate effect's parameter (its effect's name
+/// with it), checked; `None` for a calibrated parameter. `index` is its place in the space.
+fn candidate_param(
+    cx: &Ctx<'_>,
+    t: &Table,
+    p: &str,
+    index: usize,
+) -> Result<Option<(String, CandidateParam)>, ExternalError> {
+    let effect = cx.str(t, p, "effect")?;
+    let Some(absent) = cx.num(t, p, "absent")? else {
+        return match effect {
+            Some(_) => Err(cx.err(
+                format!("{p}.effect"),
+                "names the effect of a candidate parameter: give `absent` too (the value at \
+                 which the effect is absent), or remove `effect`",
+            )),
+            None => Ok(None),
+        };
+    };
+    let name = cx.req_str(t, p, "name")?;
+    let (lower, upper) = (cx.req_num(t, p, "lower")?, cx.req_num(t, p, "upper")?);
+    if lower >= upper {
+        return Err(cx.err(
+            p,
+            format!(
+                "a candidate's range must be increasing, got lower {} and upper {}",
+                crate::number(lower),
+                crate::number(upper)
+            ),
+        ));
+    }
+    if !(lower..=upper).contains(&absent) {
+        return Err(cx.err(
+            format!("{p}.absent"),
+            format!(
+                "{} is outside [{}, {}]: the effect must be absent somewhere in its range",
+                crate::number(absent),
+                crate::number(lower),
+                crate::number(upper)
+            ),
+        ));
+    }
+    // Checked now, so that the entry still holds once `absent` is deleted to add it.
+    let scale = param_scale(cx, t, p)?;
+    if let Some(initial) = cx.num(t, p, "initial")? {
+        Param::new(name.clone(), lower, upper, initial, scale)
+            .map_err(|e| cx.err(p, e.to_string()))?;
+    }
+    let effect = match effect {
+        Some(e) if e.trim().is_empty() => {
+            return Err(cx.err(format!("{p}.effect"), "is empty"));
+        }
+        Some(e) => e,
+        None => name.clone(),
+    };
+    Ok(Some((
+        effect,
+        CandidateParam {
+            name,
+            index,
+            absent,
+            lower,
+            upper,
+        },
+    )))
 }

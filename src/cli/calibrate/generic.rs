@@ -183,6 +183,17 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     if let Some(rows) = &per_output {
         print_per_output(rows);
     }
+    if !cfg.candidates.is_empty() {
+        let names: Vec<&str> = cfg.candidates.iter().map(|c| c.name.as_str()).collect();
+        println!(
+            "  candidate effects {} are held absent; whether the data want them: kalibre \
+             diagnose --model command --config {} --measurements {} --calibration {}",
+            names.join(", "),
+            config.display(),
+            measurements.display(),
+            args.out.display()
+        );
+    }
     println!("wrote {}, {}", report_path.display(), journal.display());
     Ok(())
 }
@@ -274,7 +285,7 @@ fn per_output_json(rows: &[OutputError]) -> serde_json::Value {
 
 /// The measurements of `cfg`'s scenarios: those with no row are left out (and said so),
 /// as are outputs measured nowhere (noted).
-fn observations(
+pub(in crate::cli) fn observations(
     cfg: &CommandModelConfig,
     measurements: &Path,
 ) -> CliResult<Observations<NamedScenario>> {
@@ -406,7 +417,7 @@ fn scales(sd: &kalibre_dc::snapshots::ScenarioMeasurements, n_outputs: usize) ->
 
 /// The run journal, refused when it holds runs of another model: the command's program,
 /// arguments, templates, outputs, parameters or fingerprint files changed since.
-fn open_journal(
+pub(in crate::cli) fn open_journal(
     journal: &Path,
     cfg: &CommandModelConfig,
     config: &Path,

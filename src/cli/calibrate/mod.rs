@@ -4,7 +4,7 @@
 mod args;
 mod failed_at_bounds;
 mod findings;
-mod generic;
+pub(super) mod generic;
 mod journal_mismatch;
 mod progress;
 mod settings;

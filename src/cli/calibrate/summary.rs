@@ -74,11 +74,14 @@ fn print_uncertainty(report: &Report, style: Style) {
         .filter(|name| u.iter().all(|p| p.name != *name))
         .collect();
     if !fixed.is_empty() {
-        println!(
-            "  {:<28} {} (equal bounds: given, not calibrated)",
-            "fixed",
-            fixed.join(", ")
-        );
+        let why = match style {
+            Style::Hall => "equal bounds: given, not calibrated",
+            // model.toml's candidate effects are held where they are absent.
+            Style::Generic { .. } => {
+                "equal bounds, or a candidate effect held absent: not calibrated"
+            }
+        };
+        println!("  {:<28} {} ({why})", "fixed", fixed.join(", "));
     }
     print_numerical_checks(report);
     if let Some(src) = report.uncertainty_slopes {

@@ -1,5 +1,6 @@
 //! `kalibre diagnose`: where a calibrated hall model fails, and which physical effect is
-//! missing.
+//! missing; for a model of your own (`--model command`), which of its candidate effects
+//! the data want (`own.rs`).
 
 use std::path::PathBuf;
 
@@ -20,6 +21,7 @@ use kalibre_dc::HallModel;
 mod journal;
 mod next_hall;
 mod odd_snapshots;
+mod own;
 mod print;
 
 use next_hall::{check_writable_file, write_next_hall};
@@ -41,10 +43,18 @@ use super::{with_threads, CliError, CliResult};
 pub struct DiagnoseArgs {
     /// The hall (`hall.json`) that was calibrated.
     #[arg(long)]
-    hall: PathBuf,
+    hall: Option<PathBuf>,
     /// The measurements it was calibrated against (`snapshots.csv`).
     #[arg(long)]
-    snapshots: PathBuf,
+    snapshots: Option<PathBuf>,
+    /// With `--model command`: the `model.toml` of a model of your own, whose `[[params]]`
+    /// with `absent` are the candidate effects to test.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// With `--model command`: the measurements it was calibrated against
+    /// (`measurements.csv`).
+    #[arg(long)]
+    measurements: Option<PathBuf>,
     /// The calibration directory (`report.json`, `runs.jsonl`) of `kalibre calibrate`.
     #[arg(long)]
     calibration: PathBuf,
@@ -59,9 +69,10 @@ pub struct DiagnoseArgs {
     /// the calibration ran: `builtin` (the built-in simulator, seconds) or `openfoam` (the
     /// calibration's OpenFOAM model: one solve per snapshot for the base, each calibrated
     /// parameter and each candidate it can represent: `crac_supply_offset`, `bypass` and
-    /// `rack_recirculation`; finished solves are kept in CALIBRATION/openfoam and reused).
-    /// The grid, alpha mode and OpenFOAM options default to the ones the calibration
-    /// recorded.
+    /// `rack_recirculation`; finished solves are kept in CALIBRATION/openfoam and reused),
+    /// or `command` (a model of your own, `--config` and `--measurements`: its candidate
+    /// effects, each run journaled in CALIBRATION/runs.jsonl). The grid, alpha mode and
+    /// OpenFOAM options default to the ones the calibration recorded.
     #[arg(long, value_enum, default_value_t = DiagnoseModel::Builtin)]
     model: DiagnoseModel,
     #[command(flatten)]
@@ -124,6 +135,9 @@ pub enum DiagnoseModel {
     Builtin,
     /// OpenFOAM, as `kalibre calibrate --model openfoam` runs it.
     Openfoam,
+    /// A model of your own (`model.toml`), as `kalibre calibrate --model command
+    /// --measurements` runs it.
+    Command,
 }
 
 /// `--model openfoam`: finite-difference step of the calibrated parameters (unit box).
@@ -133,8 +147,13 @@ const OPENFOAM_EFFECT_STEP: f64 = 0.2;
 
 /// Runs `kalibre diagnose`.
 pub fn run(args: DiagnoseArgs) -> CliResult {
-    args.openfoam
-        .refuse_unless(args.model == DiagnoseModel::Openfoam)?;
+    if let Some(t) = args.sensor_bias_rival {
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(CliError::Input(format!(
+                "--sensor-bias-rival: must be finite and >= 0, got {t}"
+            )));
+        }
+    }
     if args.calibration.is_file() {
         let dir = match args.calibration.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.display().to_string(),
@@ -146,6 +165,30 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             args.calibration.display()
         )));
     }
+    if args.model == DiagnoseModel::Command {
+        return own::run(&args);
+    }
+    args.openfoam
+        .refuse_unless(args.model == DiagnoseModel::Openfoam)?;
+    for (flag, given) in [
+        ("--config", args.config.is_some()),
+        ("--measurements", args.measurements.is_some()),
+    ] {
+        if given {
+            return Err(CliError::Input(format!(
+                "{flag} belongs to a model of your own: add --model command (a hall takes \
+                 --hall and --snapshots)"
+            )));
+        }
+    }
+    let (Some(hall_path), Some(snaps_path)) = (args.hall.clone(), args.snapshots.clone()) else {
+        return Err(CliError::Input(
+            "kalibre diagnose needs --hall and --snapshots (the calibrated hall and its \
+             measurements), or --model command --config model.toml --measurements FILE for a \
+             model of your own"
+                .into(),
+        ));
+    };
     if let Some(path) = &args.write_hall {
         // The refusal first: the writability check writes a probe file in the target's
         // directory, which is no business of an input's directory.
@@ -156,23 +199,23 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         super::same_file::refuse_same_files(
             &[("--write-hall", Some(path.as_path()))],
             &[
-                ("the --hall file", Some(args.hall.as_path())),
-                ("the --snapshots file", Some(args.snapshots.as_path())),
+                ("the --hall file", Some(hall_path.as_path())),
+                ("the --snapshots file", Some(snaps_path.as_path())),
                 ("the calibration's report", Some(report.as_path())),
                 ("the calibration's run journal", Some(journal.as_path())),
             ],
         )?;
         check_writable_file(path)?;
     }
-    let hall = Hall::load(&args.hall)?;
+    let hall = Hall::load(&hall_path)?;
     let registry = EffectRegistry::builtin();
-    registry.check_hall(&hall, &args.hall.display().to_string())?;
-    let snaps = snapshots::load_snapshots(&hall, &args.snapshots)?;
-    super::plausible::warn_readings(&args.snapshots, &hall, &snaps);
-    super::plausible::warn_setpoints(&args.snapshots, &hall, snaps.iter().map(|s| &s.state));
+    registry.check_hall(&hall, &hall_path.display().to_string())?;
+    let snaps = snapshots::load_snapshots(&hall, &snaps_path)?;
+    super::plausible::warn_readings(&snaps_path, &hall, &snaps);
+    super::plausible::warn_setpoints(&snaps_path, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
-    super::plausible::warn_alpha_units(&args.hall, &hall);
-    super::plausible::warn_implausible_rises(&args.hall, &args.snapshots, &hall, states);
+    super::plausible::warn_alpha_units(&hall_path, &hall);
+    super::plausible::warn_implausible_rises(&hall_path, &snaps_path, &hall, states);
     let report_path = args.calibration.join("report.json");
     journal::check_regular_files(&args.calibration)?;
     let text = std::fs::read_to_string(&report_path)
@@ -190,20 +233,12 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             report.schema
         )));
     }
-    check_same_measurements(
-        &report_path,
-        &report.residuals,
-        &args.snapshots,
-        &hall,
-        &snaps,
-    )?;
+    check_same_measurements(&report_path, &report.residuals, &snaps_path, &hall, &snaps)?;
     // The model the calibration ran, as it recorded it: its grid, alpha mode and
     // OpenFOAM options stand unless given again here.
     let recorded = CalibratedModel::of_report(&report_path, report.model.as_ref())?;
-    let chosen = match args.model {
-        DiagnoseModel::Builtin => "builtin",
-        DiagnoseModel::Openfoam => "openfoam",
-    };
+    let openfoam = args.model == DiagnoseModel::Openfoam;
+    let chosen = if openfoam { "openfoam" } else { "builtin" };
     if let Some(m) = recorded.as_ref().filter(|m| m.kind != chosen) {
         return Err(CliError::Input(format!(
             "{}: runs of another model than --model {chosen}: the calibration ran the {} model{}",
@@ -212,6 +247,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             match m.kind.as_str() {
                 "openfoam" => "; diagnose it with --model openfoam",
                 "builtin" => "; diagnose it with --model builtin",
+                "command" => "; a model of your own is diagnosed with --model command --config model.toml --measurements FILE, and a hall's external command the diagnosis cannot solve: calibrate the hall with --model builtin or openfoam to diagnose it",
                 _ => ", which the diagnosis cannot solve; calibrate the hall with --model builtin or openfoam to diagnose it",
             }
         )));
@@ -231,23 +267,23 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     }
     let sim = sim_config(grid_m)?;
     if args.model == DiagnoseModel::Builtin {
-        check_model_cells(&hall, &args.hall, sim.cell_m, args.grid_m.is_some())?;
-        super::plausible::warn_off_grid(&args.hall, &hall, sim.cell_m);
+        check_model_cells(&hall, &hall_path, sim.cell_m, args.grid_m.is_some())?;
+        super::plausible::warn_off_grid(&hall_path, &hall, sim.cell_m);
     }
     let model = HallModel::new(&hall, sim.clone())
-        .map_err(|e| e.in_hall_file(&args.hall.display().to_string()))?;
+        .map_err(|e| e.in_hall_file(&hall_path.display().to_string()))?;
     // The solver, and the fingerprint of the model the calibration must have run.
-    let (solver, fp): (Box<dyn EffectSolver>, String) = match args.model {
-        DiagnoseModel::Builtin => (
+    let (solver, fp): (Box<dyn EffectSolver>, String) = match openfoam {
+        false => (
             Box::new(Simulator::new(&hall, sim.clone())?),
             model.fingerprint(),
         ),
-        DiagnoseModel::Openfoam => {
+        true => {
             let of = of_args.settings(&args.calibration.join("openfoam"), grid_m)?;
-            super::openfoam_args::check_mesh(&hall, &args.hall, of.grid_m, args.grid_m.is_some())?;
+            super::openfoam_args::check_mesh(&hall, &hall_path, of.grid_m, args.grid_m.is_some())?;
             super::out_dir::note_interrupted_runs(remove_interrupted_runs(&of.cache_root));
             let fp = OpenFoamModel::new(&hall, of.clone())
-                .map_err(|e| of_err(e.in_hall_file(&args.hall.display().to_string())))?
+                .map_err(|e| of_err(e.in_hall_file(&hall_path.display().to_string())))?
                 .fingerprint();
             (Box::new(OpenFoamEffectSolver::new(&hall, of)?), fp)
         }
@@ -259,8 +295,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
                  effects, --grid-m, --model or OpenFOAM option) than `{}` with --model \
                  {chosen}{}",
                 report_path.display(),
-                args.hall.display(),
-                super::hall_changes::clause(&args.calibration, &args.hall),
+                hall_path.display(),
+                super::hall_changes::clause(&args.calibration, &hall_path),
             )));
         }
     }
@@ -271,21 +307,17 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
     let params = load_params(&report_path, &report_json, space)?;
     report.best.params = NamedValues::new(&space.names(), &params);
-    let model_name = match args.model {
-        DiagnoseModel::Builtin => "builtin",
-        DiagnoseModel::Openfoam => "openfoam",
-    };
     let journal_keys = journal::scenario_keys(
         &args.calibration.join("runs.jsonl"),
         &fp,
-        &args.hall,
-        model_name,
+        &hall_path,
+        chosen,
     )?;
     check_same_conditions(
         &report_path,
         recorded.as_ref(),
         &journal_keys,
-        &args.snapshots,
+        &snaps_path,
         &snaps,
     )?;
     let robust_nu = args.likelihood.robust_nu(args.nu)?;
@@ -295,13 +327,6 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     };
     settings.diagnose.single_output_check = !args.no_single_output_check;
     settings.diagnose.ambiguity_check = !args.no_ambiguity_check;
-    if let Some(t) = args.sensor_bias_rival {
-        if !(t.is_finite() && t >= 0.0) {
-            return Err(CliError::Input(format!(
-                "--sensor-bias-rival: must be finite and >= 0, got {t}"
-            )));
-        }
-    }
     settings.diagnose.sensor_bias_rival_bic = args.sensor_bias_rival;
     settings.model_form = !args.no_model_form;
     settings.diagnose.robust_nu = robust_nu;
