@@ -156,7 +156,7 @@ fn command_line_refusals_are_one_line_and_help_is_not_an_error() {
         ),
         (
             &["diagnose", "--refit-iterations", "2"][..],
-            "not provided: --hall <HALL>, --snapshots <SNAPSHOTS>",
+            "not provided: --calibration <CALIBRATION>, --refit <K>",
         ),
         (
             &["calibrate", "--hall", "a", "--hall", "b"][..],

@@ -78,20 +78,33 @@ fn the_missing_effect_is_named_added_and_the_error_falls() {
     assert_eq!(loss["significant"], true, "{loss}");
     let fitted = loss["fitted"]["loss"].as_f64().unwrap();
     assert!((fitted - 150.0).abs() < 7.5, "fitted loss {fitted}");
+    // The change from absent (0 here) and the value the model takes, side by side.
+    assert_eq!(doc["fitted_values"]["loss"]["loss"].as_f64(), Some(fitted));
+    // The model run at the fit confirms it: a tenth of the calibrated MAE and less
+    // (measured: 0.079 against 1.067; the linearised prediction said 0.008).
+    let checked = &doc["checked"][0];
+    assert_eq!(checked["candidate"], "loss");
+    assert_eq!(checked["refuted"], false);
+    let at_fit = checked["mae"].as_f64().unwrap();
+    let now = doc["diagnosis"]["mae"].as_f64().unwrap();
+    assert!(
+        at_fit < 0.1 * now,
+        "MAE {at_fit} at the fit against {now} now"
+    );
     assert_eq!(doc["diagnosis"]["hypotheses"][0]["name"], "loss");
     let decoy = hypothesis(&doc, "cold_sensor_bias");
     assert_eq!(decoy["significant"], false, "{decoy}");
-    // 4 scenarios x (2 calibrated steps + 2 candidates' steps) new; the calibrated point
-    // is the calibration's own run.
+    // 4 scenarios x (2 calibrated steps + 2 candidates' steps + the run at the fit) new;
+    // the calibrated point is the calibration's own run.
     assert_eq!(
         doc["runs"],
-        serde_json::json!({ "new": 16, "from_journal": 4 })
+        serde_json::json!({ "new": 20, "from_journal": 4 })
     );
     // Again: every run is the journal's.
     let again = diagnosis_json(&mut diagnose(&config, &measurements, &cal));
     assert_eq!(
         again["runs"],
-        serde_json::json!({ "new": 0, "from_journal": 20 })
+        serde_json::json!({ "new": 0, "from_journal": 24 })
     );
     assert_eq!(again["diagnosis"], doc["diagnosis"]);
 
@@ -101,6 +114,19 @@ fn the_missing_effect_is_named_added_and_the_error_falls() {
     assert!(
         said.contains("delete `absent` from [[params]] `loss`"),
         "{said}"
+    );
+
+    // The same calibration again: the diagnosis's steps of the candidates lie outside
+    // the box it calibrates in (the candidates held at 0), so they are not offered as a
+    // better point it missed; the steps of UA0 and n are.
+    let o = run(&mut calibrate(&config, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let unreached = &report(&cal)["unreached"];
+    assert_eq!(unreached["complete_points"], 2, "{unreached}");
+    let offered = &unreached["best"]["params"];
+    assert!(
+        offered["loss"] == 0.0 && offered["bias"] == 0.0,
+        "{unreached}"
     );
 
     // Added as the diagnosis says: the same names in the same order, so the calibration
@@ -151,6 +177,37 @@ fn a_diagnosis_of_a_model_of_your_own_refuses_what_does_not_fit() {
     std::fs::write(&other, edited).unwrap();
     let o = run(&mut diagnose(&config, &other, &cal));
     assert_input_error(&o, "not the measurements");
+    // The same measurements weighed by an sd column: not the calibration's weighting.
+    let weighed: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                format!("{l},sd\n")
+            } else {
+                format!("{l},0.1\n")
+            }
+        })
+        .collect();
+    let with_sd = dir.join("with-sd.csv");
+    std::fs::write(&with_sd, weighed).unwrap();
+    let o = run(&mut diagnose(&config, &with_sd, &cal));
+    assert_input_error(
+        &o,
+        "/model/errors_in: the calibration weighed the errors in outputs' units",
+    );
+    // A scenario edited since the calibration: the model answers otherwise there.
+    let edited = toml.replace("t_hot_in = 70.0", "t_hot_in = 75.0");
+    assert_ne!(edited, toml);
+    let moved = dir.join("moved.toml");
+    std::fs::write(&moved, edited).unwrap();
+    let o = run(&mut diagnose(&moved, &measurements, &cal));
+    assert_input_error(&o, "scenario `low`: ");
+    assert!(
+        stderr(&o).contains("has no run of the calibrated parameters under its variables"),
+        "{}",
+        stderr(&o)
+    );
     // A model.toml with no candidate says how to give one.
     let plain = dir.join("plain.toml");
     let no_candidates = toml
@@ -178,5 +235,43 @@ fn a_diagnosis_of_a_model_of_your_own_refuses_what_does_not_fit() {
     assert_input_error(
         &o,
         "`params[3].effect`: names the effect of a candidate parameter",
+    );
+}
+
+/// A candidate whose linearisation misleads: in this model the loss first cools the hot
+/// stream, then (beyond 50 W/K) warms it, so a small step's slope sends the fit to a
+/// loss where the model reads worse than without it. Run there, it is refuted.
+#[test]
+fn a_candidate_the_model_contradicts_at_its_fit_is_not_named() {
+    let (script, template, toml) = with_decoy();
+    let (dir, config, measurements) =
+        setup_with("own-diagnose-refuted", &script, &template, &toml, &TRUTH);
+    // The measurements are the linear loss's; the model's loss turns.
+    let turning = script.replace(
+        "v[\"t_hot_in\"] - v[\"loss\"] *",
+        "v[\"t_hot_in\"] - v[\"loss\"] * (1 - v[\"loss\"] / 100.0) *",
+    );
+    assert_ne!(turning, script, "the script's loss line moved");
+    std::fs::write(dir.join("hx.py"), turning).unwrap();
+    let cal = dir.join("cal");
+    let o = run(&mut calibrate(&config, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let doc = diagnosis_json(&mut diagnose(&config, &measurements, &cal));
+    let checked = &doc["checked"][0];
+    assert_eq!(checked["candidate"], "loss", "{doc}");
+    assert_eq!(checked["refuted"], true, "{checked}");
+    let at_fit = checked["mae"].as_f64().unwrap();
+    assert!(
+        at_fit >= doc["diagnosis"]["mae"].as_f64().unwrap(),
+        "{checked}"
+    );
+    let loss = hypothesis(&doc, "loss");
+    assert_eq!(loss["significant"], false, "{loss}");
+    assert_eq!(loss["refuted"], true, "{loss}");
+    let o = run(&mut diagnose(&config, &measurements, &cal));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("the linearisation misleads, so it is not named"),
+        "{said}"
     );
 }

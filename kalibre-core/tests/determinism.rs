@@ -41,3 +41,28 @@ fn same_seed_same_bits_at_one_and_two_threads() {
     };
     assert_eq!(bits(&one), bits(&two));
 }
+
+/// `with_settings` keeps what the `with_*` calls set, whichever comes first: a seed given
+/// before the settings is not silently reset to the settings' own.
+#[test]
+fn with_calls_hold_whichever_order_they_come_in() {
+    let (model, obs, space) = (Poly::new(), observations(), space());
+    let run = |seed_first: bool| {
+        let base = Calibrator::new(&model, QuadSurface::default(), &obs, &space);
+        let mut c = if seed_first {
+            base.with_seed(42)
+                .with_max_iterations(3)
+                .with_settings(kalibre_core::Settings::recommended())
+        } else {
+            base.with_settings(kalibre_core::Settings::recommended())
+                .with_seed(42)
+                .with_max_iterations(3)
+        };
+        without_timings(&c.run().unwrap())
+    };
+    let (first, last) = (run(true), run(false));
+    assert_eq!(first.settings.seed, 42);
+    assert_eq!(first.settings.max_iterations, 3);
+    assert_ne!(kalibre_core::Settings::recommended().seed, 42);
+    assert_eq!(first, last);
+}

@@ -42,9 +42,11 @@ enum Command {
     /// Run the built-in simulator (or OpenFOAM, or your own through `--config`) on a hall's
     /// snapshots and write the predicted sensor readings.
     Simulate(simulate::SimulateArgs),
-    /// Calibrate a hall's parameters (server air flow rates, effects) against its measurements.
+    /// Calibrate a hall's parameters (server air flow rates, effects) against its
+    /// measurements, or a model of your own's (`--model command --config --measurements`).
     Calibrate(Box<calibrate::CalibrateArgs>),
-    /// Show where a calibrated model fails and rank the physical effects that may be missing.
+    /// Show where a calibrated model fails and rank the physical effects that may be missing
+    /// (a hall's, or the candidate effects of a model of your own).
     Diagnose(diagnose::DiagnoseArgs),
     /// The whole story on a synthetic hall with a hidden effect: calibrate, diagnose, add
     /// the missing effect, recalibrate, and write report.html.

@@ -32,6 +32,7 @@ where
             store: None,
             observers: Vec::new(),
             settings: Settings::default(),
+            setters: Vec::new(),
             design_bounds: None,
             numerical_variants: Vec::new(),
         }
@@ -45,61 +46,67 @@ where
     Su: Surrogate<Scenario = M::Scenario> + Sync,
     V: Validator,
 {
-    /// Replaces every setting at once, those of earlier `with_*` calls included: call
-    /// it first (`.with_settings(Settings::recommended()).with_seed(7)`).
+    /// Replaces the settings at once, except those a `with_*` call set, before or after:
+    /// `.with_seed(7).with_settings(Settings::recommended())` calibrates with seed 7, as
+    /// the other order does.
     pub fn with_settings(mut self, settings: Settings) -> Self {
         self.settings = settings;
+        for set in &self.setters {
+            set(&mut self.settings);
+        }
+        self
+    }
+
+    /// Sets a setting now and keeps the setter, so that a later `with_settings` does not
+    /// undo it.
+    fn set(mut self, set: impl Fn(&mut Settings) + Send + Sync + 'a) -> Self {
+        set(&mut self.settings);
+        self.setters.push(Box::new(set));
         self
     }
 
     /// The calibration seed.
-    pub fn with_seed(mut self, seed: u64) -> Self {
-        self.settings.seed = seed;
-        self
+    pub fn with_seed(self, seed: u64) -> Self {
+        self.set(move |s| s.seed = seed)
     }
 
     /// Four-step iterations after the initial design.
-    pub fn with_max_iterations(mut self, n: usize) -> Self {
-        self.settings.max_iterations = n;
-        self
+    pub fn with_max_iterations(self, n: usize) -> Self {
+        self.set(move |s| s.max_iterations = n)
     }
 
     /// Stop once the best score (by default the MAE) is at most `target`.
-    pub fn with_target_score(mut self, target: f64) -> Self {
-        self.settings.target_score = Some(target);
-        self
+    pub fn with_target_score(self, target: f64) -> Self {
+        self.set(move |s| s.target_score = Some(target))
     }
 
     /// Budget of model runs, initial design included.
-    pub fn with_max_model_runs(mut self, n: usize) -> Self {
-        self.settings.max_model_runs = Some(n);
-        self
+    pub fn with_max_model_runs(self, n: usize) -> Self {
+        self.set(move |s| s.max_model_runs = Some(n))
     }
 
     /// Budget of wall-clock time, seconds.
-    pub fn with_max_wall_s(mut self, seconds: f64) -> Self {
-        self.settings.max_wall_s = Some(seconds);
-        self
+    pub fn with_max_wall_s(self, seconds: f64) -> Self {
+        self.set(move |s| s.max_wall_s = Some(seconds))
     }
 
     /// At most this many model runs at once (a dedicated rayon pool).
-    pub fn with_max_parallel_runs(mut self, n: usize) -> Self {
-        self.settings.max_parallel_runs = Some(n);
-        self
+    pub fn with_max_parallel_runs(self, n: usize) -> Self {
+        self.set(move |s| s.max_parallel_runs = Some(n))
     }
 
     /// First-fit augmentation: samples per design run and noise sigma (unit box).
-    pub fn with_augmentation(mut self, copies: usize, sigma: f64) -> Self {
-        self.settings.augment_copies = copies;
-        self.settings.augment_sigma = sigma;
-        self
+    pub fn with_augmentation(self, copies: usize, sigma: f64) -> Self {
+        self.set(move |s| {
+            s.augment_copies = copies;
+            s.augment_sigma = sigma;
+        })
     }
 
     /// Adds `weight * regularizer` to the search loss.
     pub fn with_regularizer(mut self, regularizer: &'a dyn Regularizer, weight: f64) -> Self {
         self.regularizer = Some(regularizer);
-        self.settings.regularizer_weight = weight;
-        self
+        self.set(move |s| s.regularizer_weight = weight)
     }
 
     /// The searcher of step 2.
@@ -121,6 +128,7 @@ where
             store: self.store,
             observers: self.observers,
             settings: self.settings,
+            setters: self.setters,
             design_bounds: self.design_bounds,
             numerical_variants: self.numerical_variants,
         }

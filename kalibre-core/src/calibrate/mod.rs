@@ -48,6 +48,9 @@ use robust::residuals as residuals_of;
 use runner::Runner;
 use state::State;
 
+/// A `with_*` call's change to the settings, kept to apply again after `with_settings`.
+type Setter<'a> = Box<dyn Fn(&mut Settings) + Send + Sync + 'a>;
+
 /// The calibration loop over a model, a surrogate, a searcher and a validator.
 ///
 /// See the crate documentation for a complete example.
@@ -62,6 +65,8 @@ pub struct Calibrator<'a, M: Model, Su, V = ErrorMetrics> {
     store: Option<RunStore>,
     observers: Vec<Box<dyn Observe + 'a>>,
     settings: Settings,
+    /// The `with_*` calls' settings, applied again by `with_settings`.
+    setters: Vec<Setter<'a>>,
     design_bounds: Option<(Vec<f64>, Vec<f64>)>,
     /// Numerical variants of the model, or why one could not be set up.
     numerical_variants: Vec<(String, std::result::Result<&'a M, String>)>,
@@ -90,52 +95,12 @@ where
         *unit = moved;
     }
 
-    /// Refuses a parameter space or observations whose names differ from those the model
-    /// gives ([`Model::param_names`], [`Model::output_names`]): values in another order
-    /// would calibrate the wrong parameters against the wrong outputs.
-    fn check_names(&self) -> Result<()> {
-        let differ = |what: &str, model: Vec<String>, ours: Vec<String>, where_: &str| {
-            (model != ours).then(|| {
-                Error::Mismatch(format!(
-                    "the model's {what} are [{}], {where_} [{}]: they must be the same names \
-                     in the same order",
-                    crate::some_names(&model),
-                    crate::some_names(&ours)
-                ))
-            })
-        };
-        let params = self
-            .model
-            .param_names()
-            .and_then(|m| differ("parameters", m, self.space.names(), "the parameter space's"));
-        let outputs = self.model.output_names().and_then(|m| {
-            differ(
-                "outputs",
-                m,
-                self.observations.output_names(),
-                "the observations'",
-            )
-        });
-        params.or(outputs).map_or(Ok(()), Err)
-    }
-
     /// Runs the loop: initial design, then fit, search, run, validate until a stop rule fires.
     pub fn run(&mut self) -> Result<Report> {
         let t_start = Instant::now();
         let st = self.settings.clone();
         st.check()?;
-        if self.space.is_empty() {
-            return Err(Error::Mismatch("the parameter space is empty".into()));
-        }
-        // Every design point would be the same point, run once and answered from the
-        // store ever after.
-        if self.space.params().iter().all(|p| p.is_fixed()) {
-            return Err(Error::Mismatch(format!(
-                "every parameter has equal bounds ({}): nothing to calibrate",
-                crate::some_names(&self.space.names())
-            )));
-        }
-        self.check_names()?;
+        contract::check_inputs(self.model, self.space, self.observations)?;
         let fingerprint = self.model.fingerprint();
         let store = self
             .store
@@ -624,7 +589,7 @@ where
                 store,
                 obs,
                 &self.validator,
-                &names,
+                self.space,
                 &scenario_keys,
                 self.observations.scales(),
             ),

@@ -8,7 +8,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::report::NamedValues;
-use crate::{check_prediction_shape, Observations, RunRecord, RunStatus, RunStore, Validator};
+use crate::{
+    check_prediction_shape, Observations, ParamSpace, RunRecord, RunStatus, RunStore, Validator,
+};
 
 /// Journaled runs (of this model) the calibration did not ask for.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -16,8 +18,10 @@ use crate::{check_prediction_shape, Observations, RunRecord, RunStatus, RunStore
 pub struct UnreachedRuns {
     /// How many journal lines of this model were never replayed.
     pub runs: usize,
-    /// How many parameter points among them ran, successfully, at every snapshot of
-    /// these measurements (the points that can be scored).
+    /// How many parameter points among them, within the space's bounds, ran
+    /// successfully at every snapshot of these measurements (the points that can be
+    /// scored). A point outside the bounds (a diagnosis's step of a parameter this
+    /// calibration holds fixed) is no answer this calibration could give.
     pub complete_points: usize,
     /// The lowest-score complete point among them, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -48,7 +52,7 @@ pub(crate) fn summarise<S, V: Validator>(
     store: &RunStore,
     observations: &Observations<S>,
     validator: &V,
-    names: &[String],
+    space: &ParamSpace,
     scenario_keys: &[String],
     scales: Option<&[Vec<f64>]>,
 ) -> Option<UnreachedRuns> {
@@ -57,9 +61,13 @@ pub(crate) fn summarise<S, V: Validator>(
         return None;
     }
     let snapshots = observations.snapshots();
+    let names = space.names();
     let mut points: Vec<Point> = Vec::new();
     for (line, rec) in &unreached {
-        if rec.param_names != names || rec.status != RunStatus::Ok {
+        if rec.param_names != names
+            || rec.status != RunStatus::Ok
+            || space.check_physical(&rec.params).is_err()
+        {
             continue;
         }
         let Some(s) = (0..snapshots.len())
@@ -109,7 +117,7 @@ pub(crate) fn summarise<S, V: Validator>(
                 mae_c: validation.overall.mae,
                 score,
                 line: *line,
-                params: NamedValues::new(names, params),
+                params: NamedValues::new(&names, params),
             });
         }
     }

@@ -42,6 +42,10 @@ pub struct Linearised {
     pub hypotheses: Vec<Hypothesis>,
     /// Candidates not tried, each with why (a run of its step failed).
     pub not_tried: Vec<(String, String)>,
+    /// The model's outputs at the parameters, per snapshot, in the outputs' own units: to
+    /// compare with what the calibration recorded there (a scenario edited since runs
+    /// anew, and answers otherwise).
+    pub predicted: Vec<Vec<f64>>,
     /// Model runs made (not in the journal before).
     pub runs: usize,
     /// Runs read from the journal.
@@ -169,8 +173,8 @@ pub fn linearise<M: Model>(
     tally.count(&results);
     let base = all_ran(&results[0]).map_err(|(s, why)| {
         Error::Mismatch(format!(
-            "the model failed at the calibrated parameters in snapshot `{}`: {why}; there is \
-             nothing to diagnose until it runs there",
+            "the model failed at the calibrated parameters (`{}`): {why}; there is nothing \
+             to diagnose until it runs there",
             obs.snapshots()[s].label
         ))
     })?;
@@ -184,7 +188,23 @@ pub fn linearise<M: Model>(
         let mut point = &points[1 + k];
         let mut ran = all_ran(&results[1 + k]);
         let retried;
-        if ran.is_err() {
+        if let Err((s, why)) = &ran {
+            // The other side, if the box has room for a step there.
+            let u = space.params()[i].to_unit(params[i]);
+            let other_u = if forward_first(i) {
+                u - settings.unit_step
+            } else {
+                u + settings.unit_step
+            };
+            if !(0.0..=1.0).contains(&other_u) {
+                return Err(Error::Mismatch(format!(
+                    "the model failed a step of `{}` from its calibrated value (`{}`): {why}; \
+                     and the other side is beyond its bounds, so its slope there cannot be \
+                     measured",
+                    names[i],
+                    obs.snapshots()[*s].label
+                )));
+            }
             let other = moved(i, unit_step_to(i, !forward_first(i)));
             let again = runner.run(0, std::slice::from_ref(&other))?;
             tally.count(&again);
@@ -194,8 +214,8 @@ pub fn linearise<M: Model>(
         }
         let outputs = ran.map_err(|(s, why)| {
             Error::Mismatch(format!(
-                "the model failed on both sides of the calibrated value of `{}` in snapshot \
-                 `{}` ({why}): its slope there cannot be measured",
+                "the model failed on both sides of the calibrated value of `{}` (`{}`): \
+                 {why}; its slope there cannot be measured",
                 names[i],
                 obs.snapshots()[s].label
             ))
@@ -244,7 +264,7 @@ pub fn linearise<M: Model>(
                 }
                 Err((s, why)) => {
                     failed = Some(format!(
-                        "the model failed with `{}` at {} in snapshot `{}`: {why}",
+                        "the model failed with `{}` at {} (`{}`): {why}",
                         p.name,
                         crate::number(candidate_params[k].2),
                         obs.snapshots()[s].label
@@ -269,10 +289,110 @@ pub fn linearise<M: Model>(
             &columns,
         )?);
     }
+    // Back in the outputs' units.
+    let predicted = (base.into_iter().enumerate())
+        .map(|(s, mut values)| {
+            if let Some(scales) = obs.scales() {
+                for (v, scale) in values.iter_mut().zip(&scales[s]) {
+                    *v *= scale;
+                }
+            }
+            values
+        })
+        .collect();
     Ok(Linearised {
         residuals,
         hypotheses,
         not_tried,
+        predicted,
+        runs: tally.runs,
+        cached: tally.cached,
+    })
+}
+
+/// What the model itself reads at a hypothesis's fitted point ([`run_fitted`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FittedRun {
+    /// The point: the calibrated parameters moved by the joint fit's change, the
+    /// candidate's at `absent` plus its fitted change, each clamped into its range.
+    pub params: Vec<f64>,
+    /// The model's mean absolute residual there (in the observations' scale units, as
+    /// [`super::Diagnosis::mae`]), or why a run there failed.
+    pub mae: std::result::Result<f64, String>,
+    /// Model runs made (not in the journal before).
+    pub runs: usize,
+    /// Runs read from the journal.
+    pub cached: usize,
+}
+
+/// Runs the model where the diagnosis fitted `candidate` (`result`'s `fitted`, its
+/// parameters' changes from absent, and `current_change`, the calibrated parameters'
+/// change beside it), through `store`: the linearisation's prediction checked by the
+/// model itself. A candidate that reads no better there than the calibrated point is
+/// refuted ([`Hypothesis::refuted`]).
+pub fn run_fitted<M: Model>(
+    model: &M,
+    obs: &Observations<M::Scenario>,
+    space: &ParamSpace,
+    params: &[f64],
+    candidate: &CandidateEffect,
+    result: &super::HypothesisResult,
+    store: &RunStore,
+) -> Result<FittedRun> {
+    let (fitted, current_change) = (&result.fitted, &result.current_change);
+    check(
+        space,
+        params,
+        std::slice::from_ref(candidate),
+        &LineariseSettings::default(),
+    )?;
+    let names = space.names();
+    let mut point = params.to_vec();
+    for (i, p) in space.params().iter().enumerate() {
+        if let Some(change) = current_change.get(&p.name) {
+            point[i] = (params[i] + change).clamp(p.lower, p.upper);
+        }
+    }
+    for c in &candidate.params {
+        let change = fitted.get(&c.name).unwrap_or(0.0);
+        point[c.index] = (c.absent + change).clamp(c.lower, c.upper);
+    }
+    let output_names: Vec<String> = obs.outputs().iter().map(|o| o.name.clone()).collect();
+    let scenario_keys: Vec<String> = (obs.snapshots().iter())
+        .map(|s| model.scenario_key(&s.scenario))
+        .collect();
+    let runner = Runner {
+        model,
+        observations: obs,
+        store,
+        param_names: &names,
+        scenario_keys: &scenario_keys,
+        output_names: &output_names,
+        observers: &[],
+        pool: None,
+        scales: obs.scales(),
+    };
+    let results = runner.run(0, std::slice::from_ref(&point))?;
+    let mut tally = Tally::default();
+    tally.count(&results);
+    let mae = all_ran(&results[0])
+        .map(|outputs| {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for (s, snap) in obs.snapshots().iter().enumerate() {
+                for (o, m) in snap.measured.iter().enumerate() {
+                    if let Some(m) = m {
+                        let scale = obs.scales().map_or(1.0, |sc| sc[s][o]);
+                        sum += (outputs[s][o] - m / scale).abs();
+                        n += 1;
+                    }
+                }
+            }
+            sum / n.max(1) as f64
+        })
+        .map_err(|(s, why)| format!("`{}`: {why}", obs.snapshots()[s].label));
+    Ok(FittedRun {
+        params: point,
+        mae,
         runs: tally.runs,
         cached: tally.cached,
     })
@@ -302,7 +422,14 @@ fn all_ran(results: &[RunResult]) -> std::result::Result<Vec<Vec<f64>>, (usize, 
     (results.iter().enumerate())
         .map(|(s, r)| match &r.result {
             Ok(o) => Ok(o.values.clone()),
-            Err(e) => Err((s, e.to_string())),
+            // The log's gist says why, where the reason only says that it failed.
+            Err(e) => Err((
+                s,
+                match e.log_gist() {
+                    Some(gist) => format!("{e} ({gist})"),
+                    None => e.to_string(),
+                },
+            )),
         })
         .collect()
 }

@@ -89,7 +89,7 @@ pub(crate) use candidate::group_candidates;
 pub use candidate::{CandidateEffect, CandidateParam};
 pub use heldout::HeldOutScheme;
 pub use input::{measured_rows, Hypothesis, HypothesisParam, Residuals, RowInfo};
-pub use linearise::{linearise, LineariseSettings, Linearised};
+pub use linearise::{linearise, run_fitted, FittedRun, LineariseSettings, Linearised};
 pub use outcome::{Diagnosis, HypothesisResult, UnexplainedOutput, DIAGNOSIS_SCHEMA};
 pub use settings::DiagnoseSettings;
 

@@ -529,8 +529,9 @@ fn candidate_param(
         return match effect {
             Some(_) => Err(cx.err(
                 format!("{p}.effect"),
-                "names the effect of a candidate parameter: give `absent` too (the value at \
-                 which the effect is absent), or remove `effect`",
+                "names the effect of a candidate parameter, but there is no `absent` (the \
+                 value at which the effect is absent): to calibrate the parameter (an effect \
+                 added), delete `effect` too",
             )),
             None => Ok(None),
         };
@@ -560,10 +561,9 @@ fn candidate_param(
     }
     // Checked now, so that the entry still holds once `absent` is deleted to add it.
     let scale = param_scale(cx, t, p)?;
-    if let Some(initial) = cx.num(t, p, "initial")? {
-        Param::new(name.clone(), lower, upper, initial, scale)
-            .map_err(|e| cx.err(p, e.to_string()))?;
-    }
+    let initial = cx.num(t, p, "initial")?;
+    Param::new(name.clone(), lower, upper, initial.unwrap_or(lower), scale)
+        .map_err(|e| cx.err(p, e.to_string()))?;
     let effect = match effect {
         Some(e) if e.trim().is_empty() => {
             return Err(cx.err(format!("{p}.effect"), "is empty"));

@@ -43,10 +43,10 @@ pub enum ModelArg {
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
     /// The hall (`hall.json`).
-    #[arg(long, required_unless_present = "measurements")]
+    #[arg(long)]
     pub(super) hall: Option<PathBuf>,
     /// Operating conditions and measurements (`snapshots.csv`).
-    #[arg(long, required_unless_present = "measurements")]
+    #[arg(long)]
     pub(super) snapshots: Option<PathBuf>,
     /// A model of your own, not a hall: what was measured of it (`measurements.csv`:
     /// `scenario,output,value` rows, the scenarios and outputs of --config's model.toml).
@@ -245,13 +245,13 @@ impl CalibrateArgs {
     pub(super) fn hall_path(&self) -> &Path {
         self.hall
             .as_deref()
-            .expect("clap requires --hall without --measurements")
+            .expect("run checks --hall without --measurements")
     }
 
     /// `--snapshots`, required as `--hall` is.
     pub(super) fn snapshots_path(&self) -> &Path {
         self.snapshots
             .as_deref()
-            .expect("clap requires --snapshots without --measurements")
+            .expect("run checks --snapshots without --measurements")
     }
 }

@@ -25,7 +25,7 @@ const OUT_FILES: [&str; 3] = ["runs.jsonl", "report.json", MODEL_PARTS];
 
 /// Beside the journal: the digest of each part of the model's fingerprint, so that a
 /// later command of another fingerprint is told which parts changed.
-const MODEL_PARTS: &str = "model-parts.json";
+pub(in crate::cli) const MODEL_PARTS: &str = "model-parts.json";
 
 /// Flags that describe a hall, its built-in simulator or its surrogate: refused here
 /// rather than ignored.
@@ -82,6 +82,14 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         ": a model of your own is calibrated against measurements of its scenarios, each a \
          `label` and its `variables` (docs/models.md)",
     )?;
+    if !cfg.candidates.is_empty() && cfg.space.params().iter().all(|p| p.is_fixed()) {
+        return Err(CliError::Input(format!(
+            "{}: every [[params]] is a candidate effect (`absent`) or fixed (equal bounds): \
+             calibrate at least one; delete a candidate's `absent` (and `effect`) to \
+             calibrate it",
+            config.display()
+        )));
+    }
     let observations = observations(&cfg, measurements)?;
     let scaled = observations.scales().is_some();
     let style = Style::Generic { scaled };
@@ -429,18 +437,7 @@ pub(in crate::cli) fn open_journal(
     let parts_path = journal.with_file_name(MODEL_PARTS);
     let other = store.load_report().other_fingerprint;
     if other > 0 {
-        let what = match recorded_parts(&parts_path) {
-            Some((then, parts)) if then != fingerprint => {
-                let changed =
-                    kalibre_core::external::changed_parts(&parts, cfg.command.fingerprint_parts());
-                (!changed.is_empty()).then(|| {
-                    let named: Vec<String> = changed.iter().map(|c| part_in_words(c)).collect();
-                    format!("since they ran, these changed: {}", named.join(", "))
-                })
-            }
-            _ => None,
-        };
-        let what = what.unwrap_or_else(|| {
+        let what = changed_since(&parts_path, cfg).unwrap_or_else(|| {
             "its program, arguments, templates, outputs, parameters, or a file of \
              fingerprint_files changed since they ran"
                 .to_string()
@@ -462,6 +459,21 @@ pub(in crate::cli) fn open_journal(
         .map_err(|e| CliError::Run(format!("{}: {e}", parts_path.display())))?;
     kalibre_core::write_atomic(&parts_path, text + "\n").map_err(|e| io_err(&parts_path, e))?;
     Ok(store)
+}
+
+/// What changed in `cfg`'s model since the runs of `model-parts.json` (`parts_path`)
+/// ran, in words (`since they ran, these changed: the program, hx.py`); `None` when it
+/// is not recorded or nothing differs.
+pub(in crate::cli) fn changed_since(parts_path: &Path, cfg: &CommandModelConfig) -> Option<String> {
+    let (then, parts) = recorded_parts(parts_path)?;
+    if then == cfg.command.fingerprint() {
+        return None;
+    }
+    let changed = kalibre_core::external::changed_parts(&parts, cfg.command.fingerprint_parts());
+    (!changed.is_empty()).then(|| {
+        let named: Vec<String> = changed.iter().map(|c| part_in_words(c)).collect();
+        format!("since they ran, these changed: {}", named.join(", "))
+    })
 }
 
 /// The fingerprint and parts `model-parts.json` recorded, if it is there and readable

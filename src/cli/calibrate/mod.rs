@@ -231,11 +231,41 @@ fn model_record(
 /// What `kalibre calibrate` writes in `--out`.
 const OUT_FILES: [&str; 3] = ["runs.jsonl", "report.json", "report.html"];
 
+/// A hall and its snapshots, both given; without them, what to give instead (a
+/// `model.toml` of one's own takes `--measurements`).
+fn check_hall_given(args: &CalibrateArgs) -> CliResult {
+    match (&args.hall, &args.snapshots) {
+        (Some(_), Some(_)) => Ok(()),
+        (Some(_), None) => Err(CliError::Input(
+            "--hall needs --snapshots: the operating conditions and measurements \
+             (snapshots.csv) to calibrate it against"
+                .into(),
+        )),
+        (None, Some(_)) => Err(CliError::Input(
+            "--snapshots needs --hall: the hall (hall.json) they were measured in".into(),
+        )),
+        (None, None) if args.model == ModelArg::Command && args.config.is_some() => {
+            Err(CliError::Input(
+                "--model command --config without --hall calibrates a model of your own: \
+                 give --measurements FILE, what was measured at its [[scenarios]] \
+                 (scenario,output,value rows, docs/models.md)"
+                    .into(),
+            ))
+        }
+        (None, None) => Err(CliError::Input(
+            "kalibre calibrate needs --hall and --snapshots (a hall), or --model command \
+             --config model.toml --measurements FILE (a model of your own, docs/models.md)"
+                .into(),
+        )),
+    }
+}
+
 /// Runs `kalibre calibrate`.
 pub fn run(args: CalibrateArgs) -> CliResult {
     if let Some(measurements) = &args.measurements {
         return generic::run(&args, measurements);
     }
+    check_hall_given(&args)?;
     let settings = settings(&args)?;
     check_model_flags(&args)?;
     let hall = Hall::load(args.hall_path())?;
@@ -456,7 +486,7 @@ fn warn_skipped_journal_lines(journal: &Path, report: &kalibre_core::calibrate::
 /// What Ctrl-C (or a kill) says: where the finished runs are, and that the same command
 /// resumes from them (once per process: the texts live as long as it). With OpenFOAM what
 /// it ends may be a mesh being built rather than a solve; the next command sweeps that.
-fn set_stop_message(journal: &Path, openfoam: bool) {
+pub(in crate::cli) fn set_stop_message(journal: &Path, openfoam: bool) {
     let kept = format!(
         "kept in {}: the same command resumes from there, repeating no successful run",
         journal.display()

@@ -231,8 +231,16 @@ pub(super) fn print_summary(
             );
         }
     }
+    // With nothing in the journal at the start, a run read back is a point this
+    // calibration asked for again, not an earlier calibration's.
+    let fresh = report.journal.as_ref().is_none_or(|j| j.loaded == 0);
+    let cached = if fresh && report.runs.cached > 0 {
+        "asked for again and read back"
+    } else {
+        "from the journal"
+    };
     println!(
-        "  {:<28} {} ({} new, {} from the journal, {} failed)",
+        "  {:<28} {} ({} new, {} {cached}, {} failed)",
         "model runs", report.runs.total, report.runs.new, report.runs.cached, report.runs.failed
     );
     println!("  {:<28} {}", "stopped", report.stop_reason);
@@ -348,12 +356,21 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report, style: 
          its best, {}. They are kept: the calibration that made them (its budget, \
          --max-runs, --iterations or --max-wall-s, where this one stopped early; or its \
          seed, settings or initial values, where those changed since) replays them \
-         without running the model again",
+         without running the model again{}",
         journal.display(),
         u.runs,
         report.stop_reason,
         best.line,
         style.error(Some(best.mae_c)),
-        style.error(Some(report.best.mae_c))
+        style.error(Some(report.best.mae_c)),
+        match style {
+            // A diagnosis steps each calibrated parameter from the calibration's best,
+            // which can land lower when the loop had not converged.
+            Style::Generic { .. } => {
+                "; a diagnosis's step from the best may be one, which says the loop had \
+                 not converged: more --iterations, or --polish N, would get there"
+            }
+            Style::Hall => "",
+        }
     );
 }

@@ -9,7 +9,7 @@ use kalibre_core::calibrate::{NamedValues, Report, REPORT_SCHEMA};
 use kalibre_core::diagnose::CLOSE_ALTERNATIVE_BIC;
 use kalibre_core::Model;
 use kalibre_dc::diagnosis::{
-    candidates_tried, diagnose_hall_with, hypothesis_flags, EffectSolver, HallDiagnosisSettings,
+    candidates_tried, diagnose_hall_with, EffectSolver, HallDiagnosisSettings,
 };
 use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
@@ -123,6 +123,11 @@ pub struct DiagnoseArgs {
     /// Runs of each refit hypothesis (one solve per snapshot each).
     #[arg(long, value_name = "N", default_value_t = 4, requires = "refit")]
     refit_iterations: usize,
+    /// With `--model command`: replay the journal's failed runs as the failures they were
+    /// instead of running them again (by default a failed run is retried, since its
+    /// cause may have passed).
+    #[arg(long = "replay-failed")]
+    replay_failed: bool,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -173,6 +178,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     for (flag, given) in [
         ("--config", args.config.is_some()),
         ("--measurements", args.measurements.is_some()),
+        ("--replay-failed", args.replay_failed),
     ] {
         if given {
             return Err(CliError::Input(format!(
@@ -436,13 +442,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         );
     }
     for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
-        let flags = hypothesis_flags(
-            h.significant,
-            h.refuted,
-            h.inert,
-            h.identifiable,
-            h.in_range,
-        );
+        let flags = print::flags(h);
         println!(
             "  {:<48} explains {:>4.0}%  predicted MAE {:.3} C  {}",
             h.name,

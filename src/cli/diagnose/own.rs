@@ -8,8 +8,8 @@ use std::path::Path;
 
 use kalibre_core::calibrate::{Report, REPORT_SCHEMA};
 use kalibre_core::diagnose::{
-    diagnose, linearise, DiagnoseSettings, Diagnosis, HypothesisResult, LineariseSettings,
-    CLOSE_ALTERNATIVE_BIC,
+    diagnose, linearise, run_fitted, DiagnoseSettings, Diagnosis, HypothesisResult,
+    LineariseSettings, CLOSE_ALTERNATIVE_BIC,
 };
 use kalibre_core::external::{CommandModelConfig, NamedScenario};
 use kalibre_core::{Model, Observations};
@@ -62,8 +62,9 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         )));
     }
     let obs = observations(&cfg, measurements)?;
+    super::journal::check_regular_files(&args.calibration)?;
     let report_path = args.calibration.join("report.json");
-    let (report, params) = read_report(&report_path, &cfg, config)?;
+    let (report, params) = read_report(&report_path, &cfg, config, obs.scales().is_some())?;
     check_same_measurements(&report_path, &report, &obs, measurements)?;
     let settings = DiagnoseSettings::new()
         .with_single_output_check(!args.no_single_output_check)
@@ -76,14 +77,16 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     let _lock = super::super::out_dir::lock(&args.calibration, "diagnose")?;
     super::super::out_dir::note_interrupted_runs(cfg.command.remove_interrupted_runs());
     let journal = args.calibration.join("runs.jsonl");
-    let store = open_journal(&journal, &cfg, config, false)?;
+    super::super::calibrate::set_stop_message(&journal, false);
+    let store = open_journal(&journal, &cfg, config, args.replay_failed)?;
+    check_calibrated_runs(&store, &cfg, &obs, &params, &report, config)?;
     let planned = obs.snapshots().len()
         * (1 + (cfg.space.params().iter())
             .filter(|p| !p.is_fixed())
             .count()
             + cfg.candidates.iter().map(|c| c.params.len()).sum::<usize>());
     eprintln!(
-        "diagnosing {} candidate effect(s) of {}: up to {planned} model runs ({} scenarios x \
+        "diagnosing {} candidate effect(s) of {}: about {planned} model runs ({} scenarios x \
          (the calibrated point, a step of each calibrated parameter and of each candidate's)), \
          through {}",
         cfg.candidates.len(),
@@ -103,8 +106,57 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         )
     })?
     .map_err(|e| CliError::Run(e.to_string()))?;
-    let d = diagnose(&lin.residuals, &lin.hypotheses, &settings)
-        .map_err(|e| CliError::Run(format!("diagnosis of {}: {e}", config.display())))?;
+    let rank = |hypotheses: &[kalibre_core::diagnose::Hypothesis]| {
+        diagnose(&lin.residuals, hypotheses, &settings)
+            .map_err(|e| CliError::Run(format!("diagnosis of {}: {e}", config.display())))
+    };
+    let mut hypotheses = lin.hypotheses.clone();
+    let mut d = rank(&hypotheses)?;
+    // The leading candidate run where it was fitted: the model's own MAE there. One that
+    // reads no better than the calibrated point is refuted, and the ranking made again.
+    let mut checked: Vec<Checked> = Vec::new();
+    let (mut new_runs, mut read_runs) = (lin.runs, lin.cached);
+    loop {
+        let Some(best) = d.significant().next().cloned() else {
+            break;
+        };
+        let best = &best;
+        let Some(effect) = cfg.candidates.iter().find(|c| c.name == best.name) else {
+            break;
+        };
+        if checked.iter().any(|c| c.name == best.name) {
+            break;
+        }
+        let run = with_threads(args.threads, || {
+            run_fitted(
+                &cfg.command,
+                &obs,
+                &cfg.space,
+                &params,
+                effect,
+                best,
+                &store,
+            )
+        })?
+        .map_err(|e| CliError::Run(e.to_string()))?;
+        new_runs += run.runs;
+        read_runs += run.cached;
+        let refuted = run.mae.as_ref().is_ok_and(|m| *m >= d.mae);
+        checked.push(Checked {
+            name: best.name.clone(),
+            params: cfg.space.names().into_iter().zip(run.params).collect(),
+            mae: run.mae,
+            refuted,
+        });
+        if !refuted {
+            break;
+        }
+        let name = best.name.clone();
+        for h in hypotheses.iter_mut().filter(|h| h.name == name) {
+            h.refuted = true;
+        }
+        d = rank(&hypotheses)?;
+    }
     let scaled = obs.scales().is_some();
     if args.json {
         let doc = serde_json::json!({
@@ -112,10 +164,14 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
                        "fingerprint": cfg.command.fingerprint(),
                        "errors_in": if scaled { "sd" } else { "outputs' units" } },
             "diagnosis": d,
+            // The diagnosis fits each candidate's change from absent; the model takes
+            // the value.
+            "fitted_values": fitted_values_json(&d, &cfg),
             "not_tried": lin.not_tried.iter()
                 .map(|(name, why)| serde_json::json!({ "candidate": name, "reason": why }))
                 .collect::<Vec<_>>(),
-            "runs": { "new": lin.runs, "from_journal": lin.cached },
+            "checked": checked.iter().map(Checked::to_json).collect::<Vec<_>>(),
+            "runs": { "new": new_runs, "from_journal": read_runs },
         });
         println!(
             "{}",
@@ -123,14 +179,66 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         );
         return Ok(());
     }
-    print_text(&d, &cfg, config, &lin.not_tried, scaled, settings.robust_nu);
+    print_text(
+        &d,
+        &cfg,
+        config,
+        (&lin.not_tried, &checked),
+        scaled,
+        (settings.robust_nu, report.settings.robust_nu),
+    );
     println!(
         "\n{} model runs, {} read from {}",
-        lin.runs,
-        lin.cached,
+        new_runs,
+        read_runs,
         journal.display()
     );
     Ok(())
+}
+
+/// The model run where the diagnosis fitted a leading candidate.
+struct Checked {
+    name: String,
+    /// Every parameter there, by name.
+    params: Vec<(String, f64)>,
+    /// The model's MAE there, or why it failed.
+    mae: Result<f64, String>,
+    /// It read no better than the calibrated point.
+    refuted: bool,
+}
+
+impl Checked {
+    fn to_json(&self) -> serde_json::Value {
+        let params: serde_json::Map<String, serde_json::Value> = (self.params.iter())
+            .map(|(n, v)| (n.clone(), serde_json::json!(v)))
+            .collect();
+        serde_json::json!({
+            "candidate": self.name,
+            "params": params,
+            "mae": self.mae.as_ref().ok(),
+            "failed": self.mae.as_ref().err(),
+            "refuted": self.refuted,
+        })
+    }
+
+    /// In words, beside `mae_now`, the calibrated point's.
+    fn line(&self, mae_now: f64, unit: &str) -> String {
+        match &self.mae {
+            Ok(m) if self.refuted => format!(
+                "the model run there reads MAE {}{unit}, no better than now ({}{unit}): \
+                 the linearisation misleads, so it is not named",
+                significant(*m, 4),
+                significant(mae_now, 4)
+            ),
+            Ok(m) => format!(
+                "the model run there (the calibrated parameters moved with it) reads MAE \
+                 {}{unit}, against {}{unit} now",
+                significant(*m, 4),
+                significant(mae_now, 4)
+            ),
+            Err(why) => format!("the model could not run there ({why}): not checked"),
+        }
+    }
 }
 
 /// The calibration's report and its best parameters, refused when it is of another model
@@ -139,6 +247,7 @@ fn read_report(
     report_path: &Path,
     cfg: &CommandModelConfig,
     config: &Path,
+    measurements_scaled: bool,
 ) -> CliResult<(Report, Vec<f64>)> {
     let file = report_path.display();
     let text = std::fs::read_to_string(report_path)
@@ -163,12 +272,66 @@ fn read_report(
     }
     let recorded = json.pointer("/model/fingerprint").and_then(|f| f.as_str());
     if recorded != Some(cfg.command.fingerprint().as_str()) {
+        let parts = report_path.with_file_name(super::super::calibrate::generic::MODEL_PARTS);
+        let what =
+            super::super::calibrate::generic::changed_since(&parts, cfg).unwrap_or_else(|| {
+                "its program, arguments, templates, outputs, parameters or a file of \
+                 fingerprint_files changed since"
+                    .to_string()
+            });
         return Err(CliError::Input(format!(
-            "{file}: /model/fingerprint: the calibration ran another model than {} (its \
-             program, arguments, templates, outputs, parameters or a file of \
-             fingerprint_files changed since): calibrate it again, then diagnose",
+            "{file}: /model/fingerprint: the calibration ran another model than {} ({what}): \
+             calibrate it into another --out (this one's journal holds the other model's \
+             runs), then diagnose that",
             config.display()
         )));
+    }
+    let errors_in = json.pointer("/model/errors_in").and_then(|e| e.as_str());
+    if let Some(errors_in) = errors_in {
+        let here = if measurements_scaled {
+            "sd"
+        } else {
+            "outputs' units"
+        };
+        if errors_in != here {
+            return Err(CliError::Input(format!(
+                "{file}: /model/errors_in: the calibration weighed the errors in {errors_in}, \
+                 these measurements {} (an `sd` column {}): diagnose with the calibration's \
+                 measurements, or calibrate again",
+                if measurements_scaled {
+                    "in sd"
+                } else {
+                    "in the outputs' units"
+                },
+                if measurements_scaled {
+                    "added"
+                } else {
+                    "removed"
+                }
+            )));
+        }
+    }
+    // A candidate held at another value than the calibration's, or one added or turned
+    // into a calibrated parameter since, is a model.toml edit: named there.
+    for (i, p) in cfg.space.params().iter().enumerate() {
+        let was = json
+            .pointer(&format!("/best/params/{}", p.name))
+            .and_then(|v| v.as_f64());
+        let candidate = (cfg.candidates.iter())
+            .flat_map(|c| &c.params)
+            .find(|c| c.index == i);
+        if let (Some(c), Some(was)) = (candidate, was) {
+            if was != c.absent {
+                return Err(CliError::Input(format!(
+                    "{}: `params[{i}].absent` is {}, but the calibration ran `{}` at {}: \
+                     calibrate again with the candidates as they are now, then diagnose",
+                    config.display(),
+                    kalibre_core::number(c.absent),
+                    p.name,
+                    kalibre_core::number(was)
+                )));
+            }
+        }
     }
     let params = load_params(report_path, &json, &cfg.space)?;
     Ok((report, params))
@@ -217,6 +380,79 @@ fn check_same_measurements(
     Ok(())
 }
 
+/// The journal must hold the calibration's runs at its parameters, answering what the
+/// report recorded, before any step runs: a scenario's variables edited since (not in the
+/// model's fingerprint) have no run there, and the diagnosis would explain the edit.
+fn check_calibrated_runs(
+    store: &kalibre_core::RunStore,
+    cfg: &CommandModelConfig,
+    obs: &Observations<NamedScenario>,
+    params: &[f64],
+    report: &Report,
+    config: &Path,
+) -> CliResult {
+    let names = cfg.space.names();
+    let journal = store
+        .path()
+        .map_or_else(String::new, |p| p.display().to_string());
+    for s in obs.snapshots() {
+        let key = cfg.command.scenario_key(&s.scenario);
+        let outputs = store
+            .get_keyed(&s.label, &key, &names, params)
+            .and_then(|(_, rec)| rec.result().ok());
+        let Some(outputs) = outputs else {
+            return Err(CliError::Input(format!(
+                "{}: scenario `{}`: {journal} has no run of the calibrated parameters under \
+                 its variables as they are now: they changed since the calibration (or the \
+                 journal lost the run); calibrate again, then diagnose",
+                config.display(),
+                s.label
+            )));
+        };
+        for ((o, m), v) in (obs.outputs().iter()).zip(&s.measured).zip(&outputs.values) {
+            if m.is_none() {
+                continue;
+            }
+            let recorded = (report.residuals.iter())
+                .find(|r| r.snapshot == s.label && r.sensor == o.name)
+                .map(|r| r.predicted_c);
+            // The report keeps (v / scale) * scale with an sd column: equal to v but for
+            // its last bit or so.
+            if recorded.is_some_and(|r| (r - v).abs() > 1e-12 * r.abs().max(v.abs())) {
+                return Err(CliError::Input(format!(
+                    "{journal}: scenario `{}`: the run at the calibrated parameters gives {} for \
+                     `{}`, where the report recorded {}: the report is not this journal's; \
+                     calibrate again, then diagnose",
+                    s.label,
+                    significant(*v, 6),
+                    o.name,
+                    significant(recorded.unwrap_or_default(), 6)
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Each hypothesis's fitted values as the model takes them: the absent value plus the
+/// fitted change, by hypothesis and parameter name.
+fn fitted_values_json(d: &Diagnosis, cfg: &CommandModelConfig) -> serde_json::Value {
+    let mut out = serde_json::Map::new();
+    for h in &d.hypotheses {
+        let Some(effect) = cfg.candidates.iter().find(|c| c.name == h.name) else {
+            continue;
+        };
+        let values: serde_json::Map<String, serde_json::Value> = (effect.params.iter())
+            .map(|p| {
+                let change = h.fitted.get(&p.name).unwrap_or(0.0);
+                (p.name.clone(), serde_json::json!(p.absent + change))
+            })
+            .collect();
+        out.insert(h.name.clone(), serde_json::Value::Object(values));
+    }
+    serde_json::Value::Object(out)
+}
+
 fn not_the_measurements(report_path: &Path, measurements: &Path, what: &str) -> CliError {
     CliError::Input(format!(
         "{}: not the measurements {} was calibrated on: {what}; diagnose with the \
@@ -232,9 +468,9 @@ fn print_text(
     d: &Diagnosis,
     cfg: &CommandModelConfig,
     config: &Path,
-    not_tried: &[(String, String)],
+    (not_tried, checked): (&[(String, String)], &[Checked]),
     scaled: bool,
-    robust_nu: Option<f64>,
+    (robust_nu, calibration_nu): (Option<f64>, Option<f64>),
 ) {
     let unit = if scaled { " sd" } else { "" };
     println!(
@@ -243,6 +479,26 @@ fn print_text(
          MAE`: linearised, with the calibrated parameters refitted beside it):",
         significant(d.mae, 4)
     );
+    println!(
+        "  ranked under {}",
+        match robust_nu {
+            Some(nu) => format!(
+                "a Student-t likelihood ({nu} degrees of freedom: a few outputs the model \
+                 misses count little; --likelihood gaussian for least squares)"
+            ),
+            None => "least squares (--likelihood gaussian)".to_string(),
+        }
+    );
+    // The calibrated parameters alone, refitted: a calibration that had not converged
+    // shows here, and no candidate earns the difference.
+    if d.refit_mae < 0.9 * d.mae {
+        println!(
+            "  refitting the calibrated parameters alone would already give MAE {}{unit} \
+             (linearised): the calibration has not converged, and every predicted MAE below \
+             includes that; more --iterations, or --polish N, settles it",
+            significant(d.refit_mae, 4)
+        );
+    }
     let significant_ones: Vec<&HypothesisResult> = d.significant().collect();
     let undecided = d.undecided();
     if !undecided.is_empty() {
@@ -252,17 +508,13 @@ fn print_text(
              each in turn, calibrate, and keep the one that lowers the error.",
             undecided.join(", ")
         );
+    } else if d.hypotheses.is_empty() {
+        println!("  no candidate could be tried (below: why)");
     } else if significant_ones.is_empty() {
         println!("  no significant missing effect among the candidates");
     }
     for h in &d.hypotheses {
-        let flags = kalibre_dc::diagnosis::hypothesis_flags(
-            h.significant,
-            h.refuted,
-            h.inert,
-            h.identifiable,
-            h.in_range,
-        );
+        let flags = super::print::flags(h);
         println!(
             "  {:<32} explains {:>4.0}%  predicted MAE {}{unit}  BIC {:+.1}  {}",
             h.name,
@@ -301,16 +553,24 @@ fn print_text(
             );
             continue;
         }
+        let check = checked.iter().find(|c| c.name == h.name);
+        let check_line = check.map(|c| c.line(d.mae, unit));
         if h.significant {
             println!("    fitted {}", fitted.join(", "));
+            if let Some(line) = &check_line {
+                println!("    {line}");
+            }
             if !h.identifiable {
                 println!("    {}", super::print::not_identifiable(h));
             }
+            let grouped = effect.params.len() > 1 || effect.name != effect.params[0].name;
             println!(
-                "    to add it: in {}, delete `absent` from [[params]] {} and give `initial` \
-                 (the fitted value is a good start), then calibrate again into the same --out: \
-                 the runs already made count",
+                "    to add it: in {}, delete `absent`{} from [[params]] {} and give `initial` \
+                 (the fitted value is a good start), then calibrate again; the same --out \
+                 keeps its journal, whose runs are read back wherever the loop asks for one \
+                 again",
                 config.display(),
+                if grouped { " and `effect`" } else { "" },
                 kalibre_core::some_names(
                     &effect
                         .params
@@ -325,6 +585,8 @@ fn print_text(
             {
                 super::print::print_close_alternatives(d, h);
             }
+        } else if let Some(line) = check_line.filter(|_| h.refuted) {
+            println!("    fitted {}; {line}", fitted.join(", "));
         } else if undecided.contains(&h.name.as_str()) {
             println!(
                 "    undecided (about as good: {}); fitted {}",
@@ -338,7 +600,7 @@ fn print_text(
             );
         }
     }
-    print_unexplained(d, scaled, robust_nu);
+    print_unexplained(d, scaled, calibration_nu);
     if !not_tried.is_empty() {
         println!("\nnot tried:");
         for (name, why) in not_tried {
@@ -347,8 +609,9 @@ fn print_text(
     }
 }
 
-/// The outputs no candidate explains, in the units the diagnosis weighed them in.
-fn print_unexplained(d: &Diagnosis, scaled: bool, robust_nu: Option<f64>) {
+/// The outputs no candidate explains, in the units the diagnosis weighed them in;
+/// `calibration_nu` is the calibration's likelihood, which the advice is about.
+fn print_unexplained(d: &Diagnosis, scaled: bool, calibration_nu: Option<f64>) {
     if d.unexplained.is_empty() {
         return;
     }
@@ -369,7 +632,7 @@ fn print_unexplained(d: &Diagnosis, scaled: bool, robust_nu: Option<f64>) {
             u.rms_scales
         );
     }
-    if robust_nu.is_none() {
+    if calibration_nu.is_none() {
         println!(
             "  to calibrate weighing them down as a Student-t ranking does, add `--likelihood \
              student-t` to `kalibre calibrate`"

@@ -307,3 +307,14 @@ pub(crate) fn not_identifiable(h: &HypothesisResult) -> String {
         )
     }
 }
+
+/// A hypothesis's verdict flags in words (`significant`, `not identifiable`, ...).
+pub(super) fn flags(h: &HypothesisResult) -> String {
+    kalibre_dc::diagnosis::hypothesis_flags(
+        h.significant,
+        h.refuted,
+        h.inert,
+        h.identifiable,
+        h.in_range,
+    )
+}
