@@ -110,22 +110,9 @@ pub fn linearise<M: Model>(
     settings: &LineariseSettings,
 ) -> Result<Linearised> {
     check(space, params, candidates, settings)?;
-    let names = space.names();
-    let output_names: Vec<String> = obs.outputs().iter().map(|o| o.name.clone()).collect();
-    let scenario_keys: Vec<String> = (obs.snapshots().iter())
-        .map(|s| model.scenario_key(&s.scenario))
-        .collect();
-    let runner = Runner {
-        model,
-        observations: obs,
-        store,
-        param_names: &names,
-        scenario_keys: &scenario_keys,
-        output_names: &output_names,
-        observers: &[],
-        pool: None,
-        scales: obs.scales(),
-    };
+    let inputs = RunInputs::new(model, obs, space);
+    let runner = inputs.runner(model, obs, store);
+    let names = &inputs.names;
     let is_candidate = |i: usize| {
         candidates
             .iter()
@@ -180,7 +167,7 @@ pub fn linearise<M: Model>(
     })?;
 
     // Columns of the calibrated parameters: (snapshot blocks) outputs x parameters.
-    let n_out = output_names.len();
+    let n_out = inputs.output_names.len();
     let n_snap = obs.snapshots().len();
     let mut blocks = vec![Array2::<f64>::zeros((n_out, calibrated.len())); n_snap];
     for (k, &i) in movable.iter().enumerate() {
@@ -346,7 +333,6 @@ pub fn run_fitted<M: Model>(
         std::slice::from_ref(candidate),
         &LineariseSettings::default(),
     )?;
-    let names = space.names();
     let mut point = params.to_vec();
     for (i, p) in space.params().iter().enumerate() {
         if let Some(change) = current_change.get(&p.name) {
@@ -357,22 +343,8 @@ pub fn run_fitted<M: Model>(
         let change = fitted.get(&c.name).unwrap_or(0.0);
         point[c.index] = (c.absent + change).clamp(c.lower, c.upper);
     }
-    let output_names: Vec<String> = obs.outputs().iter().map(|o| o.name.clone()).collect();
-    let scenario_keys: Vec<String> = (obs.snapshots().iter())
-        .map(|s| model.scenario_key(&s.scenario))
-        .collect();
-    let runner = Runner {
-        model,
-        observations: obs,
-        store,
-        param_names: &names,
-        scenario_keys: &scenario_keys,
-        output_names: &output_names,
-        observers: &[],
-        pool: None,
-        scales: obs.scales(),
-    };
-    let results = runner.run(0, std::slice::from_ref(&point))?;
+    let inputs = RunInputs::new(model, obs, space);
+    let results = (inputs.runner(model, obs, store)).run(0, std::slice::from_ref(&point))?;
     let mut tally = Tally::default();
     tally.count(&results);
     let mae = all_ran(&results[0])
@@ -396,6 +368,45 @@ pub fn run_fitted<M: Model>(
         runs: tally.runs,
         cached: tally.cached,
     })
+}
+
+/// What a [`Runner`] borrows besides the model, the observations and the journal.
+struct RunInputs {
+    names: Vec<String>,
+    output_names: Vec<String>,
+    scenario_keys: Vec<String>,
+}
+
+impl RunInputs {
+    fn new<M: Model>(model: &M, obs: &Observations<M::Scenario>, space: &ParamSpace) -> Self {
+        RunInputs {
+            names: space.names(),
+            output_names: obs.outputs().iter().map(|o| o.name.clone()).collect(),
+            scenario_keys: (obs.snapshots().iter())
+                .map(|s| model.scenario_key(&s.scenario))
+                .collect(),
+        }
+    }
+
+    /// Runs through `store`, as the loop's step 3 does (outputs in scale units).
+    fn runner<'r, M: Model>(
+        &'r self,
+        model: &'r M,
+        obs: &'r Observations<M::Scenario>,
+        store: &'r RunStore,
+    ) -> Runner<'r, M> {
+        Runner {
+            model,
+            observations: obs,
+            store,
+            param_names: &self.names,
+            scenario_keys: &self.scenario_keys,
+            output_names: &self.output_names,
+            observers: &[],
+            pool: None,
+            scales: obs.scales(),
+        }
+    }
 }
 
 /// Runs made and read.
