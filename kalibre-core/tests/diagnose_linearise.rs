@@ -3,8 +3,8 @@
 //! failed steps.
 
 use kalibre_core::diagnose::{
-    diagnose, linearise, run_fitted, CandidateEffect, CandidateParam, DiagnoseSettings,
-    LineariseSettings,
+    diagnose, linearise, run_fitted, CandidateEffect, CandidateParam, DiagnoseSettings, Diagnosis,
+    FittedRun, LineariseSettings, Linearised,
 };
 use kalibre_core::{
     Model, ModelError, Observations, OutputInfo, Outputs, Param, ParamSpace, RunStore, Scale,
@@ -93,7 +93,7 @@ fn at_3_5<M: Model<Scenario = f64>>(
     space: &ParamSpace,
     leak: &CandidateEffect,
     store: &RunStore,
-) -> kalibre_core::Result<kalibre_core::diagnose::Linearised> {
+) -> kalibre_core::Result<Linearised> {
     let settings = LineariseSettings::default();
     linearise(
         model,
@@ -259,45 +259,44 @@ impl Model for Turning {
     }
 }
 
+/// Linearised at a = 3.5 and ranked, then run where the leading hypothesis was fitted.
+fn fit_and_run<M: Model<Scenario = f64>>(
+    model: &M,
+    obs: &Observations<f64>,
+    space: &ParamSpace,
+    leak: &CandidateEffect,
+) -> (Linearised, Diagnosis, FittedRun) {
+    let store = RunStore::in_memory("fit");
+    let lin = at_3_5(model, obs, space, leak, &store).unwrap();
+    let sigma = DiagnoseSettings::new().with_noise_sigma(0.01);
+    let d = diagnose(&lin.residuals, &lin.hypotheses, &sigma).unwrap();
+    let run = run_fitted(
+        model,
+        obs,
+        space,
+        &[3.5, 0.0],
+        leak,
+        &d.hypotheses[0],
+        &store,
+    );
+    (lin, d, run.unwrap())
+}
+
 #[test]
 fn the_model_run_at_the_fit_confirms_or_refutes_it() {
     let (space, leak) = space_and_leak(false);
     let obs = observations();
-    let sigma = DiagnoseSettings::new().with_noise_sigma(0.01);
     // Linear in the leak: the fitted point is the truth, where the model is exact.
-    let store = RunStore::in_memory("curve");
-    let lin = at_3_5(&WORKS, &obs, &space, &leak, &store).unwrap();
-    let d = diagnose(&lin.residuals, &lin.hypotheses, &sigma).unwrap();
-    let run = run_fitted(
-        &WORKS,
-        &obs,
-        &space,
-        &[3.5, 0.0],
-        &leak,
-        &d.hypotheses[0],
-        &store,
-    )
-    .unwrap();
+    let (_, _, run) = fit_and_run(&WORKS, &obs, &space, &leak);
     assert!((run.params[0] - 2.0).abs() < 1e-6 && (run.params[1] - 0.3).abs() < 1e-6);
     assert!(run.mae.unwrap() < 1e-6, "the model at the fit");
     assert_eq!(run.runs, 3);
     // Turning: the step's slope (0.6 x^2) leads the fit to a leak where the model cools.
-    let store = RunStore::in_memory("turning");
-    let lin = at_3_5(&Turning, &obs, &space, &leak, &store).unwrap();
-    let d = diagnose(&lin.residuals, &lin.hypotheses, &sigma).unwrap();
-    let run = run_fitted(
-        &Turning,
-        &obs,
-        &space,
-        &[3.5, 0.0],
-        &leak,
-        &d.hypotheses[0],
-        &store,
-    )
-    .unwrap();
+    let (lin, d, run) = fit_and_run(&Turning, &obs, &space, &leak);
     let mae = run.mae.unwrap();
     assert!(mae > d.mae, "MAE {mae} at the fit against {} now", d.mae);
     // Refuted, the hypothesis is never significant.
+    let sigma = DiagnoseSettings::new().with_noise_sigma(0.01);
     let mut refuted = lin.hypotheses.clone();
     refuted[0].refuted = true;
     let again = diagnose(&lin.residuals, &refuted, &sigma).unwrap();

@@ -126,17 +126,18 @@ pub fn linearise<M: Model>(
     // Calibrated parameters, forward in the unit box (backward at the upper bound);
     // fixed ones have no step and a zero column.
     let calibrated: Vec<usize> = (0..space.dim()).filter(|&i| !is_candidate(i)).collect();
-    let unit_step_to = |i: usize, forward: bool| {
-        let p = &space.params()[i];
-        let u = p.to_unit(params[i]);
-        let u = if forward {
+    // Parameter `i`'s unit coordinate one step forward or back from the calibrated value.
+    let unit_after = |i: usize, forward: bool| {
+        let u = space.params()[i].to_unit(params[i]);
+        if forward {
             u + settings.unit_step
         } else {
             u - settings.unit_step
-        };
-        p.from_unit(u)
+        }
     };
-    let forward_first = |i: usize| space.params()[i].to_unit(params[i]) + settings.unit_step <= 1.0;
+    let unit_step_to =
+        |i: usize, forward: bool| space.params()[i].from_unit(unit_after(i, forward));
+    let forward_first = |i: usize| unit_after(i, true) <= 1.0;
     let movable: Vec<usize> = (calibrated.iter().copied())
         .filter(|&i| !space.params()[i].is_fixed())
         .collect();
@@ -177,13 +178,7 @@ pub fn linearise<M: Model>(
         let retried;
         if let Err((s, why)) = &ran {
             // The other side, if the box has room for a step there.
-            let u = space.params()[i].to_unit(params[i]);
-            let other_u = if forward_first(i) {
-                u - settings.unit_step
-            } else {
-                u + settings.unit_step
-            };
-            if !(0.0..=1.0).contains(&other_u) {
+            if !(0.0..=1.0).contains(&unit_after(i, !forward_first(i))) {
                 return Err(Error::Mismatch(format!(
                     "the model failed a step of `{}` from its calibrated value (`{}`): {why}; \
                      and the other side is beyond its bounds, so its slope there cannot be \
@@ -215,18 +210,13 @@ pub fn linearise<M: Model>(
         }
     }
     let calibrated_names: Vec<String> = calibrated.iter().map(|&i| names[i].clone()).collect();
-    // Model minus measurement, both in the scales' units (the runner's outputs are).
-    let mut r = Vec::new();
-    for (s, snap) in obs.snapshots().iter().enumerate() {
-        for (o, m) in snap.measured.iter().enumerate() {
-            if let Some(m) = m {
-                let scale = obs.scales().map_or(1.0, |sc| sc[s][o]);
-                r.push(base[s][o] - m / scale);
-            }
-        }
-    }
     let jacobian = stack_blocks(obs, &blocks, "Jacobian")?;
-    let residuals = Residuals::new(measured_rows(obs), r, jacobian, calibrated_names)?;
+    let residuals = Residuals::new(
+        measured_rows(obs),
+        scaled_residuals(obs, &base),
+        jacobian,
+        calibrated_names,
+    )?;
 
     let mut hypotheses = Vec::new();
     let mut not_tried = Vec::new();
@@ -349,17 +339,8 @@ pub fn run_fitted<M: Model>(
     tally.count(&results);
     let mae = all_ran(&results[0])
         .map(|outputs| {
-            let (mut sum, mut n) = (0.0, 0usize);
-            for (s, snap) in obs.snapshots().iter().enumerate() {
-                for (o, m) in snap.measured.iter().enumerate() {
-                    if let Some(m) = m {
-                        let scale = obs.scales().map_or(1.0, |sc| sc[s][o]);
-                        sum += (outputs[s][o] - m / scale).abs();
-                        n += 1;
-                    }
-                }
-            }
-            sum / n.max(1) as f64
+            let r = scaled_residuals(obs, &outputs);
+            r.iter().map(|e| e.abs()).sum::<f64>() / r.len().max(1) as f64
         })
         .map_err(|(s, why)| format!("`{}`: {why}", obs.snapshots()[s].label));
     Ok(FittedRun {
@@ -368,6 +349,21 @@ pub fn run_fitted<M: Model>(
         runs: tally.runs,
         cached: tally.cached,
     })
+}
+
+/// Model minus measurement over the measured rows (as [`measured_rows`] orders them), in
+/// the scales' units: `outputs` per snapshot, as the runner gives them, already are.
+fn scaled_residuals<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f64> {
+    let mut r = Vec::new();
+    for (s, snap) in obs.snapshots().iter().enumerate() {
+        for (o, m) in snap.measured.iter().enumerate() {
+            if let Some(m) = m {
+                let scale = obs.scales().map_or(1.0, |sc| sc[s][o]);
+                r.push(outputs[s][o] - m / scale);
+            }
+        }
+    }
+    r
 }
 
 /// What a [`Runner`] borrows besides the model, the observations and the journal.

@@ -172,7 +172,7 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         "kind": "command",
         "config": config.display().to_string(),
         "fingerprint": cfg.command.fingerprint(),
-        "errors_in": if scaled { "sd" } else { "outputs' units" },
+        "errors_in": errors_in(scaled),
         "per_output": per_output.as_deref().map(per_output_json),
     }));
     let report_path = args.out.join("report.json");
@@ -204,6 +204,16 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     }
     println!("wrote {}, {}", report_path.display(), journal.display());
     Ok(())
+}
+
+/// What `report.json`'s `model.errors_in` says the errors are in: sd units with an `sd`
+/// column (`scaled`), else the outputs' own.
+pub(in crate::cli) fn errors_in(scaled: bool) -> &'static str {
+    if scaled {
+        "sd"
+    } else {
+        "outputs' units"
+    }
 }
 
 /// One output's error at the best parameters, in its own units.

@@ -14,7 +14,7 @@ use kalibre_core::diagnose::{
 use kalibre_core::external::{CommandModelConfig, NamedScenario};
 use kalibre_core::{Model, Observations};
 
-use super::super::calibrate::generic::{observations, open_journal};
+use super::super::calibrate::generic::{errors_in, observations, open_journal};
 use super::super::params_file::load_params;
 use super::super::{own_model, significant, with_threads, CliError, CliResult};
 use super::DiagnoseArgs;
@@ -162,7 +162,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         let doc = serde_json::json!({
             "model": { "kind": "command", "config": config.display().to_string(),
                        "fingerprint": cfg.command.fingerprint(),
-                       "errors_in": if scaled { "sd" } else { "outputs' units" } },
+                       "errors_in": errors_in(scaled) },
             "diagnosis": d,
             // The diagnosis fits each candidate's change from absent; the model takes
             // the value.
@@ -286,16 +286,11 @@ fn read_report(
             config.display()
         )));
     }
-    let errors_in = json.pointer("/model/errors_in").and_then(|e| e.as_str());
-    if let Some(errors_in) = errors_in {
-        let here = if measurements_scaled {
-            "sd"
-        } else {
-            "outputs' units"
-        };
-        if errors_in != here {
+    let recorded_in = json.pointer("/model/errors_in").and_then(|e| e.as_str());
+    if let Some(recorded_in) = recorded_in {
+        if recorded_in != errors_in(measurements_scaled) {
             return Err(CliError::Input(format!(
-                "{file}: /model/errors_in: the calibration weighed the errors in {errors_in}, \
+                "{file}: /model/errors_in: the calibration weighed the errors in {recorded_in}, \
                  these measurements {} (an `sd` column {}): diagnose with the calibration's \
                  measurements, or calibrate again",
                 if measurements_scaled {
@@ -313,24 +308,18 @@ fn read_report(
     }
     // A candidate held at another value than the calibration's, or one added or turned
     // into a calibrated parameter since, is a model.toml edit: named there.
-    for (i, p) in cfg.space.params().iter().enumerate() {
-        let was = json
-            .pointer(&format!("/best/params/{}", p.name))
-            .and_then(|v| v.as_f64());
-        let candidate = (cfg.candidates.iter())
-            .flat_map(|c| &c.params)
-            .find(|c| c.index == i);
-        if let (Some(c), Some(was)) = (candidate, was) {
-            if was != c.absent {
-                return Err(CliError::Input(format!(
-                    "{}: `params[{i}].absent` is {}, but the calibration ran `{}` at {}: \
-                     calibrate again with the candidates as they are now, then diagnose",
-                    config.display(),
-                    kalibre_core::number(c.absent),
-                    p.name,
-                    kalibre_core::number(was)
-                )));
-            }
+    for c in cfg.candidates.iter().flat_map(|c| &c.params) {
+        let was = (json.pointer(&format!("/best/params/{}", c.name))).and_then(|v| v.as_f64());
+        if let Some(was) = was.filter(|was| *was != c.absent) {
+            return Err(CliError::Input(format!(
+                "{}: `params[{}].absent` is {}, but the calibration ran `{}` at {}: \
+                 calibrate again with the candidates as they are now, then diagnose",
+                config.display(),
+                c.index,
+                kalibre_core::number(c.absent),
+                c.name,
+                kalibre_core::number(was)
+            )));
         }
     }
     let params = load_params(report_path, &json, &cfg.space)?;
