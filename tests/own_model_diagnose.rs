@@ -94,17 +94,22 @@ fn the_missing_effect_is_named_added_and_the_error_falls() {
     assert_eq!(doc["diagnosis"]["hypotheses"][0]["name"], "loss");
     let decoy = hypothesis(&doc, "cold_sensor_bias");
     assert_eq!(decoy["significant"], false, "{decoy}");
-    // 4 scenarios x (2 calibrated steps + 2 candidates' steps + the run at the fit) new;
-    // the calibrated point is the calibration's own run.
+    // The quick calibration stopped short of its floor: the calibrated parameters alone,
+    // refit, read lower, and the model run there is what the candidate had to beat.
+    let floor = doc["floor"]["mae"].as_f64().unwrap();
+    assert!(floor < 0.9 * now, "floor {floor} against {now}");
+    assert_eq!(doc["baseline_mae"].as_f64(), Some(floor));
+    // 4 scenarios x (2 calibrated steps + 2 candidates' steps + the floor + the run at the
+    // fit) new; the calibrated point is the calibration's own run.
     assert_eq!(
         doc["runs"],
-        serde_json::json!({ "new": 20, "from_journal": 4 })
+        serde_json::json!({ "new": 24, "from_journal": 4 })
     );
     // Again: every run is the journal's.
     let again = diagnosis_json(&mut diagnose(&config, &measurements, &cal));
     assert_eq!(
         again["runs"],
-        serde_json::json!({ "new": 0, "from_journal": 24 })
+        serde_json::json!({ "new": 0, "from_journal": 28 })
     );
     assert_eq!(again["diagnosis"], doc["diagnosis"]);
 
@@ -118,14 +123,20 @@ fn the_missing_effect_is_named_added_and_the_error_falls() {
 
     // The same calibration again: the diagnosis's steps of the candidates lie outside
     // the box it calibrates in (the candidates held at 0), so they are not offered as a
-    // better point it missed; the steps of UA0 and n are.
+    // better point it missed; the steps of UA0 and n are, and the floor, which is the
+    // best of them.
     let o = run(&mut calibrate(&config, &measurements, &cal));
     assert!(o.status.success(), "{}", stderr(&o));
     let unreached = &report(&cal)["unreached"];
-    assert_eq!(unreached["complete_points"], 2, "{unreached}");
+    assert_eq!(unreached["complete_points"], 3, "{unreached}");
     let offered = &unreached["best"]["params"];
     assert!(
         offered["loss"] == 0.0 && offered["bias"] == 0.0,
+        "{unreached}"
+    );
+    assert_eq!(
+        unreached["best"]["mae_c"].as_f64(),
+        Some(floor),
         "{unreached}"
     );
 
@@ -274,4 +285,58 @@ fn a_candidate_the_model_contradicts_at_its_fit_is_not_named() {
         said.contains("the linearisation misleads, so it is not named"),
         "{said}"
     );
+    // Refit, no run towards its fit reads better: refuted by the refit itself.
+    let doc = diagnosis_json(diagnose(&config, &measurements, &cal).args(["--refit", "1"]));
+    let refit = &doc["refits"][0];
+    assert_eq!(refit["name"], "loss", "{doc}");
+    let steps = refit["steps"].as_array().unwrap();
+    assert!(
+        !steps.is_empty() && steps.iter().all(|s| s["accepted"] == false),
+        "{refit}"
+    );
+    let loss = hypothesis(&doc, "loss");
+    assert_eq!(loss["refuted"], true, "{loss}");
+    assert_eq!(loss["significant"], false, "{loss}");
+}
+
+/// `--refit 1`: the leading candidate refit with the model's own runs (secant steps from
+/// its fit), each read by the model; the value and the error left at it beyond what one
+/// run at the linearised fit reads.
+#[test]
+fn the_leading_candidate_is_refit_with_the_models_own_runs() {
+    let (script, template, toml) = with_decoy();
+    let (dir, config, measurements) =
+        setup_with("own-diagnose-refit", &script, &template, &toml, &TRUTH);
+    let cal = dir.join("cal");
+    let o = run(&mut calibrate(&config, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let plain = diagnosis_json(&mut diagnose(&config, &measurements, &cal));
+    let checked = plain["checked"][0]["mae"].as_f64().unwrap();
+    assert!(plain["refits"].as_array().unwrap().is_empty(), "{plain}");
+
+    let doc = diagnosis_json(diagnose(&config, &measurements, &cal).args(["--refit", "1"]));
+    let refit = &doc["refits"][0];
+    assert_eq!(refit["name"], "loss", "{refit}");
+    let steps = refit["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 4, "{refit}");
+    let maes: Vec<f64> = steps.iter().map(|s| s["mae"].as_f64().unwrap()).collect();
+    assert!(steps.iter().all(|s| s["accepted"] == true), "{refit}");
+    assert!(maes.windows(2).all(|w| w[1] < w[0]), "{maes:?}");
+    // Measured: 0.073 at the first run, 5.2e-6 at the fourth; one run at the linearised
+    // fit reads 0.079.
+    assert!(maes[3] < 1e-3 * checked, "{maes:?} against {checked}");
+    let fitted = doc["fitted_values"]["loss"]["loss"].as_f64().unwrap();
+    assert!((fitted - 150.0).abs() < 0.05, "fitted loss {fitted}");
+    // 4 runs of one point each, at 4 scenarios, and the check at the refit's fit.
+    let new = doc["runs"]["new"].as_u64().unwrap();
+    assert_eq!(new, 4 * 4 + 4, "{}", doc["runs"]);
+
+    let o = run(diagnose(&config, &measurements, &cal).args(["--refit", "1"]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("refit with the model"), "{said}");
+    assert!(said.contains("loss = 150.00"), "{said}");
+    let o = run(diagnose(&config, &measurements, &cal).args(["--refit-iterations", "2"]));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--refit"), "{}", stderr(&o));
 }

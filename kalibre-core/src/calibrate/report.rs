@@ -25,6 +25,11 @@ impl NamedValues {
         NamedValues(names.iter().cloned().zip(values.iter().copied()).collect())
     }
 
+    /// Whether it holds no value.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
     /// The value of a name.
     pub fn get(&self, name: &str) -> Option<f64> {
         self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)

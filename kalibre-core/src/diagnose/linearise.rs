@@ -6,8 +6,8 @@
 use ndarray::Array2;
 
 use super::input::stack_blocks;
+use super::runs::{all_ran, scaled_residuals, RunInputs, Tally};
 use super::{measured_rows, CandidateEffect, Hypothesis, HypothesisParam, Residuals};
-use crate::calibrate::runner::{RunResult, Runner};
 use crate::{Error, Model, Observations, ParamSpace, Result, RunStore};
 
 /// Finite-difference steps of [`linearise`].
@@ -287,162 +287,8 @@ pub fn linearise<M: Model>(
     })
 }
 
-/// What the model itself reads at a hypothesis's fitted point ([`run_fitted`]).
-#[derive(Debug, Clone, PartialEq)]
-pub struct FittedRun {
-    /// The point: the calibrated parameters moved by the joint fit's change, the
-    /// candidate's at `absent` plus its fitted change, each clamped into its range.
-    pub params: Vec<f64>,
-    /// The model's mean absolute residual there (in the observations' scale units, as
-    /// [`super::Diagnosis::mae`]), or why a run there failed.
-    pub mae: std::result::Result<f64, String>,
-    /// Model runs made (not in the journal before).
-    pub runs: usize,
-    /// Runs read from the journal.
-    pub cached: usize,
-}
-
-/// Runs the model where the diagnosis fitted `candidate` (`result`'s `fitted`, its
-/// parameters' changes from absent, and `current_change`, the calibrated parameters'
-/// change beside it), through `store`: the linearisation's prediction checked by the
-/// model itself. A candidate that reads no better there than the calibrated point is
-/// refuted ([`Hypothesis::refuted`]).
-pub fn run_fitted<M: Model>(
-    model: &M,
-    obs: &Observations<M::Scenario>,
-    space: &ParamSpace,
-    params: &[f64],
-    candidate: &CandidateEffect,
-    result: &super::HypothesisResult,
-    store: &RunStore,
-) -> Result<FittedRun> {
-    let (fitted, current_change) = (&result.fitted, &result.current_change);
-    check(
-        space,
-        params,
-        std::slice::from_ref(candidate),
-        &LineariseSettings::default(),
-    )?;
-    let mut point = params.to_vec();
-    for (i, p) in space.params().iter().enumerate() {
-        if let Some(change) = current_change.get(&p.name) {
-            point[i] = (params[i] + change).clamp(p.lower, p.upper);
-        }
-    }
-    for c in &candidate.params {
-        let change = fitted.get(&c.name).unwrap_or(0.0);
-        point[c.index] = (c.absent + change).clamp(c.lower, c.upper);
-    }
-    let inputs = RunInputs::new(model, obs, space);
-    let results = (inputs.runner(model, obs, store)).run(0, std::slice::from_ref(&point))?;
-    let mut tally = Tally::default();
-    tally.count(&results);
-    let mae = all_ran(&results[0])
-        .map(|outputs| {
-            let r = scaled_residuals(obs, &outputs);
-            r.iter().map(|e| e.abs()).sum::<f64>() / r.len().max(1) as f64
-        })
-        .map_err(|(s, why)| format!("`{}`: {why}", obs.snapshots()[s].label));
-    Ok(FittedRun {
-        params: point,
-        mae,
-        runs: tally.runs,
-        cached: tally.cached,
-    })
-}
-
-/// Model minus measurement over the measured rows (as [`measured_rows`] orders them), in
-/// the scales' units: `outputs` per snapshot, as the runner gives them, already are.
-fn scaled_residuals<S>(obs: &Observations<S>, outputs: &[Vec<f64>]) -> Vec<f64> {
-    let mut r = Vec::new();
-    for (s, snap) in obs.snapshots().iter().enumerate() {
-        for (o, m) in snap.measured.iter().enumerate() {
-            if let Some(m) = m {
-                let scale = obs.scales().map_or(1.0, |sc| sc[s][o]);
-                r.push(outputs[s][o] - m / scale);
-            }
-        }
-    }
-    r
-}
-
-/// What a [`Runner`] borrows besides the model, the observations and the journal.
-struct RunInputs {
-    names: Vec<String>,
-    output_names: Vec<String>,
-    scenario_keys: Vec<String>,
-}
-
-impl RunInputs {
-    fn new<M: Model>(model: &M, obs: &Observations<M::Scenario>, space: &ParamSpace) -> Self {
-        RunInputs {
-            names: space.names(),
-            output_names: obs.outputs().iter().map(|o| o.name.clone()).collect(),
-            scenario_keys: (obs.snapshots().iter())
-                .map(|s| model.scenario_key(&s.scenario))
-                .collect(),
-        }
-    }
-
-    /// Runs through `store`, as the loop's step 3 does (outputs in scale units).
-    fn runner<'r, M: Model>(
-        &'r self,
-        model: &'r M,
-        obs: &'r Observations<M::Scenario>,
-        store: &'r RunStore,
-    ) -> Runner<'r, M> {
-        Runner {
-            model,
-            observations: obs,
-            store,
-            param_names: &self.names,
-            scenario_keys: &self.scenario_keys,
-            output_names: &self.output_names,
-            observers: &[],
-            pool: None,
-            scales: obs.scales(),
-        }
-    }
-}
-
-/// Runs made and read.
-#[derive(Default)]
-struct Tally {
-    runs: usize,
-    cached: usize,
-}
-
-impl Tally {
-    fn count(&mut self, results: &[Vec<RunResult>]) {
-        for r in results.iter().flatten() {
-            if r.cached {
-                self.cached += 1;
-            } else {
-                self.runs += 1;
-            }
-        }
-    }
-}
-
-/// One point's outputs at every snapshot, or the first snapshot that failed and why.
-fn all_ran(results: &[RunResult]) -> std::result::Result<Vec<Vec<f64>>, (usize, String)> {
-    (results.iter().enumerate())
-        .map(|(s, r)| match &r.result {
-            Ok(o) => Ok(o.values.clone()),
-            // The log's gist says why, where the reason only says that it failed.
-            Err(e) => Err((
-                s,
-                match e.log_gist() {
-                    Some(gist) => format!("{e} ({gist})"),
-                    None => e.to_string(),
-                },
-            )),
-        })
-        .collect()
-}
-
 /// The point, the candidates and the steps make sense together.
-fn check(
+pub(super) fn check(
     space: &ParamSpace,
     params: &[f64],
     candidates: &[CandidateEffect],

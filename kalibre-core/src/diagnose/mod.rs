@@ -81,7 +81,9 @@ mod jackknife;
 pub(crate) mod linalg;
 mod linearise;
 mod outcome;
+mod refit;
 pub(crate) mod robust;
+mod runs;
 mod settings;
 mod weights;
 
@@ -89,8 +91,10 @@ pub(crate) use candidate::group_candidates;
 pub use candidate::{CandidateEffect, CandidateParam};
 pub use heldout::HeldOutScheme;
 pub use input::{measured_rows, Hypothesis, HypothesisParam, Residuals, RowInfo};
-pub use linearise::{linearise, run_fitted, FittedRun, LineariseSettings, Linearised};
+pub use linearise::{linearise, LineariseSettings, Linearised};
 pub use outcome::{Diagnosis, HypothesisResult, UnexplainedOutput, DIAGNOSIS_SCHEMA};
+pub use refit::{refit_leading, Refit, RefitSettings, RefitStep, Refitted};
+pub use runs::{run_fitted, Calibrated, FittedRun, PointRun};
 pub use settings::DiagnoseSettings;
 
 use std::borrow::Cow;
@@ -462,6 +466,7 @@ pub fn diagnose(
         schema: DIAGNOSIS_SCHEMA.into(),
         mae: mean_abs(raw),
         refit_mae,
+        refit_change: NamedValues::new(res.params(), &base.x),
         noise_sigma: sigma,
         noise_sigma_estimated: estimated,
         held_out: scheme,

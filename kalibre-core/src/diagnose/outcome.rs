@@ -19,6 +19,10 @@ pub struct Diagnosis {
     /// Mean absolute residual after refitting the current parameters alone (linearised):
     /// the floor without a new parameter.
     pub refit_mae: f64,
+    /// The current parameters' change in that refit alone: where a model run checks the
+    /// floor. Missing in older diagnoses.
+    #[serde(default, skip_serializing_if = "NamedValues::is_empty")]
+    pub refit_change: NamedValues,
     /// Noise sigma used (given or estimated).
     pub noise_sigma: f64,
     /// Whether `noise_sigma` was estimated.

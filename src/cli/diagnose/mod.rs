@@ -116,8 +116,9 @@ pub struct DiagnoseArgs {
     /// Refit the K leading hypotheses with the model itself before the final ranking:
     /// each is run at its fitted point (the calibrated parameters moved with it), and its
     /// linearisation replaced by the secant through that run. For large effects that the
-    /// calibration has half absorbed into its parameters. Costs K x --refit-iterations
-    /// solves per snapshot.
+    /// calibration has half absorbed into its parameters, or (`--model command`) whose
+    /// footprint is not linear in their size. Costs K x --refit-iterations runs per
+    /// snapshot.
     #[arg(long, value_name = "K", default_value_t = 0)]
     refit: usize,
     /// Runs of each refit hypothesis (one solve per snapshot each).
