@@ -322,14 +322,19 @@ fn the_leading_candidate_is_refit_with_the_models_own_runs() {
     let maes: Vec<f64> = steps.iter().map(|s| s["mae"].as_f64().unwrap()).collect();
     assert!(steps.iter().all(|s| s["accepted"] == true), "{refit}");
     assert!(maes.windows(2).all(|w| w[1] < w[0]), "{maes:?}");
-    // Measured: 0.073 at the first run, 5.2e-6 at the fourth; one run at the linearised
-    // fit reads 0.079.
+    // Measured: 0.079 at the first run (where the single check ran), 5.9e-6 at the
+    // fourth.
     assert!(maes[3] < 1e-3 * checked, "{maes:?} against {checked}");
+    // The value is the refit's best run, which is also the check: no run beyond it.
     let fitted = doc["fitted_values"]["loss"]["loss"].as_f64().unwrap();
     assert!((fitted - 150.0).abs() < 0.05, "fitted loss {fitted}");
-    // 4 runs of one point each, at 4 scenarios, and the check at the refit's fit.
-    let new = doc["runs"]["new"].as_u64().unwrap();
-    assert_eq!(new, 4 * 4 + 4, "{}", doc["runs"]);
+    assert_eq!(Some(fitted), steps[3]["values"]["loss"].as_f64());
+    let check = &doc["checked"][0];
+    assert_eq!(check["from_refit"], true, "{check}");
+    assert_eq!(check["mae"].as_f64(), Some(maes[3]), "{check}");
+    // The first run is where the single check ran (read from the journal), then 3 more
+    // at 4 scenarios.
+    assert_eq!(doc["runs"]["new"].as_u64(), Some(3 * 4), "{}", doc["runs"]);
 
     let o = run(diagnose(&config, &measurements, &cal).args(["--refit", "1"]));
     assert!(o.status.success(), "{}", stderr(&o));
@@ -339,4 +344,108 @@ fn the_leading_candidate_is_refit_with_the_models_own_runs() {
     let o = run(diagnose(&config, &measurements, &cal).args(["--refit-iterations", "2"]));
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--refit"), "{}", stderr(&o));
+    let o = run(diagnose(&config, &measurements, &cal).args([
+        "--refit",
+        "1",
+        "--refit-iterations",
+        "0",
+    ]));
+    assert_input_error(&o, "--refit-iterations: must be at least 1");
+}
+
+/// `--write-config FILE`: the next model.toml, with the effect named added where the
+/// model ran at its fit and comments kept; calibrated with it into the same --out, the
+/// first point is that run, read from the journal. Where it may go, and when it is not
+/// written.
+#[test]
+fn the_named_effect_is_written_into_the_next_model_toml() {
+    let (script, template, toml) = with_decoy();
+    let toml = format!("# the plant's exchanger, hand-made\n{toml}");
+    let (dir, config, measurements) =
+        setup_with("own-diagnose-write", &script, &template, &toml, &TRUTH);
+    let cal = dir.join("cal");
+    let o = run(&mut calibrate(&config, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let next = dir.join("model-loss.toml");
+
+    // Refused before any run: elsewhere than beside model.toml, over an input, for a hall.
+    let elsewhere = dir.join("sub");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    let o = run(diagnose(&config, &measurements, &cal)
+        .arg("--write-config")
+        .arg(elsewhere.join("m.toml")));
+    assert_input_error(&o, "expected a file in the directory of");
+    let o = run(diagnose(&config, &measurements, &cal)
+        .arg("--write-config")
+        .arg(&config));
+    assert_input_error(&o, "is the --config file");
+    let o = run(kalibre()
+        .args([
+            "diagnose",
+            "--hall",
+            "h.json",
+            "--snapshots",
+            "s.csv",
+            "--calibration",
+        ])
+        .arg(&cal)
+        .arg("--write-config")
+        .arg(&next));
+    assert_input_error(&o, "--write-config belongs to a model of your own");
+    assert!(!next.exists(), "nothing written by a refusal");
+
+    let doc = diagnosis_json(
+        diagnose(&config, &measurements, &cal)
+            .args(["--refit", "1", "--write-config"])
+            .arg(&next),
+    );
+    assert!(
+        doc["written"].as_str().unwrap().contains("loss added"),
+        "{doc}"
+    );
+    let at_fit = &doc["checked"][0];
+    assert_eq!(at_fit["candidate"], "loss");
+    let text = std::fs::read_to_string(&next).unwrap();
+    assert!(
+        text.starts_with("# the plant's exchanger, hand-made\n"),
+        "{text}"
+    );
+    let written: toml::Value = toml::from_str(&text).unwrap();
+    let params = written["params"].as_array().unwrap();
+    let entry = |name: &str| {
+        (params.iter())
+            .find(|p| p["name"].as_str() == Some(name))
+            .unwrap_or_else(|| panic!("no [[params]] `{name}` in {text}"))
+    };
+    for name in ["UA0", "n", "loss"] {
+        assert_eq!(
+            entry(name)["initial"].as_float(),
+            at_fit["params"][name].as_f64(),
+            "{name}: {text}"
+        );
+    }
+    assert!(entry("loss").get("absent").is_none(), "{text}");
+    // The decoy stays a candidate.
+    assert_eq!(entry("bias")["absent"].as_float(), Some(0.0), "{text}");
+    assert_eq!(entry("bias")["effect"].as_str(), Some("cold_sensor_bias"));
+
+    let o = run(&mut calibrate(&next, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&cal);
+    assert_eq!(r["initial"]["mae_c"], at_fit["mae"], "{}", r["initial"]);
+    assert!(r["runs"]["cached"].as_u64().unwrap() >= 4, "{}", r["runs"]);
+    assert!(r["best"]["mae_c"].as_f64().unwrap() < 1e-3, "{}", r["best"]);
+
+    // Nothing significant is left: nothing is written.
+    let again = dir.join("model-next.toml");
+    let o = run(diagnose(&next, &measurements, &cal)
+        .arg("--write-config")
+        .arg(&again));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("not written, since no candidate is significant"),
+        "{said}"
+    );
+    assert!(!again.exists());
 }

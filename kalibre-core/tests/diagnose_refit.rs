@@ -13,10 +13,12 @@ use kalibre_core::{
 };
 
 /// `y = a x + g(q1) x^2 + g(q2) (x + 1)` seen at `x` and `x + 3`, with the effect's
-/// footprint `g(q) = q / (1 + saturation q) - turning q^2`: linear when both are 0.
+/// footprint `g(q) = q / (1 + saturation q) - turning q^2`: linear when both are 0. The
+/// model fails for `q1` above `fails_above`.
 struct Bent {
     saturation: f64,
     turning: f64,
+    fails_above: f64,
 }
 
 impl Bent {
@@ -31,6 +33,9 @@ impl Model for Bent {
         format!("bent {} {}", self.saturation, self.turning)
     }
     fn evaluate(&self, x: &f64, p: &[f64]) -> Result<Outputs, ModelError> {
+        if p[1] > self.fails_above {
+            return Err(ModelError::failed("the effect's solver diverged"));
+        }
         let y = |x: f64| p[0] * x + self.g(p[1]) * x * x + self.g(p[2]) * (x + 1.0);
         Ok(Outputs::from(vec![y(*x), y(x + 3.0)]))
     }
@@ -145,6 +150,7 @@ fn a_saturating_effect_is_refit_to_its_size() {
     let model = Bent {
         saturation: 4.0,
         turning: 0.0,
+        fails_above: f64::INFINITY,
     };
     let obs = observations(&model, [2.0, 0.5, 0.0]);
     let store = RunStore::in_memory("bent");
@@ -163,9 +169,13 @@ fn a_saturating_effect_is_refit_to_its_size() {
     assert!((a - 2.0).abs() < 0.01, "refit a {a}");
     // Each accepted run reads better than the one before, down to the model's exactness.
     let steps = &r.refits[0].steps;
-    let accepted: Vec<f64> = steps.iter().filter(|s| s.accepted).map(|s| s.mae).collect();
+    let accepted: Vec<f64> = steps
+        .iter()
+        .filter(|s| s.accepted)
+        .filter_map(|s| s.mae)
+        .collect();
     assert!(accepted.windows(2).all(|w| w[1] < w[0]), "{steps:?}");
-    let best = r.refits[0].best().unwrap().mae;
+    let best = r.refits[0].best().unwrap().mae.unwrap();
     assert!(best < 1e-3 * linearised.mae, "best {best}, {steps:?}");
     assert_eq!(r.runs, 4 * steps.len());
     // The journal answers every run a second time.
@@ -179,6 +189,7 @@ fn an_effect_of_two_parameters_is_refit_jointly() {
     let model = Bent {
         saturation: 4.0,
         turning: 0.0,
+        fails_above: f64::INFINITY,
     };
     let obs = observations(&model, [2.0, 0.5, 0.2]);
     let store = RunStore::in_memory("bent2");
@@ -193,7 +204,7 @@ fn an_effect_of_two_parameters_is_refit_jointly() {
     let off = |a: f64, b: f64| (a - 0.5).abs() + (b - 0.2).abs();
     assert!(off(l1, l2) > 0.2, "linearised {l1}, {l2}");
     assert!(off(q1, q2) < 0.02, "refit {q1}, {q2}: {:?}", r.refits);
-    let best = r.refits[0].best().unwrap().mae;
+    let best = r.refits[0].best().unwrap().mae.unwrap();
     assert!(best < 1e-2 * before.mae, "{:?}", r.refits);
 }
 
@@ -204,11 +215,13 @@ fn an_effect_that_turns_is_refuted_by_its_runs() {
     let linear = Bent {
         saturation: 0.0,
         turning: 0.0,
+        fails_above: f64::INFINITY,
     };
     let obs = observations(&linear, [2.0, 0.3, 0.0]);
     let model = Bent {
         saturation: 0.0,
         turning: 10.0 / 3.0,
+        fails_above: f64::INFINITY,
     };
     let store = RunStore::in_memory("turning");
     let (lin, r) = refit(&model, &obs, &space(false), 2.0, 4, &store);
@@ -220,14 +233,56 @@ fn an_effect_that_turns_is_refuted_by_its_runs() {
     );
     let refit = &r.refits[0];
     assert!(refit.best().is_none(), "{refit:?}");
-    assert!(refit.steps.iter().all(|s| s.mae >= before.mae), "{refit:?}");
+    assert!(
+        (refit.steps.iter()).all(|s| s.mae.is_some_and(|m| m >= before.mae)),
+        "{refit:?}"
+    );
     assert_eq!(
         refit.stopped.as_deref(),
-        Some("no run read better than its best point"),
+        Some("its fit points back to absent, or beyond"),
         "{refit:?}"
     );
     let h = &r.diagnosis.hypotheses[0];
     assert!(h.refuted && !h.significant, "{h:?}");
+}
+
+#[test]
+fn a_run_that_fails_halves_the_next_step() {
+    // Growing faster than linearly, the effect's small step undersells it, so its fit
+    // (0.32) lies where the model fails (above 0.3); halfway there it runs.
+    let model = Bent {
+        saturation: -1.0,
+        turning: 0.0,
+        fails_above: 0.3,
+    };
+    let truth = Bent {
+        fails_above: f64::INFINITY,
+        ..model
+    };
+    let obs = observations(&truth, [2.0, 0.25, 0.0]);
+    let store = RunStore::in_memory("fails");
+    let (_, r) = refit(&model, &obs, &space(false), 2.5, 8, &store);
+    let steps = &r.refits[0].steps;
+    let first = &steps[0];
+    assert!(
+        first
+            .failed
+            .as_deref()
+            .is_some_and(|f| f.contains("diverged")),
+        "{steps:?}"
+    );
+    assert!(first.mae.is_none() && !first.accepted);
+    let q_failed = first.values.get("q1").unwrap();
+    let q_next = steps[1].values.get("q1").unwrap();
+    assert!(
+        q_failed > 0.3 && (q_next - q_failed / 2.0).abs() < 0.02,
+        "{steps:?}"
+    );
+    let h = &r.diagnosis.hypotheses[0];
+    assert!(h.significant && !h.refuted, "{h:?}");
+    let best = r.refits[0].best().unwrap();
+    let q = best.values.get("q1").unwrap();
+    assert!((q - 0.25).abs() < 0.01, "best run at q1 {q}: {steps:?}");
 }
 
 #[test]
@@ -240,11 +295,13 @@ fn a_calibration_short_of_its_floor_credits_no_candidate_with_the_way_there() {
     let linear = Bent {
         saturation: 0.0,
         turning: 0.0,
+        fails_above: f64::INFINITY,
     };
     let obs = observations(&linear, [2.0, 0.3, 0.0]);
     let model = Bent {
         saturation: 0.0,
         turning: 10.0 / 3.0,
+        fails_above: f64::INFINITY,
     };
     let (space, effects) = space(false);
     let params = [8.0, 0.0, 0.0];

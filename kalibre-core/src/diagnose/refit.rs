@@ -11,8 +11,11 @@
 //! `H' = H + (r(p, q) - r0 - J dp - H dq) dq^T / |dq|^2`.
 //!
 //! Ranked again with those columns, each refit hypothesis is scored at a point the model
-//! has run. Its next run goes from its best point towards the new fit (half as far after
-//! a run that reads worse than the best). A hypothesis none of whose runs reads better
+//! has run; its best run ([`Refit::best`]) is the value to take, since the ranking's fit
+//! from those columns may lie beyond it. The first run goes where the ranking fitted the
+//! candidate; each later one from the best point so far by the ranking's own fit on local
+//! slopes that every run updates (the same rank-one update, from the best point), half as
+//! far after a run that reads worse or fails. A hypothesis none of whose runs reads better
 //! than the baseline is refuted ([`Hypothesis::refuted`]). Each run costs one model run
 //! per snapshot, through the journal.
 
@@ -56,8 +59,13 @@ impl Default for RefitSettings {
 pub struct RefitStep {
     /// The candidate's parameters there, as the model takes them.
     pub values: NamedValues,
-    /// The model's mean absolute residual there (as [`Diagnosis::mae`]).
-    pub mae: f64,
+    /// Every parameter there (the calibrated ones moved with the candidate's).
+    pub params: NamedValues,
+    /// The model's mean absolute residual there (as [`Diagnosis::mae`]); `None` when a
+    /// run failed.
+    pub mae: Option<f64>,
+    /// Why a run there failed: the next run goes half as far.
+    pub failed: Option<String>,
     /// It read better than every earlier point and the baseline, so the hypothesis's
     /// columns are now the secant through it.
     pub accepted: bool,
@@ -75,9 +83,13 @@ pub struct Refit {
 }
 
 impl Refit {
-    /// Its best accepted run, if any.
+    /// Its best accepted run, if any: the point the model has run where it reads best,
+    /// below the baseline (the ranking's fit, from columns exact there, may lie beyond).
     pub fn best(&self) -> Option<&RefitStep> {
-        (self.steps.iter().filter(|s| s.accepted)).min_by(|a, b| a.mae.total_cmp(&b.mae))
+        (self.steps.iter().filter(|s| s.accepted)).min_by(|a, b| {
+            let mae = |s: &RefitStep| s.mae.unwrap_or(f64::INFINITY);
+            mae(a).total_cmp(&mae(b))
+        })
     }
 }
 
@@ -115,6 +127,12 @@ pub fn refit_leading<M: Model>(
     settings: &DiagnoseSettings,
     refit: &RefitSettings,
 ) -> Result<Refitted> {
+    if !(refit.effect_step > 0.0 && refit.effect_step <= 0.5) {
+        return Err(Error::InvalidSetting {
+            name: "effect_step".into(),
+            reason: format!("{} is not in (0, 0.5]", refit.effect_step),
+        });
+    }
     let names = at.space.names();
     // The residuals' parameters in the space, for the calibrated parameters' change.
     let res_index: Vec<usize> = (residuals.params().iter())
@@ -145,11 +163,22 @@ pub fn refit_leading<M: Model>(
         })
         .collect();
     let n_cal = res_index.len();
-    // Each parameter's scale in the rank-one updates: its range (1 where it has none, as
-    // a fixed parameter, which never moves).
+    // Each parameter's scale in the rank-one updates: how far one unit of its unit box
+    // moves it at the calibrated point, as the linearisation steps it (its range on a
+    // linear scale; 1 where it has none, as a fixed parameter, which never moves).
     let width = |lower: f64, upper: f64| if upper > lower { upper - lower } else { 1.0 };
     let cal_width: Vec<f64> = (res_index.iter())
-        .map(|&j| width(at.space.params()[j].lower, at.space.params()[j].upper))
+        .map(|&j| {
+            let p = &at.space.params()[j];
+            let u = p.to_unit(at.params[j]);
+            let (lo, hi) = ((u - 0.01).max(0.0), (u + 0.01).min(1.0));
+            let w = (p.from_unit(hi) - p.from_unit(lo)) / (hi - lo);
+            if w.is_finite() && w > 0.0 {
+                w
+            } else {
+                1.0
+            }
+        })
         .collect();
     let r0 = Array1::from(residuals.residuals().to_vec());
     let mut state: Vec<State> = (picked.iter())
@@ -175,12 +204,27 @@ pub fn refit_leading<M: Model>(
                 refits[k].stopped = Some("fitted outside its range".into());
                 continue;
             }
-            let step = match state[k].local_fit(residuals, c, n_cal, &local_settings) {
-                Ok(step) => step,
-                Err(e) => {
-                    refits[k].stopped = Some(format!("no local fit: {e}"));
-                    continue;
-                }
+            // The first run goes where the ranking fitted it (where `run_fitted` runs);
+            // later ones by the local fit.
+            let first = (diagnosis.hypotheses.iter())
+                .find(|h| h.name == c.name)
+                .filter(|_| refits[k].steps.is_empty());
+            let step = match first {
+                Some(h) => (residuals.params().iter())
+                    .map(|n| h.current_change.get(n).unwrap_or(0.0))
+                    .chain(
+                        c.params
+                            .iter()
+                            .map(|p| h.fitted.get(&p.name).unwrap_or(0.0)),
+                    )
+                    .collect(),
+                None => match state[k].local_fit(residuals, c, n_cal, &local_settings) {
+                    Ok(step) => step,
+                    Err(e) => {
+                        refits[k].stopped = Some(format!("no local fit: {e}"));
+                        continue;
+                    }
+                },
             };
             let t = state[k].share;
             let mut point = state[k].point.clone();
@@ -207,6 +251,15 @@ pub fn refit_leading<M: Model>(
                 *v = v.clamp(p.lower, p.upper);
                 point[p.index] = *v;
             }
+            // Clamped back towards absent (the fit points out of the range through it), a
+            // run would try the calibrated parameters alone, not the effect.
+            let reach = (c.params.iter().zip(&values))
+                .map(|(p, v)| (v - p.absent).abs() / p.step(refit.effect_step).abs())
+                .fold(0.0, f64::max);
+            if reach < 0.5 - 1e-9 {
+                refits[k].stopped = Some("its fit points back to absent, or beyond".into());
+                continue;
+            }
             points.push((k, point, values));
         }
         if points.is_empty() {
@@ -217,21 +270,29 @@ pub fn refit_leading<M: Model>(
             runs += run.runs;
             cached += run.cached;
             let (i, c) = picked[k];
+            let value_names: Vec<String> = c.params.iter().map(|p| p.name.clone()).collect();
+            let mut step = RefitStep {
+                values: NamedValues::new(&value_names, &values),
+                params: NamedValues::new(&names, &point),
+                mae: None,
+                failed: None,
+                accepted: false,
+            };
             let r1 = match run.residuals {
                 Ok(r) => Array1::from(r),
                 Err(why) => {
-                    refits[k].stopped = Some(format!("a run failed: {why}"));
+                    // Too far for the model: half as far next time.
+                    step.failed = Some(why);
+                    refits[k].steps.push(step);
+                    state[k].share *= 0.5;
                     continue;
                 }
             };
             let mae = r1.iter().map(|e| e.abs()).sum::<f64>() / r1.len().max(1) as f64;
             let accepted = mae < state[k].mae;
-            let value_names: Vec<String> = c.params.iter().map(|p| p.name.clone()).collect();
-            refits[k].steps.push(RefitStep {
-                values: NamedValues::new(&value_names, &values),
-                mae,
-                accepted,
-            });
+            step.mae = Some(mae);
+            step.accepted = accepted;
+            refits[k].steps.push(step);
             // Every run teaches the local slopes, from the best point to it.
             let q_width: Vec<f64> = c.params.iter().map(|p| width(p.lower, p.upper)).collect();
             let widths: Vec<f64> = cal_width.iter().chain(&q_width).copied().collect();
@@ -258,10 +319,12 @@ pub fn refit_leading<M: Model>(
             (s.point, s.values, s.residuals, s.mae, s.share) = (point, values, r1, mae, 1.0);
         }
         // A hypothesis every one of whose runs read worse than the baseline is refuted by
-        // the model itself: its linearisation promised what the model does not give.
+        // the model itself: its linearisation promised what the model does not give. One
+        // whose runs all failed is not: the model said nothing of it.
         for (k, (i, _)) in picked.iter().enumerate() {
             let steps = &refits[k].steps;
-            hypotheses[*i].refuted = !steps.is_empty() && steps.iter().all(|s| !s.accepted);
+            hypotheses[*i].refuted =
+                steps.iter().any(|s| s.mae.is_some()) && steps.iter().all(|s| !s.accepted);
         }
         diagnosis = diagnose(residuals, &hypotheses, settings)?;
     }
@@ -316,8 +379,9 @@ impl State {
         }
     }
 
-    /// The step the ranking's own fit takes from here with the local slopes: the
-    /// calibrated parameters' change, then the candidate's.
+    /// The step the ranking's own fit (its likelihood, at its noise; a prior, if any,
+    /// about the current value) takes from here with the local slopes: the calibrated
+    /// parameters' change, then the candidate's.
     fn local_fit(
         &self,
         residuals: &Residuals,

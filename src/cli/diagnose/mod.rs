@@ -113,6 +113,14 @@ pub struct DiagnoseArgs {
     /// the next `kalibre calibrate --hall FILE`. Not written when nothing is significant.
     #[arg(long = "write-hall", value_name = "FILE")]
     write_hall: Option<PathBuf>,
+    /// With `--model command`: write FILE, model.toml with the top significant candidate
+    /// added (its `absent` and `effect` deleted, `initial` its fitted value) and every
+    /// calibrated parameter's `initial` where the model ran at that fit: the next
+    /// `kalibre calibrate --config FILE` with the same --out starts from that run, read
+    /// from the journal. FILE goes beside model.toml (its paths are relative to it);
+    /// comments and layout are kept. Not written when nothing is significant.
+    #[arg(long = "write-config", value_name = "FILE")]
+    write_config: Option<PathBuf>,
     /// Refit the K leading hypotheses with the model itself before the final ranking:
     /// each is run at its fitted point (the calibrated parameters moved with it), and its
     /// linearisation replaced by the secant through that run. For large effects that the
@@ -180,6 +188,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         ("--config", args.config.is_some()),
         ("--measurements", args.measurements.is_some()),
         ("--replay-failed", args.replay_failed),
+        ("--write-config", args.write_config.is_some()),
     ] {
         if given {
             return Err(CliError::Input(format!(

@@ -6,6 +6,7 @@
 
 mod inputs;
 mod print;
+mod write_config;
 
 use kalibre_core::diagnose::{
     diagnose, linearise, refit_leading, run_fitted, Calibrated, DiagnoseSettings, Diagnosis,
@@ -38,6 +39,12 @@ fn refuse_hall_flags(args: &DiagnoseArgs) -> CliResult {
 /// Runs the diagnosis of a model of your own.
 pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     refuse_hall_flags(args)?;
+    if args.refit > 0 && args.refit_iterations == 0 {
+        return Err(CliError::Input(
+            "--refit-iterations: must be at least 1 with --refit (each refit runs the model)"
+                .into(),
+        ));
+    }
     let (Some(config), Some(measurements)) = (args.config.as_deref(), args.measurements.as_deref())
     else {
         return Err(CliError::Input(
@@ -57,6 +64,21 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
              again, then diagnose (docs/models.md)",
             config.display()
         )));
+    }
+    if let Some(path) = &args.write_config {
+        let (report, journal) = (
+            args.calibration.join("report.json"),
+            args.calibration.join("runs.jsonl"),
+        );
+        write_config::check_target(
+            path,
+            config,
+            &[
+                ("the --measurements file", measurements),
+                ("the calibration's report", &report),
+                ("the calibration's run journal", &journal),
+            ],
+        )?;
     }
     let obs = observations(&cfg, measurements)?;
     super::journal::check_regular_files(&args.calibration)?;
@@ -94,7 +116,8 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     eprintln!(
         "diagnosing {} candidate effect(s) of {}: about {planned} model runs ({n_snap} \
          scenarios x (the calibrated point, a step of each calibrated parameter and of each \
-         candidate's)), {n_snap} at the leading candidate's fit{refit_runs}, through {}",
+         candidate's)), {n_snap} at the leading candidate's fit, {n_snap} at the calibrated \
+         parameters' own refit if the calibration had not converged{refit_runs}, through {}",
         cfg.candidates.len(),
         config.display(),
         journal.display()
@@ -145,7 +168,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     } else {
         None
     };
-    let mut refits = Vec::new();
+    let mut refits: Vec<Refit> = Vec::new();
     if args.refit > 0 {
         let how = RefitSettings {
             top: args.refit,
@@ -182,6 +205,22 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         if checked.iter().any(|c| c.name == best.name) {
             break;
         }
+        // Refit with a run below the baseline: that run is the check, and its point the
+        // value (the ranking's fit, from columns exact there, may lie beyond it).
+        if let Some(step) = refits
+            .iter()
+            .find(|r| r.name == best.name)
+            .and_then(Refit::best)
+        {
+            checked.push(Checked {
+                name: best.name.clone(),
+                params: step.params.0.clone(),
+                mae: step.mae.ok_or_else(|| "no MAE".to_string()),
+                refuted: false,
+                from_refit: true,
+            });
+            break;
+        }
         let run = with_threads(args.threads, || {
             run_fitted(
                 &cfg.command,
@@ -202,6 +241,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
             params: cfg.space.names().into_iter().zip(run.params).collect(),
             mae: run.mae,
             refuted,
+            from_refit: false,
         });
         if !refuted {
             break;
@@ -212,6 +252,23 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         }
         d = rank(&hypotheses)?;
     }
+    // The next model.toml: the effect named, everything where the model ran at its fit.
+    let written = match (&args.write_config, d.significant().next()) {
+        (None, _) => None,
+        (Some(path), None) => Some(format!(
+            "--write-config {}: not written, since no candidate is significant",
+            path.display()
+        )),
+        (Some(path), Some(best)) => {
+            let effect = (cfg.candidates.iter().find(|c| c.name == best.name))
+                .expect("a significant hypothesis is a candidate's");
+            let point = match checked.iter().find(|c| c.name == best.name) {
+                Some(c) => c.params.clone(),
+                None => fit_point(&at, effect, best),
+            };
+            Some(write_config::write(path, config, &cfg, effect, &point)?)
+        }
+    };
     let outcome = Outcome {
         d,
         not_tried: &lin.not_tried,
@@ -220,6 +277,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         checked,
         baseline,
         runs: (new_runs, read_runs),
+        written,
     };
     let scaled = obs.scales().is_some();
     if args.json {
@@ -228,6 +286,10 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
             "{}",
             serde_json::to_string_pretty(&doc).map_err(|e| CliError::Run(format!("JSON: {e}")))?
         );
+        // stdout is the JSON document; say what was written on stderr.
+        if let Some(line) = &outcome.written {
+            eprintln!("{line}");
+        }
         return Ok(());
     }
     print::text(
@@ -241,7 +303,24 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         "\n{new_runs} model runs, {read_runs} read from {}",
         journal.display()
     );
+    if let Some(line) = &outcome.written {
+        println!("{line}");
+    }
     Ok(())
+}
+
+/// Every parameter where `best` was fitted (as [`run_fitted`] runs it), by name.
+fn fit_point<M: kalibre_core::Model>(
+    at: &Calibrated<'_, M>,
+    effect: &kalibre_core::diagnose::CandidateEffect,
+    best: &kalibre_core::diagnose::HypothesisResult,
+) -> Vec<(String, f64)> {
+    let mut point = at.moved(&best.current_change);
+    for c in &effect.params {
+        let change = best.fitted.get(&c.name).unwrap_or(0.0);
+        point[c.index] = (c.absent + change).clamp(c.lower, c.upper);
+    }
+    at.space.names().into_iter().zip(point).collect()
 }
 
 /// Refitting the calibrated parameters alone lowers the linearised MAE below this share
@@ -263,6 +342,8 @@ struct Outcome<'a> {
     baseline: f64,
     /// Model runs made, and read from the journal.
     runs: (usize, usize),
+    /// What `--write-config` wrote, in words.
+    written: Option<String>,
 }
 
 /// The model run where the calibrated parameters alone refit.
@@ -271,13 +352,15 @@ struct Floor {
     mae: Result<f64, String>,
 }
 
-/// The model run where the diagnosis fitted a leading candidate.
+/// The model run where the diagnosis fitted a leading candidate, or its refit's best.
 struct Checked {
     name: String,
     /// Every parameter there, by name.
     params: Vec<(String, f64)>,
     /// The model's MAE there, or why it failed.
     mae: Result<f64, String>,
-    /// It read no better than the calibrated point.
+    /// It read no better than the baseline.
     refuted: bool,
+    /// The best run of its `--refit`, not a run at the ranking's fit.
+    from_refit: bool,
 }

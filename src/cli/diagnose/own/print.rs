@@ -26,6 +26,7 @@ impl Checked {
             "mae": self.mae.as_ref().ok(),
             "failed": self.mae.as_ref().err(),
             "refuted": self.refuted,
+            "from_refit": self.from_refit,
         })
     }
 
@@ -41,6 +42,11 @@ impl Checked {
             format!("now ({}{unit})", significant(mae_now, 4))
         };
         match &self.mae {
+            Ok(m) if self.from_refit => format!(
+                "its refit's best run (the calibrated parameters moved with it) reads MAE \
+                 {}{unit}, against {against}",
+                significant(*m, 4)
+            ),
             Ok(m) if self.refuted => format!(
                 "the model run there reads MAE {}{unit}, no better than {against}: the \
                  linearisation misleads, so it is not named",
@@ -80,7 +86,7 @@ pub(super) fn json(
         "diagnosis": o.d,
         // The diagnosis fits each candidate's change from absent; the model takes the
         // value.
-        "fitted_values": fitted_values_json(&o.d, cfg),
+        "fitted_values": fitted_values_json(o, cfg),
         "not_tried": o.not_tried.iter()
             .map(|(name, why)| serde_json::json!({ "candidate": name, "reason": why }))
             .collect::<Vec<_>>(),
@@ -89,26 +95,45 @@ pub(super) fn json(
         "checked": o.checked.iter().map(Checked::to_json).collect::<Vec<_>>(),
         "baseline_mae": o.baseline,
         "runs": { "new": o.runs.0, "from_journal": o.runs.1 },
+        "written": o.written,
     })
 }
 
-/// Each hypothesis's fitted values as the model takes them: the absent value plus the
-/// fitted change, by hypothesis and parameter name.
-fn fitted_values_json(d: &Diagnosis, cfg: &CommandModelConfig) -> serde_json::Value {
+/// Each hypothesis's fitted values as the model takes them (the absent value plus the
+/// fitted change, or its refit's best run), by hypothesis and parameter name.
+fn fitted_values_json(o: &Outcome<'_>, cfg: &CommandModelConfig) -> serde_json::Value {
     let mut out = serde_json::Map::new();
-    for h in &d.hypotheses {
+    for h in &o.d.hypotheses {
         let Some(effect) = cfg.candidates.iter().find(|c| c.name == h.name) else {
             continue;
         };
-        let values: serde_json::Map<String, serde_json::Value> = (effect.params.iter())
-            .map(|p| {
-                let change = h.fitted.get(&p.name).unwrap_or(0.0);
-                (p.name.clone(), serde_json::json!(p.absent + change))
-            })
+        let values: serde_json::Map<String, serde_json::Value> = (fitted_values(o, effect, h))
+            .into_iter()
+            .map(|(n, v)| (n, serde_json::json!(v)))
             .collect();
         out.insert(h.name.clone(), serde_json::Value::Object(values));
     }
     serde_json::Value::Object(out)
+}
+
+/// A hypothesis's values as the model takes them: its refit's best run where it has one,
+/// else the absent value plus the fitted change.
+fn fitted_values(
+    o: &Outcome<'_>,
+    effect: &kalibre_core::diagnose::CandidateEffect,
+    h: &HypothesisResult,
+) -> Vec<(String, f64)> {
+    let best = (o.refits.iter().find(|r| r.name == h.name)).and_then(|r| r.best());
+    (effect.params.iter())
+        .map(|p| {
+            let value = match best {
+                Some(step) => step.values.get(&p.name),
+                None => None,
+            };
+            let value = value.unwrap_or(p.absent + h.fitted.get(&p.name).unwrap_or(0.0));
+            (p.name.clone(), value)
+        })
+        .collect()
 }
 
 /// The diagnosis in words: each candidate's verdict, how to add the one named, and the
@@ -142,9 +167,14 @@ pub(super) fn text(
     // shows here, and no candidate earns the difference.
     if let Some(floor) = &o.floor {
         let run = match &floor.mae {
-            Ok(m) => format!(
+            Ok(m) if *m < d.mae => format!(
                 "; the model run there reads {}{unit}, which a candidate's own run must beat \
                  to be named",
+                significant(*m, 4)
+            ),
+            Ok(m) => format!(
+                "; the model run there reads {}{unit}, no better than now (the linearised \
+                 refit overshoots), so a candidate's run must beat the calibrated MAE",
                 significant(*m, 4)
             ),
             Err(why) => format!("; the model could not run there ({why})"),
@@ -184,11 +214,9 @@ pub(super) fn text(
             continue;
         };
         // The fit is of the change from absent; the model takes the value.
-        let values: Vec<(String, f64, [f64; 2])> = (effect.params.iter())
-            .map(|p| {
-                let change = h.fitted.get(&p.name).unwrap_or(0.0);
-                (p.name.clone(), p.absent + change, [p.lower, p.upper])
-            })
+        let values: Vec<(String, f64, [f64; 2])> = (fitted_values(o, effect, h).into_iter())
+            .zip(&effect.params)
+            .map(|((n, v), p)| (n, v, [p.lower, p.upper]))
             .collect();
         let fitted: Vec<String> = (values.iter())
             .map(|(n, v, _)| format!("{n} = {}", significant(*v, 4)))
@@ -225,7 +253,8 @@ pub(super) fn text(
                 "    to add it: in {}, delete `absent`{} from [[params]] {} and give `initial` \
                  (the fitted value is a good start), then calibrate again; the same --out \
                  keeps its journal, whose runs are read back wherever the loop asks for one \
-                 again",
+                 again (--write-config FILE writes that model.toml, every parameter starting \
+                 where the model ran at the fit)",
                 config.display(),
                 if grouped { " and `effect`" } else { "" },
                 kalibre_core::some_names(
@@ -305,7 +334,8 @@ fn print_refits(o: &Outcome<'_>, unit: &str) {
     }
     println!(
         "\nrefit with the model (each run: the effect's value, the model's MAE there; \
-         `worse`: not better than the best point before it, so the next step was halved):"
+         `worse`: not better than the best point before it, so the next step was halved, as \
+         after a failed run; the best run is the value to take):"
     );
     for r in &o.refits {
         let steps: Vec<String> = (r.steps.iter())
@@ -313,12 +343,12 @@ fn print_refits(o: &Outcome<'_>, unit: &str) {
                 let values: Vec<String> = (s.values.0.iter())
                     .map(|(n, v)| format!("{n} = {}", significant(*v, 6)))
                     .collect();
-                let worse = if s.accepted { "" } else { " worse" };
-                format!(
-                    "{}: {}{unit}{worse}",
-                    values.join(", "),
-                    significant(s.mae, 4)
-                )
+                let read = match (s.mae, &s.failed) {
+                    (Some(m), _) if s.accepted => format!("{}{unit}", significant(m, 4)),
+                    (Some(m), _) => format!("{}{unit} worse", significant(m, 4)),
+                    (None, why) => format!("failed ({})", why.as_deref().unwrap_or("no reason")),
+                };
+                format!("{}: {read}", values.join(", "))
             })
             .collect();
         let stopped = (r.stopped.as_ref())
