@@ -179,6 +179,11 @@ fn a_diagnosis_of_a_model_of_your_own_refuses_what_does_not_fit() {
     // Hall flags are refused by name.
     let o = run(diagnose(&config, &measurements, &cal).args(["--write-hall", "h.json"]));
     assert_input_error(&o, "--write-hall is about a hall");
+    // No calibration yet: what to run first.
+    let empty = dir.join("not-calibrated");
+    std::fs::create_dir_all(&empty).unwrap();
+    let o = run(&mut diagnose(&config, &measurements, &empty));
+    assert_input_error(&o, "no calibration there yet: calibrate first");
     // Other measurements than the calibration's.
     let text = std::fs::read_to_string(&measurements).unwrap();
     let first = text.lines().nth(1).unwrap();
@@ -379,6 +384,12 @@ fn the_named_effect_is_written_into_the_next_model_toml() {
         .arg("--write-config")
         .arg(&config));
     assert_input_error(&o, "is the --config file");
+    // Nor over the model's program, which is no model.toml.
+    let o = run(diagnose(&config, &measurements, &cal)
+        .arg("--write-config")
+        .arg(dir.join("hx.py")));
+    assert_input_error(&o, "exists and is not a model.toml");
+    assert_eq!(std::fs::read_to_string(dir.join("hx.py")).unwrap(), script);
     let o = run(kalibre()
         .args([
             "diagnose",
@@ -429,6 +440,12 @@ fn the_named_effect_is_written_into_the_next_model_toml() {
     assert_eq!(entry("bias")["absent"].as_float(), Some(0.0), "{text}");
     assert_eq!(entry("bias")["effect"].as_str(), Some("cold_sensor_bias"));
 
+    // Before it is calibrated, the calibration is not this model.toml's: refused.
+    let o = run(&mut diagnose(&next, &measurements, &cal));
+    assert_input_error(
+        &o,
+        "`loss` is calibrated here, but the calibration held it absent",
+    );
     let o = run(&mut calibrate(&next, &measurements, &cal));
     assert!(o.status.success(), "{}", stderr(&o));
     let r = report(&cal);
@@ -448,4 +465,44 @@ fn the_named_effect_is_written_into_the_next_model_toml() {
         "{said}"
     );
     assert!(!again.exists());
+}
+
+/// A calibrated parameter held at a bound of its range (UA0 at most 4000, where the
+/// truth is 5000): refit alone it would go beyond, and the diagnosis says that the box,
+/// not the iterations, stopped the calibration.
+#[test]
+fn a_parameter_held_at_its_bound_is_named() {
+    let (script, template, toml) = with_decoy();
+    let ua0 = "name = \"UA0\"\nlower = 1000.0\nupper = 20000.0\n";
+    assert!(toml.contains(ua0));
+    let toml = toml.replace(ua0, "name = \"UA0\"\nlower = 1000.0\nupper = 4000.0\n");
+    let (dir, config, measurements) =
+        setup_with("own-diagnose-bound", &script, &template, &toml, &TRUTH);
+    let cal = dir.join("cal");
+    let o = run(&mut calibrate(&config, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("UA0 at its upper bound 4000"), "{said}");
+    let doc = diagnosis_json(&mut diagnose(&config, &measurements, &cal));
+    let beyond = &doc["floor"]["beyond_bounds"];
+    assert_eq!(beyond[0]["param"], "UA0", "{doc}");
+    assert_eq!(beyond[0]["bound"].as_f64(), Some(4000.0), "{beyond}");
+    assert!(beyond[0]["refit_to"].as_f64().unwrap() > 4000.0, "{beyond}");
+    let o = run(&mut diagnose(&config, &measurements, &cal));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("the box stopped the calibration there, not its iterations"),
+        "{said}"
+    );
+    assert!(!said.contains("has not converged"), "{said}");
+    // The loss wants UA0 beyond the box too: run with UA0 clamped, it reads worse
+    // (measured: 5.89 against 3.28), and the text says the box may be why.
+    let checked = &doc["checked"][0];
+    assert_eq!(checked["candidate"], "loss", "{doc}");
+    assert_eq!(checked["clamped"], serde_json::json!(["UA0"]), "{checked}");
+    assert_eq!(checked["refuted"], true, "{checked}");
+    assert!(
+        said.contains("with a wider range it may read otherwise"),
+        "{said}"
+    );
 }

@@ -209,9 +209,9 @@ pub struct CalibrateArgs {
     pub(super) model: ModelArg,
     #[command(flatten)]
     pub(super) openfoam: OpenFoamArgs,
-    /// `--model command`: the model description (`model.toml`, see docs/models.md); its
-    /// params must be the hall's calibrated parameters in order and its outputs the
-    /// hall's sensors in order.
+    /// `--model command`: the model description (`model.toml`, see docs/models.md). With
+    /// `--measurements`, a model of your own; with `--hall`, its params must be the
+    /// hall's calibrated parameters in order and its outputs the hall's sensors in order.
     #[arg(long)]
     pub(super) config: Option<PathBuf>,
     /// No progress bars (they are off anyway when stderr is not a terminal).

@@ -17,7 +17,7 @@ use super::super::own_model;
 use super::super::simulate::refuse_given;
 use super::super::{io_err, significant, with_threads, CliError, CliResult};
 use super::progress::{Plan, Progress};
-use super::summary::{print_summary, Style};
+use super::summary::{held_at_bounds, print_summary, Style};
 use super::{CalibrateArgs, ModelArg};
 
 /// What a calibration of a model of your own writes in `--out`.
@@ -63,11 +63,15 @@ fn refuse_hall_flags(args: &CalibrateArgs) -> CliResult {
 /// Runs the generic calibration.
 pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     if args.model != ModelArg::Command {
-        return Err(CliError::Input(
-            "--measurements calibrates a model of your own: add --model command --config \
-             model.toml (docs/models.md); a hall takes --hall and --snapshots"
-                .into(),
-        ));
+        let add = if args.config.is_some() {
+            "--model command"
+        } else {
+            "--model command --config model.toml"
+        };
+        return Err(CliError::Input(format!(
+            "--measurements calibrates a model of your own: add {add} (docs/models.md); a \
+             hall takes --hall and --snapshots"
+        )));
     }
     let Some(config) = args.config.as_deref() else {
         return Err(CliError::Input(
@@ -174,6 +178,10 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         "fingerprint": cfg.command.fingerprint(),
         "errors_in": errors_in(scaled),
         "per_output": per_output.as_deref().map(per_output_json),
+        // Held absent: what a diagnosis of this calibration may test.
+        "candidates": (cfg.candidates.iter())
+            .flat_map(|c| c.params.iter().map(|p| (p.name.clone(), serde_json::json!(p.absent))))
+            .collect::<serde_json::Map<String, serde_json::Value>>(),
     }));
     let report_path = args.out.join("report.json");
     let json = serde_json::to_string_pretty(&report)
@@ -188,13 +196,21 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         None,
         failed_at_bounds.as_deref(),
     );
+    if let Some(line) = held_at_bounds(&report, &cfg.space) {
+        println!("{line}");
+    }
     if let Some(rows) = &per_output {
         print_per_output(rows);
     }
     if !cfg.candidates.is_empty() {
         let names: Vec<&str> = cfg.candidates.iter().map(|c| c.name.as_str()).collect();
+        let (effects, are, them) = if names.len() == 1 {
+            ("candidate effect", "is", "it")
+        } else {
+            ("candidate effects", "are", "them")
+        };
         println!(
-            "  candidate effects {} are held absent; whether the data want them: kalibre \
+            "  {effects} {} {are} held absent; whether the data want {them}: kalibre \
              diagnose --model command --config {} --measurements {} --calibration {}",
             names.join(", "),
             config.display(),

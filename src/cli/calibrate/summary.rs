@@ -172,6 +172,39 @@ fn print_numerical_checks(report: &Report) {
     }
 }
 
+/// Calibrated parameters the data would move beyond the bound they sit at: the box, not
+/// the iterations, holds them (a summary line), or nothing.
+pub(super) fn held_at_bounds(report: &Report, space: &kalibre_core::ParamSpace) -> Option<String> {
+    let held: Vec<String> = (report.uncertainty.iter())
+        .filter_map(|u| {
+            let p = space.params().iter().find(|p| p.name == u.name)?;
+            let shift = u.shift?;
+            let tol = 1e-9 * (p.upper - p.lower);
+            let (side, bound) = if u.value >= p.upper - tol && shift > 0.0 {
+                ("upper", p.upper)
+            } else if u.value <= p.lower + tol && shift < 0.0 {
+                ("lower", p.lower)
+            } else {
+                return None;
+            };
+            Some(format!(
+                "{} at its {side} bound {} (the data point to {})",
+                u.name,
+                kalibre_core::number(bound),
+                super::super::significant(u.value + shift, 4)
+            ))
+        })
+        .collect();
+    (!held.is_empty()).then(|| {
+        format!(
+            "  {:<28} {}: the range, not the iterations, stops it; widen it in model.toml if \
+             such a value is plausible (a candidate effect may also explain it)",
+            "held at a bound",
+            held.join(", ")
+        )
+    })
+}
+
 /// The end-of-run summary table.
 pub(super) fn print_summary(
     report: &Report,

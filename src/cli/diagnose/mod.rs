@@ -58,7 +58,8 @@ pub struct DiagnoseArgs {
     /// The calibration directory (`report.json`, `runs.jsonl`) of `kalibre calibrate`.
     #[arg(long)]
     calibration: PathBuf,
-    /// Print the diagnosis as JSON (`kalibre.diagnosis/1`) instead of text.
+    /// Print the diagnosis as JSON (`kalibre.diagnosis/1`; with `--model command`, the
+    /// document of docs/formats.md) instead of text.
     #[arg(long)]
     json: bool,
     /// Grid cell size (m) of the model that supplies the Jacobians (default: the one the

@@ -21,6 +21,15 @@ pub(super) fn read_report(
     measurements_scaled: bool,
 ) -> CliResult<(Report, Vec<f64>)> {
     let file = report_path.display();
+    if !report_path.exists() {
+        let dir = report_path.parent().unwrap_or(Path::new("."));
+        return Err(CliError::Input(format!(
+            "{file}: no calibration there yet: calibrate first, with kalibre calibrate \
+             --model command --config {} --measurements FILE --out {}",
+            config.display(),
+            dir.display()
+        )));
+    }
     let text = std::fs::read_to_string(report_path)
         .map_err(|e| CliError::Input(format!("{file}: {e}")))?;
     let json: serde_json::Value = serde_json::from_str(&text)
@@ -91,6 +100,24 @@ pub(super) fn read_report(
                 kalibre_core::number(c.absent),
                 c.name,
                 kalibre_core::number(was)
+            )));
+        }
+    }
+    // A candidate then that is calibrated now: this model.toml's calibration is not the
+    // one in the report (older reports do not record their candidates).
+    if let Some(then) = json
+        .pointer("/model/candidates")
+        .and_then(|c| c.as_object())
+    {
+        let now: Vec<&str> = (cfg.candidates.iter())
+            .flat_map(|c| c.params.iter().map(|p| p.name.as_str()))
+            .collect();
+        if let Some(name) = then.keys().find(|n| !now.contains(&n.as_str())) {
+            return Err(CliError::Input(format!(
+                "{}: `{name}` is calibrated here, but the calibration held it absent (a \
+                 candidate then): calibrate with this model.toml first (into the same --out, \
+                 which resumes), then diagnose",
+                config.display()
             )));
         }
     }

@@ -161,9 +161,22 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         if let Ok(m) = mae {
             baseline = baseline.min(m);
         }
+        // Where the refit would take a parameter beyond its bounds, the box (not the
+        // iterations) stopped the calibration.
+        let beyond = (cfg.space.params().iter().zip(&params))
+            .filter_map(|(p, x)| {
+                let wanted = x + d.refit_change.get(&p.name)?;
+                let tol = 1e-9 * (p.upper - p.lower).abs().max(1e-12);
+                (wanted > p.upper + tol || wanted < p.lower - tol).then(|| {
+                    let bound = if wanted > p.upper { p.upper } else { p.lower };
+                    (p.name.clone(), wanted, bound)
+                })
+            })
+            .collect();
         Some(Floor {
             params: cfg.space.names().into_iter().zip(run.params).collect(),
             mae,
+            beyond,
         })
     } else {
         None
@@ -218,6 +231,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
                 mae: step.mae.ok_or_else(|| "no MAE".to_string()),
                 refuted: false,
                 from_refit: true,
+                clamped: Vec::new(),
             });
             break;
         }
@@ -236,12 +250,24 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         new_runs += run.runs;
         read_runs += run.cached;
         let refuted = run.mae.as_ref().is_ok_and(|m| *m >= baseline);
+        // The joint fit's calibrated parameters beyond their bounds: the run is not at
+        // the fit, and a refutation may be the box's.
+        let clamped = (cfg.space.params().iter().zip(&params).zip(&run.params))
+            .filter(|((p, x), ran)| {
+                // The calibrated ones: the candidate's own are in `fitted`.
+                best.current_change.get(&p.name).is_some_and(|change| {
+                    (*x + change - **ran).abs() > 1e-9 * (p.upper - p.lower).abs().max(1e-300)
+                })
+            })
+            .map(|((p, _), _)| p.name.clone())
+            .collect();
         checked.push(Checked {
             name: best.name.clone(),
             params: cfg.space.names().into_iter().zip(run.params).collect(),
             mae: run.mae,
             refuted,
             from_refit: false,
+            clamped,
         });
         if !refuted {
             break;
@@ -274,6 +300,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         not_tried: &lin.not_tried,
         floor,
         refits,
+        refit_asked: args.refit,
         checked,
         baseline,
         runs: (new_runs, read_runs),
@@ -300,7 +327,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         (settings.robust_nu, report.settings.robust_nu),
     );
     println!(
-        "\n{new_runs} model runs, {read_runs} read from {}",
+        "\n{new_runs} new model runs, {read_runs} read from {}",
         journal.display()
     );
     if let Some(line) = &outcome.written {
@@ -334,8 +361,9 @@ struct Outcome<'a> {
     /// The calibrated parameters' own refit, run by the model, when the calibration had
     /// not converged.
     floor: Option<Floor>,
-    /// The `--refit` of the leading candidates.
+    /// The `--refit` of the leading candidates, and how many were asked for.
     refits: Vec<Refit>,
+    refit_asked: usize,
     /// The leading candidates run at their fit.
     checked: Vec<Checked>,
     /// What a candidate's run must read below: the calibrated MAE, or the floor's.
@@ -350,6 +378,8 @@ struct Outcome<'a> {
 struct Floor {
     params: Vec<(String, f64)>,
     mae: Result<f64, String>,
+    /// Parameters the refit would move beyond a bound: name, where it would go, the bound.
+    beyond: Vec<(String, f64, f64)>,
 }
 
 /// The model run where the diagnosis fitted a leading candidate, or its refit's best.
@@ -363,4 +393,6 @@ struct Checked {
     refuted: bool,
     /// The best run of its `--refit`, not a run at the ranking's fit.
     from_refit: bool,
+    /// Calibrated parameters the fit moved beyond their bounds, clamped there for the run.
+    clamped: Vec<String>,
 }

@@ -27,6 +27,7 @@ impl Checked {
             "failed": self.mae.as_ref().err(),
             "refuted": self.refuted,
             "from_refit": self.from_refit,
+            "clamped": self.clamped,
         })
     }
 
@@ -47,6 +48,13 @@ impl Checked {
                  {}{unit}, against {against}",
                 significant(*m, 4)
             ),
+            Ok(m) if self.refuted && !self.clamped.is_empty() => format!(
+                "the model run there reads MAE {}{unit}, no better than {against}, so it is \
+                 not named; but the fit moved {} beyond its bounds, clamped there for the \
+                 run: with a wider range it may read otherwise",
+                significant(*m, 4),
+                self.clamped.join(", ")
+            ),
             Ok(m) if self.refuted => format!(
                 "the model run there reads MAE {}{unit}, no better than {against}: the \
                  linearisation misleads, so it is not named",
@@ -64,10 +72,16 @@ impl Checked {
 
 impl Floor {
     fn to_json(&self) -> serde_json::Value {
+        let beyond: Vec<serde_json::Value> = (self.beyond.iter())
+            .map(|(n, wanted, bound)| {
+                serde_json::json!({ "param": n, "refit_to": wanted, "bound": bound })
+            })
+            .collect();
         serde_json::json!({
             "params": params_json(&self.params),
             "mae": self.mae.as_ref().ok(),
             "failed": self.mae.as_ref().err(),
+            "beyond_bounds": beyond,
         })
     }
 }
@@ -168,23 +182,43 @@ pub(super) fn text(
     if let Some(floor) = &o.floor {
         let run = match &floor.mae {
             Ok(m) if *m < d.mae => format!(
-                "; the model run there reads {}{unit}, which a candidate's own run must beat \
+                "the model run there reads {}{unit}, which a candidate's own run must beat \
                  to be named",
                 significant(*m, 4)
             ),
             Ok(m) => format!(
-                "; the model run there reads {}{unit}, no better than now (the linearised \
+                "the model run there reads {}{unit}, no better than now (the linearised \
                  refit overshoots), so a candidate's run must beat the calibrated MAE",
                 significant(*m, 4)
             ),
-            Err(why) => format!("; the model could not run there ({why})"),
+            Err(why) => format!("the model could not run there ({why})"),
         };
-        println!(
-            "  refitting the calibrated parameters alone would already give MAE {}{unit} \
-             (linearised){run}: the calibration has not converged, and every predicted MAE \
-             below includes that; more --iterations, or --polish N, settles it",
-            significant(d.refit_mae, 4)
-        );
+        if floor.beyond.is_empty() {
+            println!(
+                "  refitting the calibrated parameters alone would already give MAE {}{unit} \
+                 (linearised); {run}: the calibration has not converged, and every predicted \
+                 MAE below includes that; more --iterations, or --polish N, settles it",
+                significant(d.refit_mae, 4)
+            );
+        } else {
+            let moves: Vec<String> = (floor.beyond.iter())
+                .map(|(n, wanted, bound)| {
+                    format!(
+                        "{n} to {} (its bound is {})",
+                        significant(*wanted, 4),
+                        kalibre_core::number(*bound)
+                    )
+                })
+                .collect();
+            println!(
+                "  refitting the calibrated parameters alone would give MAE {}{unit} \
+                 (linearised), but it moves {}: the box stopped the calibration there, not \
+                 its iterations. Widen that range in model.toml if such a value is plausible; \
+                 a candidate may also explain it. Clamped into the box, {run}",
+                significant(d.refit_mae, 4),
+                moves.join(", ")
+            );
+        }
     }
     let significant_ones: Vec<&HypothesisResult> = d.significant().collect();
     let undecided = d.undecided();
@@ -329,6 +363,19 @@ fn print_unexplained(d: &Diagnosis, scaled: bool, calibration_nu: Option<f64>) {
 
 /// What `--refit` ran: each refit candidate's values and the model's MAE at each run.
 fn print_refits(o: &Outcome<'_>, unit: &str) {
+    let could = o.refit_asked.min(o.d.hypotheses.len());
+    if o.refits.len() < could {
+        let why = if o.refits.is_empty() {
+            "no candidate could be refit"
+        } else {
+            "fewer candidates could be refit than --refit asked"
+        };
+        println!(
+            "\n--refit {}: {why}: a refit takes a candidate fitted within its range, moving \
+             the outputs and not refuted, and the others are not",
+            o.refit_asked
+        );
+    }
     if o.refits.is_empty() {
         return;
     }

@@ -22,6 +22,15 @@ pub(super) fn check_target(path: &Path, config: &Path, inputs: &[(&str, &Path)])
     if path.is_dir() {
         return bad("is a directory; expected a file path".into());
     }
+    // An existing file is replaced only if it is a model.toml (an earlier --write-config,
+    // say): never the model's program, a template or a data file.
+    if path.exists() && CommandModelConfig::load(path).is_err() {
+        return bad(
+            "exists and is not a model.toml, so writing would replace it (the model's \
+             program or a template, perhaps); expected a new file, or a model.toml"
+                .into(),
+        );
+    }
     let dir_of = |p: &Path| -> Option<PathBuf> {
         let parent = p.parent().filter(|d| !d.as_os_str().is_empty());
         std::fs::canonicalize(parent.unwrap_or(Path::new("."))).ok()
