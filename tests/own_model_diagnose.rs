@@ -366,6 +366,9 @@ fn the_leading_candidate_is_refit_with_the_models_own_runs() {
 fn the_named_effect_is_written_into_the_next_model_toml() {
     let (script, template, toml) = with_decoy();
     let toml = format!("# the plant's exchanger, hand-made\n{toml}");
+    let initial = "initial = 3000.0\n";
+    assert!(toml.contains(initial));
+    let toml = toml.replacen(initial, "initial = 3000.0   # W/K, from the datasheet\n", 1);
     let (dir, config, measurements) =
         setup_with("own-diagnose-write", &script, &template, &toml, &TRUTH);
     let cal = dir.join("cal");
@@ -421,6 +424,7 @@ fn the_named_effect_is_written_into_the_next_model_toml() {
         text.starts_with("# the plant's exchanger, hand-made\n"),
         "{text}"
     );
+    assert!(text.contains("   # W/K, from the datasheet\n"), "{text}");
     let written: toml::Value = toml::from_str(&text).unwrap();
     let params = written["params"].as_array().unwrap();
     let entry = |name: &str| {
@@ -440,6 +444,15 @@ fn the_named_effect_is_written_into_the_next_model_toml() {
     assert_eq!(entry("bias")["absent"].as_float(), Some(0.0), "{text}");
     assert_eq!(entry("bias")["effect"].as_str(), Some("cold_sensor_bias"));
 
+    // The decoy dropped, fixed where it was absent: the same calibration, diagnosed.
+    let bias =
+        "name = \"bias\"\neffect = \"cold_sensor_bias\"\nlower = -2.0\nupper = 2.0\nabsent = 0.0\n";
+    assert!(toml.contains(bias), "{toml}");
+    let dropped = dir.join("model-no-bias.toml");
+    let fixed = "name = \"bias\"\nlower = 0.0\nupper = 0.0\ninitial = 0.0\n";
+    std::fs::write(&dropped, toml.replace(bias, fixed)).unwrap();
+    let o = run(&mut diagnose(&dropped, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
     // Before it is calibrated, the calibration is not this model.toml's: refused.
     let o = run(&mut diagnose(&next, &measurements, &cal));
     assert_input_error(
@@ -481,8 +494,21 @@ fn a_parameter_held_at_its_bound_is_named() {
     let cal = dir.join("cal");
     let o = run(&mut calibrate(&config, &measurements, &cal));
     assert!(o.status.success(), "{}", stderr(&o));
+    // The summary says the range holds UA0 only where the data point beyond it by more
+    // than its spread allows (measured here: 4000 + 584 +/- 292, within two spreads, so
+    // it does not).
     let said = String::from_utf8_lossy(&o.stdout);
-    assert!(said.contains("UA0 at its upper bound 4000"), "{said}");
+    let ua0 = (report(&cal)["uncertainty"].as_array().unwrap().iter())
+        .find(|u| u["name"] == "UA0")
+        .cloned()
+        .unwrap();
+    let (shift, std) = (ua0["shift"].as_f64().unwrap(), ua0["std"].as_f64().unwrap());
+    assert_eq!(ua0["value"].as_f64(), Some(4000.0), "{ua0}");
+    assert_eq!(
+        said.contains("UA0 at its upper bound 4000"),
+        shift > 2.0 * std,
+        "{ua0}: {said}"
+    );
     let doc = diagnosis_json(&mut diagnose(&config, &measurements, &cal));
     let beyond = &doc["floor"]["beyond_bounds"];
     assert_eq!(beyond[0]["param"], "UA0", "{doc}");
@@ -505,4 +531,40 @@ fn a_parameter_held_at_its_bound_is_named() {
         said.contains("with a wider range it may read otherwise"),
         "{said}"
     );
+}
+
+/// `--write-config` where the model fails at the fit (its loss solver diverges above
+/// 120 W/K, the fit is near 150): nothing is written, the diagnosis is printed, and the
+/// next calibration is not sent to a point that does not run.
+#[test]
+fn no_next_model_toml_where_the_model_fails_at_the_fit() {
+    let (script, template, toml) = with_decoy();
+    let fails = script.replace(
+        "cp = 4180.0\n",
+        "cp = 4180.0\nif v[\"loss\"] > 120:\n    sys.exit(\"loss solver diverged\")\n",
+    );
+    assert_ne!(fails, script, "the script's cp line moved");
+    let (dir, config, measurements) = setup_with(
+        "own-diagnose-write-fails",
+        &script,
+        &template,
+        &toml,
+        &TRUTH,
+    );
+    std::fs::write(dir.join("hx.py"), fails).unwrap();
+    let cal = dir.join("cal");
+    let o = run(&mut calibrate(&config, &measurements, &cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let next = dir.join("model-loss.toml");
+    let o = run(diagnose(&config, &measurements, &cal)
+        .arg("--write-config")
+        .arg(&next));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("the model could not run there"), "{said}");
+    assert!(
+        said.contains("not written, since the model failed where loss was fitted"),
+        "{said}"
+    );
+    assert!(!next.exists() && !dir.join("model-loss.toml.partial").exists());
 }

@@ -178,7 +178,8 @@ pub(super) fn held_at_bounds(report: &Report, space: &kalibre_core::ParamSpace) 
     let held: Vec<String> = (report.uncertainty.iter())
         .filter_map(|u| {
             let p = space.params().iter().find(|p| p.name == u.name)?;
-            let shift = u.shift?;
+            // A settled value at its bound is where the data put it.
+            let shift = u.shift.filter(|_| !u.settled())?;
             let tol = 1e-9 * (p.upper - p.lower);
             let (side, bound) = if u.value >= p.upper - tol && shift > 0.0 {
                 ("upper", p.upper)

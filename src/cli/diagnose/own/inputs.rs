@@ -109,10 +109,18 @@ pub(super) fn read_report(
         .pointer("/model/candidates")
         .and_then(|c| c.as_object())
     {
-        let now: Vec<&str> = (cfg.candidates.iter())
-            .flat_map(|c| c.params.iter().map(|p| p.name.as_str()))
-            .collect();
-        if let Some(name) = then.keys().find(|n| !now.contains(&n.as_str())) {
+        // Still held there: a candidate, or a parameter fixed at the same value.
+        let held = |name: &str, absent: Option<f64>| {
+            let candidate =
+                (cfg.candidates.iter()).any(|c| c.params.iter().any(|p| p.name == name));
+            let fixed = (cfg.space.params().iter())
+                .any(|p| p.name == name && p.is_fixed() && Some(p.lower) == absent);
+            candidate || fixed
+        };
+        if let Some(name) = (then.iter())
+            .find(|(n, absent)| !held(n, absent.as_f64()))
+            .map(|(n, _)| n)
+        {
             return Err(CliError::Input(format!(
                 "{}: `{name}` is calibrated here, but the calibration held it absent (a \
                  candidate then): calibrate with this model.toml first (into the same --out, \

@@ -167,8 +167,12 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
             .filter_map(|(p, x)| {
                 let wanted = x + d.refit_change.get(&p.name)?;
                 let tol = 1e-9 * (p.upper - p.lower).abs().max(1e-12);
-                (wanted > p.upper + tol || wanted < p.lower - tol).then(|| {
-                    let bound = if wanted > p.upper { p.upper } else { p.lower };
+                // At the bound it would cross: an interior value short of it is the
+                // iterations', not the box's.
+                let up = wanted > p.upper + tol && *x >= p.upper - tol;
+                let down = wanted < p.lower - tol && *x <= p.lower + tol;
+                (up || down).then(|| {
+                    let bound = if up { p.upper } else { p.lower };
                     (p.name.clone(), wanted, bound)
                 })
             })
@@ -279,6 +283,8 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         d = rank(&hypotheses)?;
     }
     // The next model.toml: the effect named, everything where the model ran at its fit.
+    // A write that fails is said after the diagnosis, which is printed anyway.
+    let mut write_error = None;
     let written = match (&args.write_config, d.significant().next()) {
         (None, _) => None,
         (Some(path), None) => Some(format!(
@@ -288,11 +294,27 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         (Some(path), Some(best)) => {
             let effect = (cfg.candidates.iter().find(|c| c.name == best.name))
                 .expect("a significant hypothesis is a candidate's");
-            let point = match checked.iter().find(|c| c.name == best.name) {
-                Some(c) => c.params.clone(),
-                None => fit_point(&at, effect, best),
-            };
-            Some(write_config::write(path, config, &cfg, effect, &point)?)
+            match checked.iter().find(|c| c.name == best.name) {
+                Some(Checked { mae: Err(why), .. }) => Some(format!(
+                    "--write-config {}: not written, since the model failed where {} was \
+                     fitted ({why}): a calibration would start from a point that does not run",
+                    path.display(),
+                    effect.name
+                )),
+                check => {
+                    let point = match check {
+                        Some(c) => c.params.clone(),
+                        None => fit_point(&at, effect, best),
+                    };
+                    match write_config::write(path, config, &cfg, effect, &point) {
+                        Ok(line) => Some(line),
+                        Err(e) => {
+                            write_error = Some(e);
+                            None
+                        }
+                    }
+                }
+            }
         }
     };
     let outcome = Outcome {
@@ -317,7 +339,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         if let Some(line) = &outcome.written {
             eprintln!("{line}");
         }
-        return Ok(());
+        return write_error.map_or(Ok(()), Err);
     }
     print::text(
         &outcome,
@@ -333,7 +355,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     if let Some(line) = &outcome.written {
         println!("{line}");
     }
-    Ok(())
+    write_error.map_or(Ok(()), Err)
 }
 
 /// Every parameter where `best` was fitted (as [`run_fitted`] runs it), by name.

@@ -187,9 +187,14 @@ pub(super) fn text(
                 significant(*m, 4)
             ),
             Ok(m) => format!(
-                "the model run there reads {}{unit}, no better than now (the linearised \
-                 refit overshoots), so a candidate's run must beat the calibrated MAE",
-                significant(*m, 4)
+                "the model run there reads {}{unit}, no better than now{}, so a candidate's \
+                 run must beat the calibrated MAE",
+                significant(*m, 4),
+                if floor.beyond.is_empty() {
+                    " (the linearised refit overshoots)"
+                } else {
+                    ""
+                }
             ),
             Err(why) => format!("the model could not run there ({why})"),
         };

@@ -13,6 +13,9 @@ use super::super::super::{own_model, same_file, CliError, CliResult};
 /// The refusals that need no run: FILE beside `config` (its paths are relative to the
 /// directory of model.toml), not a directory, and none of the inputs.
 pub(super) fn check_target(path: &Path, config: &Path, inputs: &[(&str, &Path)]) -> CliResult {
+    // model.toml itself must be one it can edit, before any run.
+    let mut doc = parse(config)?;
+    params_of(&mut doc, config)?;
     let bad = |why: String| {
         Err(CliError::Input(format!(
             "--write-config {}: {why}",
@@ -59,22 +62,8 @@ pub(super) fn write(
     effect: &CandidateEffect,
     point: &[(String, f64)],
 ) -> CliResult<String> {
-    let file = config.display();
-    let text =
-        std::fs::read_to_string(config).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
-    let mut doc: toml_edit::DocumentMut = text
-        .parse()
-        .map_err(|e| CliError::Input(format!("{file}: not valid TOML: {e}")))?;
-    let Some(params) = doc
-        .get_mut("params")
-        .and_then(|p| p.as_array_of_tables_mut())
-    else {
-        return Err(CliError::Input(format!(
-            "{file}: params: --write-config edits [[params]] tables; these are written \
-             otherwise (inline), so add the effect by hand: delete its `absent` and give \
-             `initial`"
-        )));
-    };
+    let mut doc = parse(config)?;
+    let params = params_of(&mut doc, config)?;
     let value_of = |name: &str| point.iter().find(|(n, _)| n == name).map(|(_, v)| *v);
     let added: Vec<&str> = effect.params.iter().map(|p| p.name.as_str()).collect();
     for t in params.iter_mut() {
@@ -91,7 +80,15 @@ pub(super) fn write(
             // Another candidate: still held absent.
             continue;
         }
-        t["initial"] = toml_edit::value(value);
+        // The new value in the old one's place, with its comment.
+        match t.get_mut("initial").and_then(|i| i.as_value_mut()) {
+            Some(v) => {
+                let decor = v.decor().clone();
+                *v = toml_edit::Value::from(value);
+                *v.decor_mut() = decor;
+            }
+            None => t["initial"] = toml_edit::value(value),
+        }
     }
     let written = doc.to_string();
     let tmp = path.with_extension("toml.partial");
@@ -121,8 +118,13 @@ pub(super) fn write(
         }
         Ok(Ok(_)) => {}
     }
-    std::fs::rename(&tmp, path)
-        .map_err(|e| CliError::Run(format!("--write-config {}: {e}", path.display())))?;
+    if let Err(e) = std::fs::rename(&tmp, path) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(CliError::Run(format!(
+            "--write-config {}: {e}",
+            path.display()
+        )));
+    }
     let values: Vec<String> = (effect.params.iter())
         .filter_map(|p| value_of(&p.name).map(|v| format!("{} = {v}", p.name)))
         .collect();
@@ -135,4 +137,30 @@ pub(super) fn write(
         values.join(", "),
         path.display()
     ))
+}
+
+/// model.toml as an editable document.
+fn parse(config: &Path) -> CliResult<toml_edit::DocumentMut> {
+    let file = config.display();
+    let text =
+        std::fs::read_to_string(config).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
+    text.parse()
+        .map_err(|e| CliError::Input(format!("{file}: not valid TOML: {e}")))
+}
+
+/// Its `[[params]]` tables, or why --write-config cannot edit them.
+fn params_of<'d>(
+    doc: &'d mut toml_edit::DocumentMut,
+    config: &Path,
+) -> CliResult<&'d mut toml_edit::ArrayOfTables> {
+    doc.get_mut("params")
+        .and_then(|p| p.as_array_of_tables_mut())
+        .ok_or_else(|| {
+            CliError::Input(format!(
+                "{}: params: --write-config edits [[params]] tables, and these are written \
+                 otherwise (inline); write them as [[params]], or drop --write-config and add \
+                 the effect by hand (delete its `absent`, give `initial`)",
+                config.display()
+            ))
+        })
 }
