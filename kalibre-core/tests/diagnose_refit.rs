@@ -21,6 +21,15 @@ struct Bent {
     fails_above: f64,
 }
 
+/// A [`Bent`] that always runs.
+fn bent(saturation: f64, turning: f64) -> Bent {
+    Bent {
+        saturation,
+        turning,
+        fails_above: f64::INFINITY,
+    }
+}
+
 impl Bent {
     fn g(&self, q: f64) -> f64 {
         q / (1.0 + self.saturation * q) - self.turning * q * q
@@ -147,11 +156,7 @@ fn refit(
 
 #[test]
 fn a_saturating_effect_is_refit_to_its_size() {
-    let model = Bent {
-        saturation: 4.0,
-        turning: 0.0,
-        fails_above: f64::INFINITY,
-    };
+    let model = bent(4.0, 0.0);
     let obs = observations(&model, [2.0, 0.5, 0.0]);
     let store = RunStore::in_memory("bent");
     let setup = space(false);
@@ -186,11 +191,7 @@ fn a_saturating_effect_is_refit_to_its_size() {
 
 #[test]
 fn an_effect_of_two_parameters_is_refit_jointly() {
-    let model = Bent {
-        saturation: 4.0,
-        turning: 0.0,
-        fails_above: f64::INFINITY,
-    };
+    let model = bent(4.0, 0.0);
     let obs = observations(&model, [2.0, 0.5, 0.2]);
     let store = RunStore::in_memory("bent2");
     let (lin, r) = refit(&model, &obs, &space(true), 2.5, 10, &store);
@@ -212,17 +213,9 @@ fn an_effect_of_two_parameters_is_refit_jointly() {
 fn an_effect_that_turns_is_refuted_by_its_runs() {
     // The data are the linear effect's; the model's first warms, then cools (g turns at
     // q = 0.15), so its small step's slope sends the fit where the model reads worse.
-    let linear = Bent {
-        saturation: 0.0,
-        turning: 0.0,
-        fails_above: f64::INFINITY,
-    };
+    let linear = bent(0.0, 0.0);
     let obs = observations(&linear, [2.0, 0.3, 0.0]);
-    let model = Bent {
-        saturation: 0.0,
-        turning: 10.0 / 3.0,
-        fails_above: f64::INFINITY,
-    };
+    let model = bent(0.0, 10.0 / 3.0);
     let store = RunStore::in_memory("turning");
     let (lin, r) = refit(&model, &obs, &space(false), 2.0, 4, &store);
     let before = diagnose(&lin.residuals, &lin.hypotheses, &sigma()).unwrap();
@@ -255,10 +248,7 @@ fn a_run_that_fails_halves_the_next_step() {
         turning: 0.0,
         fails_above: 0.3,
     };
-    let truth = Bent {
-        fails_above: f64::INFINITY,
-        ..model
-    };
+    let truth = bent(model.saturation, model.turning);
     let obs = observations(&truth, [2.0, 0.25, 0.0]);
     let store = RunStore::in_memory("fails");
     let (_, r) = refit(&model, &obs, &space(false), 2.5, 8, &store);
@@ -292,17 +282,9 @@ fn a_calibration_short_of_its_floor_credits_no_candidate_with_the_way_there() {
     // a = 8, far from the line's best a, the run at the candidate's fit reads better than
     // the calibrated point only because `a` moves with it; the calibrated parameters'
     // own refit, run by the model, reads better still.
-    let linear = Bent {
-        saturation: 0.0,
-        turning: 0.0,
-        fails_above: f64::INFINITY,
-    };
+    let linear = bent(0.0, 0.0);
     let obs = observations(&linear, [2.0, 0.3, 0.0]);
-    let model = Bent {
-        saturation: 0.0,
-        turning: 10.0 / 3.0,
-        fails_above: f64::INFINITY,
-    };
+    let model = bent(0.0, 10.0 / 3.0);
     let (space, effects) = space(false);
     let params = [8.0, 0.0, 0.0];
     let store = RunStore::in_memory("short");
