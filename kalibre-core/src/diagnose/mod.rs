@@ -136,8 +136,9 @@ fn sum_sq(v: &[f64]) -> f64 {
     v.iter().map(|x| x * x).sum()
 }
 
-fn mean_abs(v: &[f64]) -> f64 {
-    v.iter().map(|x| x.abs()).sum::<f64>() / v.len() as f64
+/// Mean absolute value (0 of nothing).
+pub(super) fn mean_abs(v: &[f64]) -> f64 {
+    v.iter().map(|x| x.abs()).sum::<f64>() / v.len().max(1) as f64
 }
 
 /// Ranks `hypotheses` as explanations of what `res` leaves unexplained.

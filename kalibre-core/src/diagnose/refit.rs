@@ -24,7 +24,7 @@ use serde::Serialize;
 
 use super::{
     diagnose, Calibrated, CandidateEffect, DiagnoseSettings, Diagnosis, Hypothesis,
-    HypothesisParam, LineariseSettings, Residuals,
+    HypothesisParam, HypothesisResult, LineariseSettings, Residuals,
 };
 use crate::calibrate::NamedValues;
 use crate::{Error, Model, Result};
@@ -180,6 +180,9 @@ pub fn refit_leading<M: Model>(
             }
         })
         .collect();
+    let q_widths: Vec<Vec<f64>> = (picked.iter())
+        .map(|(_, c)| c.params.iter().map(|p| width(p.lower, p.upper)).collect())
+        .collect();
     let r0 = Array1::from(residuals.residuals().to_vec());
     let mut state: Vec<State> = (picked.iter())
         .map(|&(i, c)| State::new(at.params, c, &r0, residuals, &hypotheses[i], baseline_mae))
@@ -210,14 +213,7 @@ pub fn refit_leading<M: Model>(
                 .find(|h| h.name == c.name)
                 .filter(|_| refits[k].steps.is_empty());
             let step = match first {
-                Some(h) => (residuals.params().iter())
-                    .map(|n| h.current_change.get(n).unwrap_or(0.0))
-                    .chain(
-                        c.params
-                            .iter()
-                            .map(|p| h.fitted.get(&p.name).unwrap_or(0.0)),
-                    )
-                    .collect(),
+                Some(h) => step_of(h, residuals, c),
                 None => match state[k].local_fit(residuals, c, n_cal, &local_settings) {
                     Ok(step) => step,
                     Err(e) => {
@@ -236,10 +232,14 @@ pub fn refit_leading<M: Model>(
                 .zip(&step[n_cal..])
                 .map(|(v, dq)| v + t * dq)
                 .collect();
+            // How far from absent, in the linearisation's steps.
+            let reach_of = |values: &[f64]| {
+                (c.params.iter().zip(values))
+                    .map(|(p, v)| (v - p.absent).abs() / p.step(refit.effect_step).abs())
+                    .fold(0.0, f64::max)
+            };
             // At least half the linearisation's step from absent, on the fit's side.
-            let reach = (c.params.iter().zip(&values))
-                .map(|(p, v)| (v - p.absent).abs() / p.step(refit.effect_step).abs())
-                .fold(0.0, f64::max);
+            let reach = reach_of(&values);
             if reach == 0.0 {
                 refits[k].stopped = Some("fitted at its absent value".into());
                 continue;
@@ -253,10 +253,7 @@ pub fn refit_leading<M: Model>(
             }
             // Clamped back towards absent (the fit points out of the range through it), a
             // run would try the calibrated parameters alone, not the effect.
-            let reach = (c.params.iter().zip(&values))
-                .map(|(p, v)| (v - p.absent).abs() / p.step(refit.effect_step).abs())
-                .fold(0.0, f64::max);
-            if reach < 0.5 - 1e-9 {
+            if reach_of(&values) < 0.5 - 1e-9 {
                 refits[k].stopped = Some("its fit points back to absent, or beyond".into());
                 continue;
             }
@@ -278,8 +275,8 @@ pub fn refit_leading<M: Model>(
                 failed: None,
                 accepted: false,
             };
-            let r1 = match run.residuals {
-                Ok(r) => Array1::from(r),
+            let (mae, r1) = match run.residuals {
+                Ok(r) => (super::mean_abs(&r), Array1::from(r)),
                 Err(why) => {
                     // Too far for the model: half as far next time.
                     step.failed = Some(why);
@@ -288,14 +285,13 @@ pub fn refit_leading<M: Model>(
                     continue;
                 }
             };
-            let mae = r1.iter().map(|e| e.abs()).sum::<f64>() / r1.len().max(1) as f64;
             let accepted = mae < state[k].mae;
             step.mae = Some(mae);
             step.accepted = accepted;
             refits[k].steps.push(step);
             // Every run teaches the local slopes, from the best point to it.
-            let q_width: Vec<f64> = c.params.iter().map(|p| width(p.lower, p.upper)).collect();
-            let widths: Vec<f64> = cal_width.iter().chain(&q_width).copied().collect();
+            let q_width = &q_widths[k];
+            let widths: Vec<f64> = cal_width.iter().chain(q_width).copied().collect();
             let dx: Vec<f64> = (res_index.iter().map(|&j| point[j] - state[k].point[j]))
                 .chain(values.iter().zip(&state[k].values).map(|(v, b)| v - b))
                 .collect();
@@ -313,7 +309,7 @@ pub fn refit_leading<M: Model>(
                 .collect();
             let mut h = base_columns[k].clone();
             let dr_base = &r1 - &r0 - residuals.jacobian().dot(&dp);
-            rank_one_update(&mut h, &dr_base, &dq, &q_width);
+            rank_one_update(&mut h, &dr_base, &dq, q_width);
             hypotheses[i].jacobian = h;
             let s = &mut state[k];
             (s.point, s.values, s.residuals, s.mae, s.share) = (point, values, r1, mae, 1.0);
@@ -410,16 +406,21 @@ impl State {
             &[Hypothesis::new(&c.name, params, columns)],
             settings,
         )?;
-        let h = &d.hypotheses[0];
-        Ok((residuals.params().iter())
-            .map(|n| h.current_change.get(n).unwrap_or(0.0))
-            .chain(
-                c.params
-                    .iter()
-                    .map(|p| h.fitted.get(&p.name).unwrap_or(0.0)),
-            )
-            .collect())
+        Ok(step_of(&d.hypotheses[0], residuals, c))
     }
+}
+
+/// A fit's step: the calibrated parameters' change (in `residuals`' order), then the
+/// candidate's.
+fn step_of(h: &HypothesisResult, residuals: &Residuals, c: &CandidateEffect) -> Vec<f64> {
+    (residuals.params().iter())
+        .map(|n| h.current_change.get(n).unwrap_or(0.0))
+        .chain(
+            c.params
+                .iter()
+                .map(|p| h.fitted.get(&p.name).unwrap_or(0.0)),
+        )
+        .collect()
 }
 
 /// Broyden's rank-one update of `jacobian` (rows x `dx.len()`) so that it maps `dx` to

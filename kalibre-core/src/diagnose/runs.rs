@@ -51,11 +51,7 @@ pub fn run_fitted<M: Model>(
         params,
         store,
     };
-    let mut point = at.moved(&result.current_change);
-    for c in &candidate.params {
-        let change = result.fitted.get(&c.name).unwrap_or(0.0);
-        point[c.index] = (c.absent + change).clamp(c.lower, c.upper);
-    }
+    let point = at.fitted_point(candidate, result);
     let run = at.run(std::slice::from_ref(&point))?.remove(0);
     Ok(FittedRun {
         mae: run.mae(),
@@ -99,7 +95,7 @@ impl PointRun {
     /// The mean absolute residual (as [`Diagnosis::mae`]), or why a run failed.
     pub fn mae(&self) -> std::result::Result<f64, String> {
         (self.residuals.as_ref())
-            .map(|r| r.iter().map(|e| e.abs()).sum::<f64>() / r.len().max(1) as f64)
+            .map(|r| super::mean_abs(r))
             .map_err(Clone::clone)
     }
 }
@@ -135,6 +131,22 @@ impl<M: Model> Calibrated<'_, M> {
                 None => *x,
             })
             .collect()
+    }
+
+    /// Where `result` fitted `candidate`: the calibrated parameters moved by the joint
+    /// fit's change, the candidate's at `absent` plus its fitted change, each clamped into
+    /// its range (where [`run_fitted`] runs).
+    pub fn fitted_point(
+        &self,
+        candidate: &CandidateEffect,
+        result: &super::HypothesisResult,
+    ) -> Vec<f64> {
+        let mut point = self.moved(&result.current_change);
+        for c in &candidate.params {
+            let change = result.fitted.get(&c.name).unwrap_or(0.0);
+            point[c.index] = (c.absent + change).clamp(c.lower, c.upper);
+        }
+        point
     }
 
     /// Runs the model where `diagnosis` refit the calibrated parameters alone

@@ -180,6 +180,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             args.calibration.display()
         )));
     }
+    // Both kinds of model refit with the model itself.
+    if args.refit > 0 && args.refit_iterations == 0 {
+        return Err(CliError::Input(
+            "--refit-iterations: must be at least 1 with --refit (each refit runs the model)"
+                .into(),
+        ));
+    }
     if args.model == DiagnoseModel::Command {
         return own::run(&args);
     }
@@ -347,12 +354,6 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     settings.diagnose.sensor_bias_rival_bic = args.sensor_bias_rival;
     settings.model_form = !args.no_model_form;
     settings.diagnose.robust_nu = robust_nu;
-    if args.refit > 0 && args.refit_iterations == 0 {
-        return Err(CliError::Input(
-            "--refit-iterations: must be at least 1 with --refit (each refit runs the model)"
-                .into(),
-        ));
-    }
     settings.refit_top = args.refit;
     settings.refit_iterations = args.refit_iterations;
     if args.model == DiagnoseModel::Openfoam {

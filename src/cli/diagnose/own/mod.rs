@@ -39,12 +39,6 @@ fn refuse_hall_flags(args: &DiagnoseArgs) -> CliResult {
 /// Runs the diagnosis of a model of your own.
 pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     refuse_hall_flags(args)?;
-    if args.refit > 0 && args.refit_iterations == 0 {
-        return Err(CliError::Input(
-            "--refit-iterations: must be at least 1 with --refit (each refit runs the model)"
-                .into(),
-        ));
-    }
     let (Some(config), Some(measurements)) = (args.config.as_deref(), args.measurements.as_deref())
     else {
         return Err(CliError::Input(
@@ -304,7 +298,9 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
                 check => {
                     let point = match check {
                         Some(c) => c.params.clone(),
-                        None => fit_point(&at, effect, best),
+                        None => (cfg.space.names().into_iter())
+                            .zip(at.fitted_point(effect, best))
+                            .collect(),
                     };
                     match write_config::write(path, config, &cfg, effect, &point) {
                         Ok(line) => Some(line),
@@ -356,20 +352,6 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         println!("{line}");
     }
     write_error.map_or(Ok(()), Err)
-}
-
-/// Every parameter where `best` was fitted (as [`run_fitted`] runs it), by name.
-fn fit_point<M: kalibre_core::Model>(
-    at: &Calibrated<'_, M>,
-    effect: &kalibre_core::diagnose::CandidateEffect,
-    best: &kalibre_core::diagnose::HypothesisResult,
-) -> Vec<(String, f64)> {
-    let mut point = at.moved(&best.current_change);
-    for c in &effect.params {
-        let change = best.fitted.get(&c.name).unwrap_or(0.0);
-        point[c.index] = (c.absent + change).clamp(c.lower, c.upper);
-    }
-    at.space.names().into_iter().zip(point).collect()
 }
 
 /// Refitting the calibrated parameters alone lowers the linearised MAE below this share
