@@ -343,7 +343,7 @@ fn a_journal_line_no_hall_model_could_give_is_named_on_resume() {
     std::fs::write(&journal, lines.join("\n") + "\n").unwrap();
     let o = calibrate();
     assert_input_error(&o, &format!("runs.jsonl: line {}", k + 1));
-    assert_input_error(&o, "is implausible: 1e308 C");
+    assert_input_error(&o, "is implausible: 1e308 (beyond +/-1e150");
     // A line that is not a record at all is skipped and its run done again, with a word.
     lines[k] = "{not json".into();
     std::fs::write(&journal, lines.join("\n") + "\n").unwrap();

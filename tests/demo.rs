@@ -35,11 +35,28 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
         "suggested entry for hall.json \"effects\"",
         "summary",
         "report.html",
-        // The folders count calibrations; the printed steps count diagnoses too.
-        "each calibration's report.json in step-1/ (step 1), step-2/ (step 3)",
+        // Steps count calibrations, as the step-K/ folders and report.html do; each
+        // diagnosis is named after the step it diagnoses.
+        "step 2: add rack_recirculation(rack=A05), recalibrate",
+        "diagnosis after step 1: diagnose where the calibrated model fails",
+        "diagnosis after step 2: diagnose where the calibrated model fails",
+        "each step's report.json in step-1/, step-2/",
+        // The order is the BIC's, and the header says so.
+        "missing effects, best first: the significant ones, then the others, each in order of `BIC`",
     ] {
         assert!(stdout.contains(needle), "`{needle}` not in:\n{stdout}");
     }
+    assert!(!stdout.contains("step 3"), "{stdout}");
+    // The summary numbers the calibrations as report.html does (`1. calibrate alpha`).
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l.starts_with("  1    calibrate alpha"))
+            && stdout
+                .lines()
+                .any(|l| l.starts_with("  2    add rack_recirculation(rack=A05)")),
+        "{stdout}"
+    );
 
     // Under each worst sensor of the first diagnosis, which racks warm it in the model's
     // flow. The worst is the inlet of the rack whose exhaust recirculates (hidden): the
@@ -103,6 +120,57 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("<th>intakes: MAE (C)</th>"), "intake table");
     assert!(html.contains(&format!("<td>{before:.2}</td>")), "{before}");
+    assert!(html.contains("<td>1. calibrate alpha</td>"), "step table");
+    assert!(html.contains("<td>2. add rack_recirculation(rack=A05), recalibrate</td>"));
+    // Each hypothesis's BIC change is shown, as in the terminal; a fit outside its range
+    // is not offered as an entry (clamped, it would do nothing), in story.json either.
+    let mut outside = 0;
+    for d in story["diagnoses"].as_array().unwrap() {
+        for h in d["hypotheses"].as_array().unwrap() {
+            let bic = h["delta_bic"].as_f64().unwrap();
+            let line = stdout.lines().find(|l| {
+                l.trim_start()
+                    .starts_with(&format!("{} ", h["name"].as_str().unwrap()))
+            });
+            if let Some(line) = line {
+                assert!(line.contains(&format!("BIC {bic:+.1}")), "{line}");
+            }
+            // Its row in report.html.
+            let name = h["name"].as_str().unwrap().replace('"', "&quot;");
+            let row = html
+                .split("<tr>")
+                .find(|r| r.starts_with(&format!("<td>{name}</td>")))
+                .unwrap_or_else(|| panic!("{name} has no row"));
+            let offered = !row.contains("none (fitted outside its range, which no entry gives)");
+            if h["in_range"] == false {
+                outside += 1;
+                assert!(h["entry"].is_null(), "{h}");
+                assert!(!offered, "{row}");
+            } else {
+                assert_eq!(
+                    h["entry"]["kind"],
+                    h["name"]
+                        .as_str()
+                        .unwrap()
+                        .split(['(', '#'])
+                        .next()
+                        .unwrap()
+                );
+                assert!(offered && row.contains("<code>{&quot;kind&quot;"), "{row}");
+            }
+        }
+    }
+    assert!(
+        outside > 0,
+        "the demo has fits outside their range to leave out"
+    );
+    for zero in ["&quot;fraction&quot;:0.0,", "&quot;fraction&quot;:0.0}"] {
+        assert!(
+            !html.contains(zero),
+            "an entry that does nothing is offered"
+        );
+    }
+
     // The hall to continue from carries the entry.
     let hall: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("hall-with-effect.json")).unwrap())
@@ -136,6 +204,54 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
             "the report refers to `{external}`"
         );
     }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// A hidden bypass behind A03: the bypasses behind its neighbours (and across the aisle)
+/// are significant too, each on its own evidence, but they read the same residual (their
+/// shares add up to more than all of it): the listing says they are alternative
+/// placements of one effect, and which the data cannot tell from the first.
+#[test]
+fn demo_says_significant_neighbours_are_alternatives_of_one_effect() {
+    let out = tmp("bypass");
+    let o = Command::new(env!("CARGO_BIN_EXE_kalibre"))
+        .args(["demo", "--effect", "bypass", "--out"])
+        .arg(&out)
+        .output()
+        .expect("the kalibre binary runs");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let lines: Vec<&str> = stdout.lines().collect();
+    let listed: Vec<usize> = (0..lines.len())
+        .filter(|&i| lines[i].contains("explains") && lines[i].contains("significant"))
+        .collect();
+    let first = lines[listed[0]].trim_start();
+    assert!(first.starts_with("bypass(behind_rack="), "{stdout}");
+    let best = first.split_whitespace().next().unwrap();
+    // Every other significant one of the first diagnosis is called an alternative.
+    let others: Vec<usize> = listed
+        .iter()
+        .copied()
+        .skip(1)
+        .take_while(|&i| !lines[..i].iter().any(|l| l.contains("suggested entry")))
+        .collect();
+    assert!(others.len() >= 2, "{stdout}");
+    for i in others {
+        assert!(
+            lines[i + 1].contains(&format!("an alternative to {best}, not a second effect")),
+            "{}\n{}",
+            lines[i],
+            lines[i + 1]
+        );
+    }
+    assert!(
+        stdout.contains("the data cannot tell the two apart (BIC +"),
+        "{stdout}"
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 

@@ -1,6 +1,7 @@
 //! `kalibre diagnose`'s listing says which fits lie outside their parameter's range (a
 //! bypass at a negative share, say: the data lean the opposite way), as its JSON does,
-//! and never names one.
+//! and never names one, nor offers its entry; it is ordered by the BIC change, which
+//! every line shows.
 
 mod cli_support;
 
@@ -35,7 +36,21 @@ fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = text.lines().collect();
-    // The listing shows the first 8, in the JSON's order.
+    // The header says what the order is.
+    assert!(
+        text.contains("missing effects, best first: the significant ones, then the others, each in order of `BIC`"),
+        "{text}"
+    );
+    // A fit outside its range has no entry to paste: clamped into the range it would be
+    // the effect's absence (a bypass of fraction 0), an entry that does nothing.
+    for h in hyps {
+        let in_range = h["in_range"].as_bool().unwrap();
+        assert_eq!(h["suggestion"].is_null(), !in_range, "{h}");
+    }
+    for zero in ["\"fraction\":0.0,", "\"fraction\":0.0}"] {
+        assert!(!text.contains(zero), "{text}");
+    }
+    // The listing shows the first 8, in the JSON's order, each with its BIC change.
     let mut outside = 0;
     for h in hyps.iter().take(8) {
         let name = h["name"].as_str().unwrap();
@@ -45,6 +60,12 @@ fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
             .unwrap_or_else(|| panic!("{name} not listed:\n{text}"));
         let flagged = lines[at].contains("fitted outside its range");
         let in_range = h["in_range"].as_bool().unwrap();
+        let bic = h["delta_bic"].as_f64().unwrap();
+        assert!(
+            lines[at].contains(&format!("  BIC {bic:+.1}  ")),
+            "{name}: {}",
+            lines[at]
+        );
         assert_eq!(flagged, !in_range, "{name}: {}", lines[at]);
         if !in_range {
             outside += 1;
@@ -54,7 +75,8 @@ fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
             let value = value.as_f64().unwrap();
             assert!(
                 lines[at + 1].contains(&format!("fitted {param} = {value:.4}"))
-                    && lines[at + 1].contains("the data lean the opposite way"),
+                    && lines[at + 1].contains("the data lean the opposite way")
+                    && lines[at + 1].ends_with("no entry to add"),
                 "{}",
                 lines[at + 1]
             );
@@ -63,6 +85,21 @@ fn fits_outside_their_range_are_flagged_in_text_and_json_alike() {
     // On this hall the model's own error looks like negative bypasses (more supply at the
     // tiles), so the listing has some to flag.
     assert!(outside > 0, "{text}");
+    // The BIC orders those that are not significant (none is, here).
+    let bics: Vec<f64> = hyps
+        .iter()
+        .map(|h| h["delta_bic"].as_f64().unwrap())
+        .collect();
+    assert!(bics.windows(2).all(|w| w[0] <= w[1]), "{bics:?}");
+    // Nor does --write-hall write one: nothing significant, nothing written.
+    let next = dir.join("next/hall.json");
+    let o = run(on_dataset("diagnose", "of-dev-clean")
+        .arg("--calibration")
+        .arg(&cal)
+        .arg("--write-hall")
+        .arg(&next));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!next.exists(), "{}", String::from_utf8_lossy(&o.stdout));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -152,5 +189,50 @@ fn a_fit_above_its_range_and_an_unidentifiable_one_are_said_as_such() {
         "{text}"
     );
     assert!(!text.contains("lean the opposite way"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Two effects of one kind: the second's parameters are `<kind>#2/<name>`
+/// (`docs/formats.md`), and the calibration's report.html says beside each where its
+/// effect acts, so that `rack_recirculation#2/fraction` reads as the one in rack B04.
+#[test]
+fn parameters_of_two_effects_of_one_kind_say_where_each_acts() {
+    let dir = tmp("listing-two-of-a-kind");
+    let o = run(kalibre()
+        .args(["synth", "--preset", "demo", "--seed", "1", "--out"])
+        .arg(dir.join("hall")));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (hall, snapshots) = (dir.join("hall/hall.json"), dir.join("hall/snapshots.csv"));
+    let mut h: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&hall).unwrap()).unwrap();
+    h["effects"] = serde_json::json!([
+        { "kind": "rack_recirculation", "rack": "A05", "fraction": 0.1 },
+        { "kind": "rack_recirculation", "rack": "B04", "fraction": 0.1 }
+    ]);
+    std::fs::write(&hall, serde_json::to_string_pretty(&h).unwrap()).unwrap();
+    let cal = dir.join("cal");
+    let o = run(on_files("calibrate", &hall, &snapshots)
+        .args(QUICK_CALIBRATION)
+        .arg("--out")
+        .arg(&cal));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cal.join("report.json")).unwrap()).unwrap();
+    let params = report["best"]["params"].as_object().unwrap();
+    assert!(
+        params.contains_key("rack_recirculation/fraction"),
+        "{params:?}"
+    );
+    assert!(
+        params.contains_key("rack_recirculation#2/fraction"),
+        "{params:?}"
+    );
+    let html = std::fs::read_to_string(cal.join("report.html")).unwrap();
+    for label in [
+        "<td>rack_recirculation/fraction (rack A05)</td>",
+        "<td>rack_recirculation#2/fraction (rack B04)</td>",
+    ] {
+        assert!(html.contains(label), "{label} not in report.html");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

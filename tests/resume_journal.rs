@@ -146,3 +146,117 @@ fn an_edited_hall_is_refused_naming_the_changed_fields() {
     assert_input_error(&d, "/model/fingerprint: runs of another model");
     assert_input_error(&d, "/cracs/0/rated_flow_m3_s (crac-1): ");
 }
+
+/// of-dev-clean's hall.json with `edit` applied, written to a fresh file `name`.
+fn edited_hall(name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> std::path::PathBuf {
+    let mut hall: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("of-dev-clean/hall.json")).unwrap())
+            .unwrap();
+    edit(&mut hall);
+    let path = tmp(name).join("hall.json");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    std::fs::write(&path, serde_json::to_string_pretty(&hall).unwrap()).unwrap();
+    path
+}
+
+fn report(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+/// A bound or an initial value changes where the calibration searches, not what a run
+/// computes: the journal's runs are this model's and are read (a walkthrough found
+/// `holds 159 runs of another model: ... alpha_cfm_per_w/max (web): 3.0 -> 1.0`, every
+/// OpenFOAM run lost). A physical field edited beside a bound is refused, naming it
+/// alone.
+#[test]
+fn an_edited_bound_or_initial_value_keeps_the_journals_runs() {
+    let out = tmp("journal-bounds");
+    let (first, _) = calibrate(&out, &["--iterations", "1"]);
+    let first_runs = first["runs"]["total"].as_u64().unwrap();
+    let fingerprint = first["model"]["fingerprint"].clone();
+
+    let started = edited_hall("journal-bounds-initial", |h| {
+        h["server_types"][0]["alpha_cfm_per_w"]["initial"] = 0.5.into();
+    });
+    let narrower = edited_hall("journal-bounds-max", |h| {
+        h["server_types"][0]["alpha_cfm_per_w"]["max"] = 1.0.into();
+    });
+    let mut journaled = first_runs;
+    for hall in [&started, &narrower] {
+        let o = calibrate_hall_output(hall, &out, &["--iterations", "1"]);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        let again = report(&out);
+        let journal = &again["journal"];
+        assert_eq!(journal["loaded"].as_u64(), Some(journaled), "{journal}");
+        assert_eq!(journal["other_fingerprint"].as_u64(), Some(0), "{journal}");
+        assert_eq!(again["model"]["fingerprint"], fingerprint);
+        journaled += again["runs"]["new"].as_u64().unwrap();
+    }
+    // New runs were made (another start, another box), under the same fingerprint.
+    assert!(journaled > first_runs);
+
+    // `diagnose` takes the report written under other bounds as this model's.
+    let d = run(diagnose_cmd(
+        &data("of-dev-clean/hall.json"),
+        &data("of-dev-clean/snapshots.csv"),
+        &out,
+    )
+    .args(["--threads", "1"]));
+    assert_eq!(d.status.code(), Some(0), "{}", stderr(&d));
+
+    let cooler = edited_hall("journal-bounds-flow", |h| {
+        h["server_types"][0]["alpha_cfm_per_w"]["max"] = 1.0.into();
+        h["cracs"][0]["rated_flow_m3_s"] = 3.25.into();
+    });
+    let o = calibrate_hall_output(&cooler, &out, &["--iterations", "1"]);
+    assert_input_error(&o, "runs of another model: ");
+    assert_input_error(&o, "/cracs/0/rated_flow_m3_s (crac-1): ");
+    assert!(!stderr(&o).contains("alpha_cfm_per_w"), "{}", stderr(&o));
+}
+
+/// A `--out` written before bounds and initial values left the fingerprint: its runs
+/// and its report carry the fingerprint the old computation gave, which the model still
+/// owns (`kalibre-dc-sim/3:c6490c6057133148` for of-dev-clean on the default grid, as
+/// the old version wrote it).
+#[test]
+fn a_journal_and_report_of_the_previous_fingerprint_are_this_models() {
+    use kalibre_core::Model;
+    let hall = kalibre_dc::hall::Hall::load(&data("of-dev-clean/hall.json")).unwrap();
+    let model = kalibre_dc::HallModel::new(&hall, kalibre_dc::sim::SimConfig::default()).unwrap();
+    let legacy = "kalibre-dc-sim/3:c6490c6057133148";
+    assert_eq!(model.legacy_fingerprints(), vec![legacy.to_string()]);
+
+    let out = tmp("journal-legacy");
+    let (first, _) = calibrate(&out, &["--iterations", "1"]);
+    let ours = model.fingerprint();
+    assert_eq!(first["model"]["fingerprint"].as_str(), Some(ours.as_str()));
+    let runs = first["runs"]["total"].as_u64().unwrap();
+    // As the previous version left it.
+    let old = |name: &str| {
+        let path = out.join(name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.contains(&ours));
+        std::fs::write(&path, text.replace(&ours, legacy)).unwrap();
+    };
+    old("runs.jsonl");
+    old("report.json");
+
+    let d = run(diagnose_cmd(
+        &data("of-dev-clean/hall.json"),
+        &data("of-dev-clean/snapshots.csv"),
+        &out,
+    )
+    .args(["--threads", "1"]));
+    assert_eq!(d.status.code(), Some(0), "{}", stderr(&d));
+
+    let (again, _) = calibrate(&out, &["--iterations", "1"]);
+    assert_eq!(
+        again["runs"]["cached"].as_u64(),
+        Some(runs),
+        "{}",
+        again["runs"]
+    );
+    assert_eq!(again["runs"]["new"].as_u64(), Some(0));
+    assert_eq!(again["journal"]["other_fingerprint"].as_u64(), Some(0));
+    assert_eq!(again["model"]["fingerprint"].as_str(), Some(ours.as_str()));
+}

@@ -211,6 +211,15 @@ pub trait Model: Sync {
     /// another fingerprint are never reused.
     fn fingerprint(&self) -> String;
 
+    /// Fingerprints earlier versions of this code gave the same model (the same answers
+    /// at the same scenario and parameters, hashed another way): a journal opened for the
+    /// model reads their runs as its own ([`crate::RunStore::open_with_aliases`]), so
+    /// that a change of what the fingerprint covers does not discard journaled runs. New
+    /// runs are journaled under [`Self::fingerprint`]. The default has none.
+    fn legacy_fingerprints(&self) -> Vec<String> {
+        Vec::new()
+    }
+
     /// Runs the model. Failure is a value: return a [`ModelError`] (the loop also catches
     /// a panic and journals it as a failed run, but a panic may leave the model's own
     /// state half-updated).
@@ -277,5 +286,38 @@ pub fn check_outputs(
             value: v.to_string(),
         });
     }
+    // Finite, but the fits square it: near f64::MAX that overflows into NaN, far from
+    // the run that gave it.
+    if let Some((index, v)) =
+        (outputs.values.iter().enumerate()).find(|(_, v)| !crate::within_magnitude(**v))
+    {
+        return Err(ModelError::Implausible {
+            index,
+            name: names[index].clone(),
+            value: crate::number(*v),
+            reason: format!(
+                "beyond +/-{}, more than the fit can square",
+                crate::number(crate::MAX_MAGNITUDE)
+            ),
+        });
+    }
     Ok(outputs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outputs_beyond_what_a_fit_can_square_are_named() {
+        let names = vec!["t_in".to_string(), "t_out".to_string()];
+        let e = check_outputs(Outputs::from(vec![20.0, 5e307]), &names).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            matches!(e, ModelError::Implausible { index: 1, .. }),
+            "{text}"
+        );
+        assert!(text.contains("`t_out`") && text.contains("5e307"), "{text}");
+        assert!(check_outputs(Outputs::from(vec![20.0, -1e150]), &names).is_ok());
+    }
 }

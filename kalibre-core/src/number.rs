@@ -1,5 +1,25 @@
 //! Numbers and lists in messages: as written, unless that would take many digits or
-//! names.
+//! names; and the largest magnitude kalibre fits.
+
+/// The largest magnitude of a number kalibre fits (a bound, a measurement, its `sd`, a
+/// model's output): the fits square differences and sum them over every output, so a
+/// value near `f64::MAX` (1.8e308) turns them into infinity and NaN. Beyond this, a
+/// value is refused where it is read, naming its file and field, instead of failing a
+/// fit later with a message that names nothing. No quantity in any unit system comes
+/// near it (the observable universe holds about 1e80 atoms).
+///
+/// ```
+/// use kalibre_core::{within_magnitude, MAX_MAGNITUDE};
+/// assert!(within_magnitude(-1e150) && within_magnitude(6.02e23));
+/// assert!(!within_magnitude(1e300) && !within_magnitude(f64::NAN));
+/// assert_eq!(MAX_MAGNITUDE, 1e150);
+/// ```
+pub const MAX_MAGNITUDE: f64 = 1e150;
+
+/// Finite and at most [`MAX_MAGNITUDE`] in magnitude.
+pub fn within_magnitude(v: f64) -> bool {
+    v.abs() <= MAX_MAGNITUDE
+}
 
 /// A number as written, or in exponent form when that would run to many digits (an
 /// error message quoting 1e308 should not print 309 of them, nor 1e-300 its 300 zeros).

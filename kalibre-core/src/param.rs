@@ -56,6 +56,18 @@ impl Param {
                 number(initial)
             )));
         }
+        // The search and the fits work in these units: a bound near f64::MAX overflows
+        // them into NaN later, where nothing names the parameter.
+        if let Some((what, v)) = [("lower", lower), ("upper", upper), ("initial", initial)]
+            .into_iter()
+            .find(|(_, v)| !crate::within_magnitude(*v))
+        {
+            return Err(bad(format!(
+                "{what} {} is beyond +/-{}, more than the fit can square",
+                number(v),
+                number(crate::MAX_MAGNITUDE)
+            )));
+        }
         if lower > upper {
             return Err(bad(format!(
                 "inverted bounds: lower {} > upper {}",
@@ -377,6 +389,18 @@ mod tests {
     }
 
     #[test]
+    fn bounds_beyond_what_a_fit_can_square_are_refused_by_name() {
+        for (lower, upper, initial) in [(1.0, 1e308, 2.0), (-1e200, 1.0, 0.0)] {
+            let e = Param::new("k", lower, upper, initial, Scale::Linear)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("parameter `k`"), "{e}");
+            assert!(e.contains("beyond +/-1e150"), "{e}");
+        }
+        assert!(Param::new("k", -1e150, 1e150, 0.0, Scale::Linear).is_ok());
+    }
+
+    #[test]
     fn the_space_maps_as_each_parameter_does_bit_for_bit() {
         let s = space();
         for i in 0..=64 {
@@ -395,14 +419,14 @@ mod tests {
 
     #[test]
     fn bounds_whose_span_overflows_are_refused() {
-        for (lower, upper, scale) in [
-            (-1e308, 1e308, Scale::Linear),
-            (f64::MIN_POSITIVE, f64::MAX, Scale::Log),
-        ] {
-            let e = Param::new("x", lower, upper, lower, scale).unwrap_err();
-            assert!(e.to_string().contains("span more than a float"), "{e}");
-        }
-        Param::new("x", -1e307, 1e307, 0.0, Scale::Linear).expect("a span that fits");
+        // Within the magnitude limit, a log span can still overflow (1e150 over 2e-308).
+        let e = Param::new("x", f64::MIN_POSITIVE, 1e150, 1.0, Scale::Log).unwrap_err();
+        assert!(e.to_string().contains("span more than a float"), "{e}");
+        // Beyond it, the limit refuses them first.
+        let e = Param::new("x", -1e308, 1e308, 0.0, Scale::Linear).unwrap_err();
+        assert!(e.to_string().contains("beyond +/-1e150"), "{e}");
+        Param::new("x", -1e150, 1e150, 0.0, Scale::Linear).expect("a span that fits");
+        Param::new("x", 1e-150, 1e150, 1.0, Scale::Log).expect("a log span that fits");
     }
 
     #[test]

@@ -208,3 +208,188 @@ fn a_config_by_relative_path_gives_the_program_absolute_run_dirs() {
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(out.values.len(), 2);
 }
+
+/// The key and the whole message of the error a config text gets; the message must be
+/// one line naming the file and the key.
+fn refusal(text: &str, file: &std::path::Path) -> (String, String) {
+    match CommandModelConfig::from_toml_str(text, file) {
+        Err(e @ ExternalError::Config { .. }) => {
+            let ExternalError::Config { key, file: f, .. } = &e else {
+                unreachable!()
+            };
+            assert_eq!(*f, file.display().to_string());
+            let message = e.to_string();
+            assert!(
+                !message.contains('\n') && message.starts_with(&format!("{f}: `{key}`: ")),
+                "not one line naming the file and the key: {message:?}"
+            );
+            // A refused control character is named, not printed.
+            assert!(
+                !message.chars().any(|c| c.is_control()),
+                "prints a control character: {message:?}"
+            );
+            (key.clone(), message)
+        }
+        Err(e) => panic!("not a config error: {e}"),
+        Ok(_) => panic!("accepted a bad config:\n{text}"),
+    }
+}
+
+/// Scenario labels follow the rules of a hall's snapshot labels (`snapshots.csv`):
+/// non-empty, no control character, no space at either end, at most 200 characters. An
+/// empty label was accepted, and a measurements row with an empty scenario matched it.
+#[test]
+fn scenario_labels_follow_the_snapshot_label_rules() {
+    let (dir, text) = example_config("config_labels");
+    let file = dir.join("model.toml");
+    let long = "w".repeat(201);
+    let edits = [
+        ("label = \"\"", "non-empty"),
+        ("label = \"win\\u0007ter\"", "control character (U+0007)"),
+        ("label = \"win\tter\"", "control character (U+0009)"),
+        ("label = \" winter\"", "starts or ends with a space"),
+        ("label = \"winter \"", "starts or ends with a space"),
+        (&format!("label = \"{long}\"")[..], "at most 200"),
+    ];
+    for (to, why) in edits {
+        let (key, message) = refusal(&text.replace("label = \"winter\"", to), &file);
+        assert_eq!(key, "scenarios[0].label", "{to}");
+        assert!(message.contains(why), "{to}: {message}");
+    }
+    // 200 characters are still a label.
+    let ok = text.replace("label = \"winter\"", &format!("label = \"{}\"", &long[1..]));
+    CommandModelConfig::from_toml_str(&ok, &file).unwrap();
+}
+
+/// A `runs_root` that is a file (or under one) failed every run with `cannot create a
+/// run directory under .../model.py: File exists`, naming neither model.toml nor the key.
+#[test]
+fn a_runs_root_that_is_not_a_directory_is_refused_at_load() {
+    let (dir, text) = example_config("config_runs_root");
+    let file = dir.join("model.toml");
+    for root in ["model.py", "model.py/runs"] {
+        let edited = text.replace("runs_root = \"runs\"", &format!("runs_root = \"{root}\""));
+        let (key, message) = refusal(&edited, &file);
+        assert_eq!(key, "runs_root", "{root}");
+        assert!(message.contains("not a directory"), "{message}");
+    }
+    // One that does not exist yet is made by the first run; an existing directory is used.
+    std::fs::create_dir(dir.join("made")).unwrap();
+    for root in ["not/yet", "made"] {
+        let edited = text.replace("runs_root = \"runs\"", &format!("runs_root = \"{root}\""));
+        CommandModelConfig::from_toml_str(&edited, &file).unwrap();
+    }
+}
+
+/// A NUL byte cannot reach a program's argument list, its environment or a path: every
+/// run failed with `nul byte found in provided data`. Refused at load, by key.
+#[test]
+fn nul_bytes_are_refused_at_load() {
+    let (dir, text) = example_config("config_nul");
+    let file = dir.join("model.toml");
+    let edits = [
+        (
+            "args = [\"{{config_dir}}/model.py\", \"params.in\", \"out.csv\"]",
+            "args = [\"{{config_dir}}/model.py\", \"params.in\", \"out.csv\", \"a\\u0000b\"]",
+            "args[3]",
+        ),
+        (
+            "program = \"python3\"",
+            "program = \"python3\\u0000\"",
+            "program",
+        ),
+        (
+            "program = \"python3\"",
+            "program = \"bin/python3\\u0000\"",
+            "program",
+        ),
+        (
+            "source = \"params.in.tmpl\"",
+            "source = \"params.in.tmpl\\u0000\"",
+            "templates[0].source",
+        ),
+        (
+            "destination = \"params.in\"",
+            "destination = \"params\\u0000.in\"",
+            "templates[0].destination",
+        ),
+        (
+            "runs_root = \"runs\"",
+            "runs_root = \"ru\\u0000ns\"",
+            "runs_root",
+        ),
+        (
+            "OMP_NUM_THREADS = \"1\"",
+            "OMP_NUM_THREADS = \"1\\u0000\"",
+            "env.OMP_NUM_THREADS",
+        ),
+        (
+            "file = \"out.csv\"",
+            "file = \"out\\u0000.csv\"",
+            "output.file",
+        ),
+        (
+            "fingerprint_files = [\"model.py\"]",
+            "fingerprint_files = [\"model.py\\u0000\"]",
+            "fingerprint_files[0]",
+        ),
+    ];
+    for (from, to, want) in edits {
+        assert!(text.contains(from), "the example lacks `{from}`");
+        let (key, message) = refusal(&text.replace(from, to), &file);
+        assert_eq!(key, want, "{to}");
+        assert!(message.contains("NUL"), "{message}");
+    }
+}
+
+/// Parameter, output and variable names with a control character, and a name given
+/// twice, are refused at load naming the entry's key.
+#[test]
+fn bad_or_repeated_names_are_refused_by_key() {
+    let (dir, text) = example_config("config_names");
+    let file = dir.join("model.toml");
+    let edits = [
+        (
+            "name = \"k\"",
+            "name = \"k\\u001b[31m\"",
+            "params[0].name",
+            "control character",
+        ),
+        (
+            "name = \"h\"",
+            "name = \"h\\t\"",
+            "params[1].name",
+            "control character",
+        ),
+        (
+            "name = \"h\"",
+            "name = \"k\"",
+            "params[1].name",
+            "duplicate",
+        ),
+        (
+            "names = [\"t_in\", \"t_out\"]",
+            "names = [\"t_in\", \"t\\u0000out\"]",
+            "output.names[1]",
+            "control character",
+        ),
+        (
+            "names = [\"t_in\", \"t_out\"]",
+            "names = [\"t_in\", \"t_in\"]",
+            "output.names[1]",
+            "duplicate",
+        ),
+        (
+            "variables = { ambient_c = 5.0 }",
+            "variables = { ambient_c = 5.0, \"x\\u0007\" = 1.0 }",
+            "scenarios[0].variables",
+            "control character",
+        ),
+    ];
+    for (from, to, want, why) in edits {
+        assert!(text.contains(from), "the example lacks `{from}`");
+        let (key, message) = refusal(&text.replace(from, to), &file);
+        assert_eq!(key, want, "{to}");
+        assert!(message.contains(why), "{to}: {message}");
+    }
+}

@@ -500,3 +500,46 @@ fn a_journal_in_use_is_refused_until_it_is_closed() {
     let again = RunStore::open(&path, "m1").unwrap();
     assert!(again.get("t0", &names(), &[1.0, 1.0]).is_some());
 }
+
+/// A model whose fingerprint changed (what it covers, not what the model computes) reads
+/// the runs journaled under the old one, given as an alias; other models' runs stay
+/// ignored, and new runs are journaled under the new fingerprint.
+#[test]
+fn a_store_opened_with_an_alias_reads_the_aliases_lines_as_its_own() {
+    let path = journal_of("journal-alias", &[1.0, 2.0]);
+    {
+        let other = RunStore::open(&path, "another model").unwrap();
+        other
+            .record("t0", &names(), &[3.0, 1.0], &ok(&[3.0]), 0.0)
+            .unwrap();
+    }
+    // Without the alias, the old runs are another model's.
+    let plain = RunStore::open(&path, "m2").unwrap();
+    assert_eq!(plain.load_report().other_fingerprint, 3);
+    assert!(plain.get("t0", &names(), &[1.0, 1.0]).is_none());
+    drop(plain);
+
+    let aliases = ["m1".to_string()];
+    let store = RunStore::open_with_aliases(&path, "m2", &aliases, false).unwrap();
+    let load = store.load_report();
+    assert_eq!((load.loaded, load.other_fingerprint), (2, 1), "{load:?}");
+    for a in [1.0, 2.0] {
+        let hit = store
+            .get("t0", &names(), &[a, 1.0])
+            .expect("an alias's run");
+        assert_eq!(hit.outputs, Some(vec![a]));
+    }
+    assert!(store.get("t0", &names(), &[3.0, 1.0]).is_none());
+    assert_eq!(store.fingerprint(), "m2");
+    let new = store
+        .record("t0", &names(), &[4.0, 1.0], &ok(&[4.0]), 0.0)
+        .unwrap();
+    assert_eq!(new.fingerprint, "m2");
+    drop(store);
+    let last = lines(&path).pop().unwrap();
+    assert!(last.contains(r#""fingerprint":"m2""#), "{last}");
+    // Reopened, old and new lines alike are the model's.
+    let again = RunStore::open_with_aliases(&path, "m2", &aliases, true).unwrap();
+    assert_eq!(again.load_report().loaded, 3);
+    assert_eq!(again.load_report().other_fingerprint, 1);
+}

@@ -185,7 +185,14 @@ where
     let penalty = TemperatureRisePenalty::new(hall, layout, &scenarios, settings.penalty)?;
     let store = match journal {
         Some(path) => {
-            let store = RunStore::open_with(path, model.fingerprint(), settings.replay_failed)?;
+            // Runs an earlier version journaled under another fingerprint of this
+            // model are its runs too.
+            let store = RunStore::open_with_aliases(
+                path,
+                model.fingerprint(),
+                &model.legacy_fingerprints(),
+                settings.replay_failed,
+            )?;
             let load = store.load_report();
             if load.other_fingerprint > 0 {
                 return Err(Error::OtherModelJournal {

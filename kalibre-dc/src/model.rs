@@ -37,6 +37,8 @@ pub struct HallModel {
     effects: Vec<Box<dyn Effect>>,
     layout: ParamLayout,
     fingerprint: String,
+    /// The fingerprint earlier versions gave this model ([`legacy_fingerprint`]).
+    legacy_fingerprint: String,
     sensor_names: Vec<String>,
 }
 
@@ -63,20 +65,16 @@ impl HallModel {
         effects: Vec<Box<dyn Effect>>,
     ) -> Result<Self> {
         let layout = ParamLayout::new(hall, &effects)?;
-        let hall_json = hall.physics_json();
         let config_json =
             serde_json::to_string(&config).map_err(|e| Error::Mismatch(format!("config: {e}")))?;
-        let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
-        let effects_json =
-            serde_json::to_string(&specs).map_err(|e| Error::Mismatch(format!("effects: {e}")))?;
         let fingerprint = format!(
-            "kalibre-dc-sim/3:{:016x}",
+            "{SIM_FINGERPRINT}:{:016x}",
             fnv1a(&[
-                hall_json.as_bytes(),
+                hall.model_json(hall.calibrate.alpha, &effects).as_bytes(),
                 config_json.as_bytes(),
-                effects_json.as_bytes()
             ])
         );
+        let legacy_fingerprint = legacy_fingerprint(hall, &config_json, &effects)?;
         let sim = Simulator::new(hall, config)?;
         check_effect_placements(&sim, &effects)?;
         let sensor_names = hall.sensors.iter().map(|s| s.id.clone()).collect();
@@ -85,6 +83,7 @@ impl HallModel {
             effects,
             layout,
             fingerprint,
+            legacy_fingerprint,
             sensor_names,
         })
     }
@@ -161,8 +160,14 @@ impl HallModel {
 impl Model for HallModel {
     type Scenario = OperatingState;
 
+    /// The hall ([`Hall::model_json`]: bounds and initial values of the calibrated
+    /// parameters left out) and the simulator's configuration.
     fn fingerprint(&self) -> String {
         self.fingerprint.clone()
+    }
+
+    fn legacy_fingerprints(&self) -> Vec<String> {
+        vec![self.legacy_fingerprint.clone()]
     }
 
     fn evaluate(
@@ -234,6 +239,32 @@ pub fn check_sensor_c(
         }),
         None => Ok(()),
     }
+}
+
+/// The version of the built-in model's fingerprint: its prefix.
+const SIM_FINGERPRINT: &str = "kalibre-dc-sim/3";
+
+/// The fingerprint versions before bounds and initial values were left out gave the
+/// model of `hall` with `config` (as JSON) and `effects`: the hall's physics JSON, bounds
+/// and initial values included, and the effects' entries as each writes itself. Kept
+/// exactly, so that the runs they journaled are read as this model's
+/// ([`Model::legacy_fingerprints`]).
+fn legacy_fingerprint(
+    hall: &Hall,
+    config_json: &str,
+    effects: &[Box<dyn Effect>],
+) -> Result<String> {
+    let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
+    let effects_json =
+        serde_json::to_string(&specs).map_err(|e| Error::Mismatch(format!("effects: {e}")))?;
+    Ok(format!(
+        "{SIM_FINGERPRINT}:{:016x}",
+        fnv1a(&[
+            hall.physics_json().as_bytes(),
+            config_json.as_bytes(),
+            effects_json.as_bytes()
+        ])
+    ))
 }
 
 /// 64-bit FNV-1a: a hash that is stable across builds and platforms.

@@ -143,8 +143,14 @@ pub struct Suggestion {
     /// field was recorded reads as in range).
     #[serde(default = "in_range_default")]
     pub in_range: bool,
-    /// The `effects` entry to paste into `hall.json`.
-    pub entry: EffectSpec,
+    /// The BIC change it brings (negative: better supported), by which the hypotheses are
+    /// ordered after the significant ones (a story written before this field was
+    /// recorded has none).
+    #[serde(default)]
+    pub delta_bic: Option<f64>,
+    /// The `effects` entry to paste into `hall.json`; `None` (`null`) for a fit outside
+    /// its range, which no entry gives.
+    pub entry: Option<EffectSpec>,
 }
 
 fn in_range_default() -> bool {
@@ -165,9 +171,12 @@ pub struct DiagnosisStep {
 }
 
 impl DiagnosisStep {
-    /// The first significant hypothesis, if any.
+    /// The first significant hypothesis, if any (a significant one is fitted in its
+    /// range, so it has an entry).
     pub fn top_significant(&self) -> Option<&Suggestion> {
-        self.hypotheses.iter().find(|h| h.significant)
+        self.hypotheses
+            .iter()
+            .find(|h| h.significant && h.entry.is_some())
     }
 }
 
@@ -386,7 +395,7 @@ pub fn run_story(
         });
         let top = diag.top_significant().cloned();
         diagnoses.push(diag);
-        let top = match top {
+        let (top, entry) = match top.and_then(|t| t.entry.clone().map(|e| (t, e))) {
             Some(top) if added.len() < settings.max_effects => top,
             _ => {
                 thermal.push(plane(&cal, snaps, settings, &best, &after)?);
@@ -406,18 +415,18 @@ pub fn run_story(
             .find(|h| h.name == top.name);
         current = match fit {
             Some(h) => {
-                with_effect_refitted(&current, &cal.report, &cal.model, &registry, h, &top.entry)?
+                with_effect_refitted(&current, &cal.report, &cal.model, &registry, h, &entry)?
             }
-            None => with_effect(&current, &cal, &registry, &top.entry)?,
+            None => with_effect(&current, &cal, &registry, &entry)?,
         };
         if let Some(dir) = out_dir {
             current.save(&dir.join("hall-with-effect.json"))?;
         }
         observer(&StoryEvent::EffectAdded {
-            entry: &top.entry,
+            entry: &entry,
             hall: &current,
         });
-        added.push(top.entry.clone());
+        added.push(entry);
         name = format!("add {}, recalibrate", top.name);
     };
     let report = StoryReport {
@@ -505,9 +514,9 @@ fn summarise(after_step: usize, d: &HallDiagnosis, wall_s: f64) -> DiagnosisStep
             .diagnosis
             .hypotheses
             .iter()
-            .zip(&d.suggestions)
+            .enumerate()
             .take(KEPT_HYPOTHESES)
-            .map(|(h, s)| Suggestion {
+            .map(|(i, h)| Suggestion {
                 name: h.name.clone(),
                 explained_fraction: h.explained_fraction,
                 predicted_mae_c: h.predicted_mae,
@@ -515,7 +524,8 @@ fn summarise(after_step: usize, d: &HallDiagnosis, wall_s: f64) -> DiagnosisStep
                 inert: h.inert,
                 identifiable: h.identifiable,
                 in_range: h.in_range,
-                entry: s.clone(),
+                delta_bic: Some(h.delta_bic),
+                entry: d.entry(i).cloned(),
             })
             .collect(),
         wall_s,

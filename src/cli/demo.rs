@@ -3,11 +3,10 @@
 //! named), add it, recalibrate (the error falls), and write the report.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use clap::Args;
-use kalibre_dc::diagnosis::hypothesis_flags;
+use kalibre_dc::diagnosis::{alternative_note, hypothesis_flags};
 use kalibre_dc::hall::{EffectSpec, Hall};
 use kalibre_dc::sim::{RackHeat, SimConfig};
 use kalibre_dc::snapshots::OperatingState;
@@ -187,10 +186,6 @@ pub fn run(args: DemoArgs) -> CliResult {
         ..StorySettings::default()
     };
     let floor = settings.reference_mae_c;
-    let counter = AtomicUsize::new(0);
-    // The printed step number of each calibration: its report goes to step-K/, K
-    // counting calibrations only.
-    let calibration_steps = Mutex::new(Vec::new());
     // The hall as calibrated so far: effects join it as the story adds them.
     let current = Mutex::new(hall.clone());
     let sim = settings.calibration.sim.clone();
@@ -206,14 +201,7 @@ pub fn run(args: DemoArgs) -> CliResult {
             }
             _ => None,
         };
-        if let StoryEvent::CalibrationStarted { .. } = e {
-            let next = counter.load(Ordering::Relaxed) + 1;
-            calibration_steps
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .push(next);
-        }
-        print_event(hall, floor, &counter, e, warming.as_ref());
+        print_event(hall, floor, e, warming.as_ref());
     };
     let story = with_threads(args.threads, || {
         run_story(
@@ -235,15 +223,13 @@ pub fn run(args: DemoArgs) -> CliResult {
             );
         }
     }
-    let dirs: Vec<String> = calibration_steps
-        .into_inner()
-        .unwrap_or_else(|p| p.into_inner())
-        .iter()
-        .enumerate()
-        .map(|(k, step)| format!("step-{}/ (step {step})", k + 1))
+    // Steps count calibrations, as report.html and the step-K/ folders do; each
+    // diagnosis goes with the step it diagnoses.
+    let dirs: Vec<String> = (1..=story.steps.len())
+        .map(|k| format!("step-{k}/"))
         .collect();
     println!(
-        "wrote {}, {}; each calibration's report.json in {}",
+        "wrote {}, {}; each step's report.json in {}",
         args.out.join("story.json").display(),
         args.out.join("report.html").display(),
         dirs.join(", ")
@@ -271,13 +257,13 @@ fn sensor_warming_rows(
 fn print_event(
     hall: &Hall,
     floor: Option<f64>,
-    counter: &AtomicUsize,
     e: &StoryEvent<'_>,
     warming: Option<&Result<Vec<RackHeat>, String>>,
 ) {
-    let n = || counter.fetch_add(1, Ordering::Relaxed) + 1;
     match e {
-        StoryEvent::CalibrationStarted { name, .. } => println!("\nstep {}: {name}", n()),
+        StoryEvent::CalibrationStarted { name, index } => {
+            println!("\nstep {}: {name}", index + 1)
+        }
         StoryEvent::CalibrationDone { step, index } => {
             // After a diagnosis the start is the model run with the entry added (the
             // diagnosis's predicted MAE was a linear estimate of it).
@@ -315,31 +301,51 @@ fn print_event(
                 );
             }
         }
-        StoryEvent::DiagnosisStarted { .. } => {
-            println!("\nstep {}: diagnose where the calibrated model fails", n())
-        }
+        StoryEvent::DiagnosisStarted { after_step } => println!(
+            "\ndiagnosis after step {}: diagnose where the calibrated model fails",
+            after_step + 1
+        ),
         StoryEvent::DiagnosisDone {
             step, calibration, ..
         } => {
             print_where(hall, calibration, warming);
             println!(
-                "  missing effects, best first (MAE now {:.3} C, {:.1} s):",
+                "  missing effects, best first: the significant ones, then the others, each in \
+                 order of `BIC`, the change of the Bayesian information criterion (lower is \
+                 better supported) (MAE now {:.3} C, {:.1} s):",
                 step.mae_c, step.wall_s
             );
+            let top = step.top_significant();
             for h in step.hypotheses.iter().take(5) {
                 let flags =
                     hypothesis_flags(h.significant, false, h.inert, h.identifiable, h.in_range);
                 println!(
-                    "    {:<46} explains {:>3.0}%  predicted MAE {:.3} C  {flags}",
+                    "    {:<46} explains {:>3.0}%  predicted MAE {:.3} C  BIC {}  {flags}",
                     h.name,
                     100.0 * h.explained_fraction,
-                    h.predicted_mae_c
+                    h.predicted_mae_c,
+                    h.delta_bic.map_or("-".into(), |b| format!("{b:+.1}"))
                 );
+                let Some(best) = top.filter(|t| h.significant && t.name != h.name) else {
+                    continue;
+                };
+                let above = h
+                    .delta_bic
+                    .zip(best.delta_bic)
+                    .map_or(f64::NAN, |(a, b)| a - b);
+                if let Some(note) = alternative_note(
+                    &best.name,
+                    best.explained_fraction,
+                    h.explained_fraction,
+                    above,
+                ) {
+                    println!("      {note}");
+                }
             }
-            match step.top_significant() {
-                Some(top) => println!(
+            match top.and_then(|t| t.entry.as_ref()) {
+                Some(entry) => println!(
                     "  suggested entry for hall.json \"effects\": {}",
-                    entry_json(&top.entry)
+                    entry_json(entry)
                 ),
                 None => println!("  no significant missing effect: nothing to add"),
             }
@@ -374,10 +380,12 @@ fn print_where(
 
 /// The table of steps: calibrations and diagnoses with their errors, runs and times.
 fn print_summary(story: &StoryReport) {
-    // (what, MAE before, MAE after, model runs, wall s)
-    let mut rows: Vec<[String; 5]> = Vec::new();
+    // (step, what, MAE before, MAE after, model runs, wall s): steps count calibrations,
+    // as report.html and the step-K/ folders do; a diagnosis row follows its step.
+    let mut rows: Vec<[String; 6]> = Vec::new();
     for (i, s) in story.steps.iter().enumerate() {
         rows.push([
+            (i + 1).to_string(),
             s.name.clone(),
             s.mae_before_c.map_or("-".into(), |m| format!("{m:.3}")),
             format!("{:.3}", s.mae_after_c),
@@ -393,6 +401,7 @@ fn print_summary(story: &StoryReport) {
                 None => ("diagnose: no significant missing effect".into(), "-".into()),
             };
             rows.push([
+                String::new(),
                 what,
                 format!("{:.3}", d.mae_c),
                 predicted,
@@ -403,6 +412,7 @@ fn print_summary(story: &StoryReport) {
     }
     if story.final_diagnosis_error.is_some() {
         rows.push([
+            String::new(),
             "diagnose: failed (see above)".into(),
             "-".into(),
             "-".into(),
@@ -410,21 +420,16 @@ fn print_summary(story: &StoryReport) {
             "-".into(),
         ]);
     }
-    let w = rows.iter().map(|r| r[0].len()).max().unwrap_or(0);
+    let w = rows.iter().map(|r| r[1].len()).max().unwrap_or(0);
     println!("\nsummary");
     println!(
         "  {:<4} {:<w$} {:>10} {:>10} {:>6} {:>7}",
         "step", "", "MAE before", "MAE after", "runs", "wall s"
     );
-    for (k, r) in rows.iter().enumerate() {
+    for r in &rows {
         println!(
             "  {:<4} {:<w$} {:>10} {:>10} {:>6} {:>7}",
-            k + 1,
-            r[0],
-            r[1],
-            r[2],
-            r[3],
-            r[4]
+            r[0], r[1], r[2], r[3], r[4], r[5]
         );
     }
     println!(

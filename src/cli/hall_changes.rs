@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use serde_json::Value;
 
@@ -33,7 +34,8 @@ pub fn keep_runs_hall(out: &Path, hall_file: &Path, journal: &Path) -> CliResult
 /// The hall's changes since the runs of the calibration directory `dir`: `None` when the
 /// directory keeps no copy of their hall (made before copies were kept) or it cannot be
 /// read; else the changed fields as `pointer: before -> now`, empty when none of the
-/// model's fields changed (the name and `extra` notes are not the model's).
+/// model's fields changed (the name, `extra` notes and the calibrated parameters' bounds
+/// and initial values are not the model's).
 pub fn since_runs(dir: &Path, hall_file: &Path) -> Option<Vec<String>> {
     let before = physics(&dir.join(RUNS_HALL))?;
     let now = physics(hall_file)?;
@@ -73,11 +75,18 @@ pub fn clause(dir: &Path, hall_file: &Path) -> String {
     }
 }
 
-/// The hall's fields the model reads, as JSON (its name and notes cleared, as in the
-/// model's fingerprint).
+/// The hall's fields the model reads, as JSON: as the model's fingerprint hashes it
+/// ([`Hall::model_json`]: its name and notes cleared, and the calibrated parameters'
+/// bounds and initial values left out, which change no run), so that only what makes
+/// the runs another model's is named. A hall whose effects do not build (a kind the
+/// built-in registry lacks) is compared with its effects' entries as written.
 fn physics(path: &Path) -> Option<Value> {
     let hall = Hall::load(path).ok()?;
-    serde_json::from_str(&hall.physics_json()).ok()
+    let text = match EffectRegistry::builtin().build_all(&hall) {
+        Ok(effects) => hall.model_json(hall.calibrate.alpha, &effects),
+        Err(_) => hall.physics_json(),
+    };
+    serde_json::from_str(&text).ok()
 }
 
 /// Appends to `out` each difference between `before` and `now` at `pointer` (a JSON

@@ -35,21 +35,28 @@ pub struct Cli {
     command: Command,
 }
 
+// `allow_negative_numbers`: `--iterations -1` is then refused as a bad value of that
+// flag, not as an unknown argument `-1` that names no flag.
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Generate a synthetic hall with a hidden truth (hall.json, snapshots.csv, truth.json).
+    #[command(allow_negative_numbers = true)]
     Synth(synth::SynthArgs),
     /// Run the built-in simulator (or OpenFOAM, or your own through `--config`) on a hall's
     /// snapshots and write the predicted sensor readings.
+    #[command(allow_negative_numbers = true)]
     Simulate(simulate::SimulateArgs),
     /// Calibrate a hall's parameters (server air flow rates, effects) against its
     /// measurements, or a model of your own's (`--model command --config --measurements`).
+    #[command(allow_negative_numbers = true)]
     Calibrate(Box<calibrate::CalibrateArgs>),
     /// Show where a calibrated model fails and rank the physical effects that may be missing
     /// (a hall's, or the candidate effects of a model of your own).
+    #[command(allow_negative_numbers = true)]
     Diagnose(diagnose::DiagnoseArgs),
     /// The whole story on a synthetic hall with a hidden effect: calibrate, diagnose, add
     /// the missing effect, recalibrate, and write report.html.
+    #[command(allow_negative_numbers = true)]
     Demo(demo::DemoArgs),
 }
 

@@ -69,6 +69,10 @@ pub struct RefitStep {
     /// It read better than every earlier point and the baseline, so the hypothesis's
     /// columns are now the secant through it.
     pub accepted: bool,
+    /// Calibrated parameters the step would have moved beyond their bounds, held there
+    /// for the run: the run is not where the fit pointed, and a worse reading may be the
+    /// box's.
+    pub clamped: Vec<String>,
 }
 
 /// The secant refit of one hypothesis.
@@ -194,7 +198,7 @@ pub fn refit_leading<M: Model>(
     let local_settings = settings.clone().with_noise_sigma(diagnosis.noise_sigma);
     let (mut runs, mut cached) = (0, 0);
     for _ in 0..refit.iterations {
-        let mut points: Vec<(usize, Vec<f64>, Vec<f64>)> = Vec::new();
+        let mut points: Vec<Planned> = Vec::new();
         for (k, (_, c)) in picked.iter().enumerate() {
             if refits[k].stopped.is_some() {
                 continue;
@@ -224,9 +228,14 @@ pub fn refit_leading<M: Model>(
             };
             let t = state[k].share;
             let mut point = state[k].point.clone();
+            let mut clamped = Vec::new();
             for (col, &j) in res_index.iter().enumerate() {
                 let p = &at.space.params()[j];
-                point[j] = (point[j] + t * step[col]).clamp(p.lower, p.upper);
+                let wanted = point[j] + t * step[col];
+                point[j] = wanted.clamp(p.lower, p.upper);
+                if (wanted - point[j]).abs() > 1e-9 * width(p.lower, p.upper) {
+                    clamped.push(p.name.clone());
+                }
             }
             let mut values: Vec<f64> = (state[k].values.iter())
                 .zip(&step[n_cal..])
@@ -257,13 +266,24 @@ pub fn refit_leading<M: Model>(
                 refits[k].stopped = Some("its fit points back to absent, or beyond".into());
                 continue;
             }
-            points.push((k, point, values));
+            points.push(Planned {
+                k,
+                point,
+                values,
+                clamped,
+            });
         }
         if points.is_empty() {
             break;
         }
-        let ran = at.run(&points.iter().map(|(_, p, _)| p.clone()).collect::<Vec<_>>())?;
-        for ((k, point, values), run) in points.into_iter().zip(ran) {
+        let ran = at.run(&points.iter().map(|p| p.point.clone()).collect::<Vec<_>>())?;
+        for (planned, run) in points.into_iter().zip(ran) {
+            let Planned {
+                k,
+                point,
+                values,
+                clamped,
+            } = planned;
             runs += run.runs;
             cached += run.cached;
             let (i, c) = picked[k];
@@ -274,6 +294,7 @@ pub fn refit_leading<M: Model>(
                 mae: None,
                 failed: None,
                 accepted: false,
+                clamped,
             };
             let (mae, r1) = match run.residuals {
                 Ok(r) => (super::mean_abs(&r), Array1::from(r)),
@@ -331,6 +352,18 @@ pub fn refit_leading<M: Model>(
         runs,
         cached,
     })
+}
+
+/// A run one refit plans this round.
+struct Planned {
+    /// The refit's index.
+    k: usize,
+    /// Every parameter there.
+    point: Vec<f64>,
+    /// The candidate's parameters there.
+    values: Vec<f64>,
+    /// Calibrated parameters held at a bound for it.
+    clamped: Vec<String>,
 }
 
 /// A refit's best point so far and its local linear model.

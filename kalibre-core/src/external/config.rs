@@ -57,6 +57,42 @@ impl Ctx<'_> {
         }
     }
 
+    /// Refuses a NUL byte in a text that becomes an argument, an environment value or a
+    /// path: the operating system cannot take one, and every run would fail on it.
+    fn no_nul(&self, key: impl Into<String>, s: &str) -> Result<(), ExternalError> {
+        match s.find('\0') {
+            Some(at) => Err(self.err(
+                key,
+                format!(
+                    "holds a NUL byte (after {} characters); no program argument, \
+                     environment value or path can carry one",
+                    s[..at].chars().count()
+                ),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Checks a parameter or output name at `key`: non-empty, printable, and not one of
+    /// `earlier` (the names before it, each with its key).
+    fn name<'n>(
+        &self,
+        key: &str,
+        name: &str,
+        mut earlier: impl Iterator<Item = (String, &'n str)>,
+    ) -> Result<(), ExternalError> {
+        if name.is_empty() {
+            return Err(self.err(key, "is empty; expected a name"));
+        }
+        if let Some(why) = unprintable_name(name) {
+            return Err(self.err(key, format!("name {why}")));
+        }
+        match earlier.find(|(_, e)| *e == name) {
+            Some((k, _)) => Err(self.err(key, format!("duplicate `{name}` (also `{k}`)"))),
+            None => Ok(()),
+        }
+    }
+
     fn path(&self, p: &str) -> PathBuf {
         let p = Path::new(p);
         if p.is_absolute() {
@@ -195,6 +231,47 @@ fn join(prefix: &str, key: &str) -> String {
     }
 }
 
+/// The longest scenario label, parameter, output or variable name, in characters: names
+/// are printed in messages, reports and journals. The same as a hall's ids and snapshot
+/// labels (`kalibre_dc::hall::MAX_NAME_CHARS`; kalibre-dc depends on this crate, not the
+/// other way, so the rule is repeated here).
+const MAX_NAME_CHARS: usize = 200;
+
+/// Why a name cannot be printed as it is, if it cannot: a control character (an escape
+/// sequence would reach the terminal, a NUL byte no argument or file can carry) or more
+/// than [`MAX_NAME_CHARS`] characters. The rule of `kalibre_dc::hall::unprintable_name`.
+fn unprintable_name(name: &str) -> Option<String> {
+    if let Some(c) = name.chars().find(|c| c.is_control()) {
+        return Some(format!(
+            "holds a control character (U+{:04X}); expected printable text",
+            c as u32
+        ));
+    }
+    let n = name.chars().count();
+    (n > MAX_NAME_CHARS)
+        .then(|| format!("is {n} characters long; expected at most {MAX_NAME_CHARS}"))
+}
+
+/// Why a scenario label is refused, if it is: the rules of a hall's snapshot labels
+/// (`snapshots.csv`): non-empty, printable, no space at either end, not too long. An
+/// empty label would match a measurements row whose scenario is empty, and a padded one
+/// (`winter `) another scenario than `winter`.
+fn label_problem(label: &str) -> Option<String> {
+    if label.is_empty() {
+        return Some("expected a non-empty scenario label".into());
+    }
+    if let Some(why) = unprintable_name(label) {
+        return Some(format!("scenario label {why}"));
+    }
+    (label.trim() != label).then(|| {
+        format!(
+            "scenario label `{label}` starts or ends with a space; labels are taken as \
+             written, so it would be another scenario than `{}`",
+            label.trim()
+        )
+    })
+}
+
 const TOP_KEYS: [&str; 16] = [
     "program",
     "args",
@@ -275,17 +352,43 @@ impl CommandModelConfig {
         cx.str(&top, "", "description")?;
 
         let program = cx.req_str(&top, "", "program")?;
+        cx.no_nul("program", &program)?;
         let program = if Path::new(&program).components().count() > 1 {
             cx.path(&program)
         } else {
             PathBuf::from(program)
         };
-        let runs_root = cx.path(
-            &cx.str(&top, "", "runs_root")?
-                .unwrap_or_else(|| "runs".into()),
-        );
+        let runs_root = cx.str(&top, "", "runs_root")?;
+        let runs_root = runs_root.as_deref().unwrap_or("runs");
+        cx.no_nul("runs_root", runs_root)?;
+        let runs_root = cx.path(runs_root);
+        // Made by the first run if missing; a file there (or on the way to it) would fail
+        // every run with `File exists` or `Not a directory`.
+        if let Some(existing) = runs_root.ancestors().find(|a| a.exists()) {
+            if !existing.is_dir() {
+                return Err(cx.err(
+                    "runs_root",
+                    if existing == runs_root {
+                        format!(
+                            "{} exists and is not a directory; run directories go under it",
+                            runs_root.display()
+                        )
+                    } else {
+                        format!(
+                            "{} is not a directory, so {} cannot be made under it",
+                            existing.display(),
+                            runs_root.display()
+                        )
+                    },
+                ));
+            }
+        }
+        let args = cx.strings(&top, "", "args")?;
+        for (i, a) in args.iter().enumerate() {
+            cx.no_nul(format!("args[{i}]"), a)?;
+        }
         let mut b = ExternalCommand::<NamedScenario>::builder(program, runs_root)
-            .with_args(cx.strings(&top, "", "args")?)
+            .with_args(args)
             .with_config_dir(config_dir.clone());
 
         let timeout = cx.req_num(&top, "", "timeout_s")?;
@@ -348,7 +451,12 @@ impl CommandModelConfig {
             Some("all") => b = b.with_keep(KeepRuns::All),
             Some(k) => return Err(cx.err("keep_runs", format!("`{k}` is not `failed` or `all`"))),
         }
-        for f in cx.strings(&top, "", "fingerprint_files")? {
+        for (i, f) in cx
+            .strings(&top, "", "fingerprint_files")?
+            .into_iter()
+            .enumerate()
+        {
+            cx.no_nul(format!("fingerprint_files[{i}]"), &f)?;
             b = b.with_fingerprint_file(cx.path(&f));
         }
         if let Some(n) = cx.count(&top, "log_lines")? {
@@ -356,7 +464,13 @@ impl CommandModelConfig {
         }
         if let Some(env) = cx.table(&top, "", "env")? {
             for k in env.keys() {
+                if let Some(why) = unprintable_name(k) {
+                    return Err(
+                        cx.err("env", format!("variable name `{}` {why}", k.escape_debug()))
+                    );
+                }
                 let v = cx.req_str(env, "env", k)?;
+                cx.no_nul(join("env", k), &v)?;
                 b = b.with_env(k.clone(), v);
             }
         }
@@ -365,6 +479,8 @@ impl CommandModelConfig {
             cx.keys(t, &p, &["source", "destination"])?;
             let source = cx.req_str(t, &p, "source")?;
             let dest = cx.req_str(t, &p, "destination")?;
+            cx.no_nul(format!("{p}.source"), &source)?;
+            cx.no_nul(format!("{p}.destination"), &dest)?;
             let source = cx.path(&source);
             if !source.is_file() {
                 return Err(cx.err(
@@ -380,9 +496,17 @@ impl CommandModelConfig {
             .ok_or_else(|| cx.err("output", "required ([output] with file, parser, names)"))?;
         cx.keys(output, "output", &["file", "parser", "names", "regex"])?;
         let out_file = cx.req_str(output, "output", "file")?;
+        cx.no_nul("output.file", &out_file)?;
         let names = cx.strings(output, "output", "names")?;
         if names.is_empty() {
             return Err(cx.err("output.names", "required: the output names in order"));
+        }
+        for (i, n) in names.iter().enumerate() {
+            let earlier = names[..i]
+                .iter()
+                .enumerate()
+                .map(|(j, e)| (format!("output.names[{j}]"), e.as_str()));
+            cx.name(&format!("output.names[{i}]"), n, earlier)?;
         }
         let parser_name = cx.req_str(output, "output", "parser")?;
         let regex = cx.table(output, "output", "regex")?;
@@ -432,7 +556,7 @@ impl CommandModelConfig {
                     "name", "lower", "upper", "initial", "scale", "absent", "effect",
                 ],
             )?;
-            if let Some(c) = candidate_param(&cx, t, &p, space.dim())? {
+            if let Some(c) = candidate_param(&cx, t, &p, &space)? {
                 let name = c.1.name.clone();
                 // Held where the effect is absent: a fixed parameter, on a linear scale
                 // since an absent value of 0 has no logarithm.
@@ -443,6 +567,7 @@ impl CommandModelConfig {
                 continue;
             }
             let name = cx.req_str(t, &p, "name")?;
+            param_name(&cx, &p, &name, &space)?;
             let param = Param::new(
                 name,
                 cx.req_num(t, &p, "lower")?,
@@ -462,6 +587,9 @@ impl CommandModelConfig {
             let p = format!("scenarios[{i}]");
             cx.keys(t, &p, &["label", "variables"])?;
             let label = cx.req_str(t, &p, "label")?;
+            if let Some(why) = label_problem(&label) {
+                return Err(cx.err(format!("{p}.label"), why));
+            }
             if scenarios.iter().any(|s: &NamedScenario| s.label == label) {
                 return Err(cx.err(format!("{p}.label"), format!("duplicate label `{label}`")));
             }
@@ -469,6 +597,12 @@ impl CommandModelConfig {
             if let Some(vars) = cx.table(t, &p, "variables")? {
                 let vp = format!("{p}.variables");
                 for k in vars.keys() {
+                    if let Some(why) = unprintable_name(k) {
+                        return Err(cx.err(
+                            vp.clone(),
+                            format!("variable name `{}` {why}", k.escape_debug()),
+                        ));
+                    }
                     values.insert(k.clone(), cx.req_num(vars, &vp, k)?);
                 }
             }
@@ -504,6 +638,17 @@ impl CommandModelConfig {
     }
 }
 
+/// `params[i].name`: non-empty, printable, and not the name of an earlier entry (each
+/// entry is one parameter of `space`, in order).
+fn param_name(cx: &Ctx<'_>, p: &str, name: &str, space: &ParamSpace) -> Result<(), ExternalError> {
+    let earlier = space
+        .params()
+        .iter()
+        .enumerate()
+        .map(|(j, e)| (format!("params[{j}].name"), e.name.as_str()));
+    cx.name(&format!("{p}.name"), name, earlier)
+}
+
 /// `params[i].scale`: `linear` (the default) or `log`.
 fn param_scale(cx: &Ctx<'_>, t: &Table, p: &str) -> Result<Scale, ExternalError> {
     match cx.str(t, p, "scale")?.as_deref() {
@@ -522,8 +667,9 @@ fn candidate_param(
     cx: &Ctx<'_>,
     t: &Table,
     p: &str,
-    index: usize,
+    space: &ParamSpace,
 ) -> Result<Option<(String, CandidateParam)>, ExternalError> {
+    let index = space.dim();
     let effect = cx.str(t, p, "effect")?;
     let Some(absent) = cx.num(t, p, "absent")? else {
         return match effect {
@@ -537,6 +683,7 @@ fn candidate_param(
         };
     };
     let name = cx.req_str(t, p, "name")?;
+    param_name(cx, p, &name, space)?;
     let (lower, upper) = (cx.req_num(t, p, "lower")?, cx.req_num(t, p, "upper")?);
     if lower >= upper {
         return Err(cx.err(
@@ -568,7 +715,12 @@ fn candidate_param(
         Some(e) if e.trim().is_empty() => {
             return Err(cx.err(format!("{p}.effect"), "is empty"));
         }
-        Some(e) => e,
+        Some(e) => {
+            if let Some(why) = unprintable_name(&e) {
+                return Err(cx.err(format!("{p}.effect"), format!("effect name {why}")));
+            }
+            e
+        }
         None => name.clone(),
     };
     Ok(Some((

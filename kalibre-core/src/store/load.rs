@@ -26,7 +26,8 @@ pub struct LoadReport {
     pub lines: usize,
     /// Runs loaded into the cache.
     pub loaded: usize,
-    /// Runs of another model fingerprint, ignored.
+    /// Runs of another model fingerprint (neither the store's nor one of its aliases),
+    /// ignored.
     pub other_fingerprint: usize,
     /// Repeated keys (the first record is kept).
     pub duplicates: usize,
@@ -97,12 +98,14 @@ pub(super) struct Loaded {
     pub(super) load: LoadReport,
 }
 
-/// Reads the journal `bytes` (of the file at `path`) for the model `fingerprint`; with
-/// `replay_failed`, a point journaled only as failed is kept as that failure.
+/// Reads the journal `bytes` (of the file at `path`) for the model `fingerprint`, whose
+/// runs may also be journaled under its `aliases`; with `replay_failed`, a point
+/// journaled only as failed is kept as that failure.
 pub(super) fn read(
     bytes: &[u8],
     path: &Path,
     fingerprint: &str,
+    aliases: &[String],
     replay_failed: bool,
 ) -> Result<Loaded> {
     let mut load = LoadReport::default();
@@ -114,7 +117,7 @@ pub(super) fn read(
     let mut take = |line: usize, rec: RunRecord, load: &mut LoadReport| {
         records += 1;
         max_seq = Some(max_seq.map_or(rec.seq, |m: u64| m.max(rec.seq)));
-        if rec.fingerprint != fingerprint {
+        if rec.fingerprint != fingerprint && !aliases.contains(&rec.fingerprint) {
             load.other_fingerprint += 1;
             return;
         }

@@ -214,7 +214,7 @@ impl RunStore {
     /// written until then), so that later lines start clean; bad lines
     /// and runs of other fingerprints are skipped. See [`Self::load_report`].
     pub fn open(path: impl AsRef<Path>, fingerprint: impl Into<String>) -> Result<Self> {
-        Self::open_impl(path.as_ref(), fingerprint.into(), false)
+        Self::open_impl(path.as_ref(), fingerprint.into(), &[], false)
     }
 
     /// [`Self::open`], or [`Self::open_replaying_failures`] when `replay_failures` (as a
@@ -224,7 +224,7 @@ impl RunStore {
         fingerprint: impl Into<String>,
         replay_failures: bool,
     ) -> Result<Self> {
-        Self::open_impl(path.as_ref(), fingerprint.into(), replay_failures)
+        Self::open_impl(path.as_ref(), fingerprint.into(), &[], replay_failures)
     }
 
     /// [`Self::open`], but a run journaled only as failed is replayed as that failure
@@ -255,10 +255,46 @@ impl RunStore {
         path: impl AsRef<Path>,
         fingerprint: impl Into<String>,
     ) -> Result<Self> {
-        Self::open_impl(path.as_ref(), fingerprint.into(), true)
+        Self::open_impl(path.as_ref(), fingerprint.into(), &[], true)
     }
 
-    fn open_impl(path: &Path, fingerprint: String, replay_failed: bool) -> Result<Self> {
+    /// [`Self::open_with`], reading the lines of the fingerprints `aliases` as this
+    /// model's too: the fingerprints earlier versions gave the same model
+    /// ([`crate::Model::legacy_fingerprints`]), so that their journals are not lost when
+    /// what a fingerprint covers changes. Their runs are reused like any other (and are
+    /// not counted in [`LoadReport::other_fingerprint`]); new runs are journaled under
+    /// `fingerprint`.
+    ///
+    /// ```
+    /// use kalibre_core::{Outputs, RunStore};
+    /// let path = std::env::temp_dir().join(format!("alias-doc-{}.jsonl", std::process::id()));
+    /// let names = vec!["k".to_string()];
+    /// {
+    ///     let old = RunStore::open(&path, "model-v1").unwrap();
+    ///     old.record("t0", &names, &[2.5], &Ok(Outputs::from(vec![1.0])), 0.1).unwrap();
+    /// }
+    /// let aliases = ["model-v1".to_string()];
+    /// let store = RunStore::open_with_aliases(&path, "model-v2", &aliases, false).unwrap();
+    /// assert_eq!(store.get("t0", &names, &[2.5]).unwrap().outputs, Some(vec![1.0]));
+    /// assert_eq!(store.load_report().other_fingerprint, 0);
+    /// # drop(store);
+    /// # std::fs::remove_file(&path).unwrap();
+    /// ```
+    pub fn open_with_aliases(
+        path: impl AsRef<Path>,
+        fingerprint: impl Into<String>,
+        aliases: &[String],
+        replay_failures: bool,
+    ) -> Result<Self> {
+        Self::open_impl(path.as_ref(), fingerprint.into(), aliases, replay_failures)
+    }
+
+    fn open_impl(
+        path: &Path,
+        fingerprint: String,
+        aliases: &[String],
+        replay_failed: bool,
+    ) -> Result<Self> {
         let path = path.to_path_buf();
         let mut file = OpenOptions::new()
             .read(true)
@@ -287,7 +323,7 @@ impl RunStore {
             lines,
             repair,
             load,
-        } = load::read(&bytes, &path, &fingerprint, replay_failed)?;
+        } = load::read(&bytes, &path, &fingerprint, aliases, replay_failed)?;
         Ok(RunStore {
             fingerprint,
             path: Some(path),

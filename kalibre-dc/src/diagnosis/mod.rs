@@ -15,7 +15,9 @@ use ndarray::Array2;
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use kalibre_core::diagnose::{diagnose, Diagnosis, Hypothesis, HypothesisParam, Residuals};
+use kalibre_core::diagnose::{
+    diagnose, Diagnosis, Hypothesis, HypothesisParam, Residuals, CLOSE_ALTERNATIVE_BIC,
+};
 use kalibre_core::ParamSpace;
 
 use crate::effects::{openings_overlap, placement, supply_openings, Effect, EffectRegistry};
@@ -55,8 +57,11 @@ fn measured_sqrt(snaps: &[HallSnapshot], u2: &[Vec<f64>]) -> Vec<f64> {
 pub struct HallDiagnosis {
     /// The ranked hypotheses.
     pub diagnosis: Diagnosis,
-    /// Per hypothesis (same order as `diagnosis.hypotheses`): the `effects` entry to add,
-    /// with the fitted parameter values.
+    /// Per hypothesis (same order as `diagnosis.hypotheses`): its placement as an
+    /// `effects` entry, with the fitted parameter values clamped into their ranges. A
+    /// hypothesis fitted outside its range has no entry to add (clamped, its value is
+    /// the effect's absence, or the end of a range the data ask to go beyond): see
+    /// [`HallDiagnosis::entry`], which is what every listing offers.
     pub suggestions: Vec<EffectSpec>,
     /// Candidates that were not tried, and why (a kind the solver cannot represent, or
     /// a failed run).
@@ -100,7 +105,46 @@ pub fn hypothesis_flags(
     .join(", ")
 }
 
+/// For a significant hypothesis below the best significant one (`best_name`, with share
+/// `best_share` of the residual): when the two explain more than the whole residual
+/// between them they read the same part of it, so it is another placement (or kind) of
+/// one effect, not a second effect; this says so. `None` when their shares leave room
+/// for two effects. `bic_above_best`: its BIC less the best's (not finite when unknown).
+pub fn alternative_note(
+    best_name: &str,
+    best_share: f64,
+    share: f64,
+    bic_above_best: f64,
+) -> Option<String> {
+    if best_share + share <= 1.0 {
+        return None;
+    }
+    let apart = if !bic_above_best.is_finite() {
+        String::new()
+    } else if bic_above_best < CLOSE_ALTERNATIVE_BIC {
+        format!(
+            "; the data cannot tell the two apart (BIC {bic_above_best:+.1}, within \
+             {CLOSE_ALTERNATIVE_BIC:.0})"
+        )
+    } else {
+        format!("; {best_name} fits better (BIC {bic_above_best:+.1})")
+    };
+    Some(format!(
+        "an alternative to {best_name}, not a second effect: between them they would explain \
+         {:.0} % of the residual, so they read the same part of it{apart}",
+        100.0 * (best_share + share)
+    ))
+}
+
 impl HallDiagnosis {
+    /// The `effects` entry to add for hypothesis `i` (in `diagnosis.hypotheses`' order),
+    /// or `None` when it was fitted outside its range: then no entry gives what the data
+    /// ask (a bypass at a negative share clamps to 0, an entry that does nothing).
+    pub fn entry(&self, i: usize) -> Option<&EffectSpec> {
+        let h = self.diagnosis.hypotheses.get(i)?;
+        self.suggestions.get(i).filter(|_| h.in_range)
+    }
+
     /// The `kalibre.diagnosis/1` JSON of `formats.md`.
     pub fn to_json(&self) -> Value {
         let hyps: Vec<Value> = self
@@ -108,7 +152,8 @@ impl HallDiagnosis {
             .hypotheses
             .iter()
             .zip(&self.suggestions)
-            .map(|(h, s)| {
+            .enumerate()
+            .map(|(i, (h, s))| {
                 json!({
                     "effect": s.kind,
                     "name": h.name,
@@ -128,7 +173,8 @@ impl HallDiagnosis {
                     "carried_by": h.carried_by,
                     "sensor_bias_delta_bic": h.sensor_bias_delta_bic,
                     "ambiguous_with": h.ambiguous_with,
-                    "suggestion": s,
+                    // `null` for a fit outside its range: no entry gives it.
+                    "suggestion": self.entry(i),
                 })
             })
             .collect();

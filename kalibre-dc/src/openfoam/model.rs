@@ -1,5 +1,6 @@
 //! [`OpenFoamModel`]: one OpenFOAM solve per model run.
 
+mod fingerprint;
 mod solve;
 
 use std::path::{Path, PathBuf};
@@ -59,6 +60,8 @@ pub struct OpenFoamModel {
     case: CaseDir,
     runs: RunDirs,
     fingerprint: String,
+    /// The fingerprint versions before it gave this model (its journals are read).
+    legacy_fingerprint: String,
     sensor_names: Vec<String>,
 }
 
@@ -117,32 +120,13 @@ impl OpenFoamModel {
                 )));
             }
         }
-        // Openings and gaps are part of the mesh, so they must be known before any run:
-        // each effect at its parameters' upper bounds shows where they are.
-        let mut extras = CaseExtras::default();
-        for (e, effect) in effects.iter().enumerate() {
-            let mods = mods_at_upper_bounds(effect.as_ref(), hall)
-                .map_err(|err| OpenFoamError::Unsupported(format!("effect {e}: {err}")))?;
-            for o in mods.supply_openings {
-                if !extras.openings.contains(&o.region) {
-                    extras.openings.push(o.region);
-                }
-            }
-            for r in mods.rack_recirculation {
-                let gap = RackGap {
-                    rack: r.rack,
-                    z_m: r.z_m,
-                };
-                if !extras.gaps.contains(&gap) {
-                    extras.gaps.push(gap);
-                }
-            }
-        }
+        let extras = case_extras(hall, &effects)?;
         let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras)?;
-        let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
+        // The case directory's key is what it has been (the hall's physics JSON,
+        // bounds included), so that cases meshed before are found again; an edited
+        // bound meshes the case again, which costs no model run.
         let hall_json = hall.physics_json();
         let settings_json = json(&settings)?;
-        let effects_json = json(&specs)?;
         let extras_key = format!("{extras:?}");
         let mut case_parts: Vec<&[u8]> = vec![
             GENERATOR.as_bytes(),
@@ -152,31 +136,20 @@ impl OpenFoamModel {
         if extras != CaseExtras::default() {
             case_parts.push(extras_key.as_bytes());
         }
-        // Only halls with panels depend on the leak (a per-run value, so not in the case),
-        // and no other fingerprint moves.
-        let leak_key = format!(
-            "containment_leak_fraction={}",
-            settings.containment_leak_fraction
-        );
         case_parts.push(CASE_SAMPLES.as_bytes());
         let case_key = hash_hex(&case_parts);
-        let mode_key = format!("{:?}", layout.mode());
-        let fingerprint = format!(
-            "{GENERATOR}:{}",
-            hash_hex(&{
-                let mut parts: Vec<&[u8]> = vec![
-                    GENERATOR.as_bytes(),
-                    hall_json.as_bytes(),
-                    settings_json.as_bytes(),
-                    effects_json.as_bytes(),
-                    mode_key.as_bytes(),
-                ];
-                if !geometry.panels.is_empty() {
-                    parts.push(leak_key.as_bytes());
-                }
-                parts
-            })
-        );
+        let (fingerprint, legacy_fingerprint) = fingerprint::fingerprints(
+            hall,
+            &effects,
+            &fingerprint::Inputs {
+                settings: &settings,
+                mode: layout.mode(),
+                // Only halls with panels depend on the leak (a per-run value, so not in
+                // the case), and no other fingerprint moves.
+                panels: !geometry.panels.is_empty(),
+                extras: &extras,
+            },
+        )?;
         let case = CaseDir::open_or_build(&geometry, &settings, &case_key)?;
         if settings.np > 1 && (which("mpirun").is_none() || which("decomposePar").is_none()) {
             return Err(OpenFoamError::NotInstalled("mpirun / decomposePar".into()));
@@ -193,6 +166,7 @@ impl OpenFoamModel {
             case,
             runs,
             fingerprint,
+            legacy_fingerprint,
         })
     }
 
@@ -418,6 +392,10 @@ impl Model for OpenFoamModel {
         self.fingerprint.clone()
     }
 
+    fn legacy_fingerprints(&self) -> Vec<String> {
+        vec![self.legacy_fingerprint.clone()]
+    }
+
     fn evaluate(&self, scenario: &OperatingState, params: &[f64]) -> Result<Outputs, ModelError> {
         self.evaluate_timed(scenario, params).map(|(o, _)| o)
     }
@@ -429,6 +407,31 @@ impl Model for OpenFoamModel {
     fn scenario_key(&self, scenario: &OperatingState) -> String {
         crate::operating_state_key(scenario)
     }
+}
+
+/// What `effects` add to the mesh: their openings and gaps, each effect at its
+/// parameters' upper bounds showing where they are (they must be known before any run).
+fn case_extras(hall: &Hall, effects: &[Box<dyn Effect>]) -> Result<CaseExtras, OpenFoamError> {
+    let mut extras = CaseExtras::default();
+    for (e, effect) in effects.iter().enumerate() {
+        let mods = mods_at_upper_bounds(effect.as_ref(), hall)
+            .map_err(|err| OpenFoamError::Unsupported(format!("effect {e}: {err}")))?;
+        for o in mods.supply_openings {
+            if !extras.openings.contains(&o.region) {
+                extras.openings.push(o.region);
+            }
+        }
+        for r in mods.rack_recirculation {
+            let gap = RackGap {
+                rack: r.rack,
+                z_m: r.z_m,
+            };
+            if !extras.gaps.contains(&gap) {
+                extras.gaps.push(gap);
+            }
+        }
+    }
+    Ok(extras)
 }
 
 /// JSON text of a value, for fingerprints.

@@ -126,11 +126,18 @@ impl EffectSolver for OpenFoamEffectSolver {
         let key = run_key(&model.fingerprint(), state, &values);
         let path = self.result_path(&key);
         let n = self.hall.sensors.len();
-        if let Ok(text) = std::fs::read_to_string(&path) {
-            // A kept result of another length (a changed hall) is solved again.
-            if let Ok(v) = serde_json::from_str::<Vec<f64>>(&text) {
-                if v.len() == n && v.iter().all(|x| x.is_finite()) {
-                    return Ok(v);
+        // Results kept by earlier versions are under the model's legacy fingerprints.
+        let legacy = model.legacy_fingerprints();
+        let kept = legacy
+            .iter()
+            .map(|f| self.result_path(&run_key(f, state, &values)));
+        for kept in std::iter::once(path.clone()).chain(kept) {
+            if let Ok(text) = std::fs::read_to_string(&kept) {
+                // A kept result of another length (a changed hall) is solved again.
+                if let Ok(v) = serde_json::from_str::<Vec<f64>>(&text) {
+                    if v.len() == n && v.iter().all(|x| x.is_finite()) {
+                        return Ok(v);
+                    }
                 }
             }
         }

@@ -32,6 +32,56 @@ th{background:#f3f4f6}td:first-child,th:first-child{text-align:left}\
 /// sensor's warming (in the report, and in `kalibre diagnose`).
 pub const WARMING_RACK_MIN_SHARE: f64 = 0.1;
 
+/// Where each effect of `hall` acts, for the kinds the hall has more than once: by the
+/// prefix of its parameters' names (`rack_recirculation` for the first of a kind,
+/// `rack_recirculation#2` for the second, as [`crate::ParamLayout`] names them), its
+/// placement in words (`rack B4`: the entry's fields less its parameters' values and
+/// bounds).
+pub fn effect_locations(hall: &Hall) -> Vec<(String, String)> {
+    let registry = crate::effects::EffectRegistry::builtin();
+    let mut out = Vec::new();
+    for (i, spec) in hall.effects.iter().enumerate() {
+        let same = |s: &&crate::hall::EffectSpec| s.kind == spec.kind;
+        if hall.effects.iter().filter(same).count() < 2 {
+            continue;
+        }
+        let n = hall.effects[..i].iter().filter(same).count();
+        let prefix = match n {
+            0 => spec.kind.clone(),
+            n => format!("{}#{}", spec.kind, n + 1),
+        };
+        // A kind of another build: every field but the bounds.
+        let place = match registry.build(spec, hall) {
+            Ok(e) => crate::effects::placement(spec, e.as_ref()),
+            Err(_) => spec.clone(),
+        };
+        let words: Vec<String> = place
+            .fields
+            .iter()
+            .filter(|(k, _)| !k.ends_with("_bounds"))
+            .map(|(k, v)| match v {
+                serde_json::Value::String(s) => format!("{k} {s}"),
+                v => format!("{k} {v}"),
+            })
+            .collect();
+        if !words.is_empty() {
+            out.push((prefix, words.join(", ")));
+        }
+    }
+    out
+}
+
+/// A parameter's name with its effect's placement beside it when the hall has that kind
+/// more than once (`rack_recirculation#2/fraction (rack B4)`; `locations` from
+/// [`effect_locations`]); the name alone otherwise.
+pub fn param_label(name: &str, locations: &[(String, String)]) -> String {
+    let prefix = name.split('/').next().unwrap_or(name);
+    match locations.iter().find(|(p, _)| p == prefix) {
+        Some((_, place)) => format!("{name} ({place})"),
+        None => name.to_string(),
+    }
+}
+
 /// Mean residual (model minus measurement) per sensor over the snapshots of the report.
 pub fn mean_residual_per_sensor(hall: &Hall, report: &Report) -> Vec<f64> {
     let mut sum = vec![0.0; hall.sensors.len()];
@@ -216,6 +266,7 @@ pub fn calibration_html(
         "<h2>Parameters</h2><table><tr><th>parameter</th><th>initial</th><th>calibrated</th>\
          <th>one standard deviation (linearised)</th><th>move from the model's numerics</th></tr>",
     );
+    let locations = effect_locations(hall);
     for (name, v) in &report.best.params.0 {
         let init = report.initial.params.get(name);
         let spread = match report.uncertainty.iter().find(|u| u.name == *name) {
@@ -249,7 +300,7 @@ pub fn calibration_html(
         let _ = write!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{v:.5}</td><td>{spread}</td><td>{numerics}</td></tr>",
-            esc(name),
+            esc(&param_label(name, &locations)),
             init.map_or("-".into(), |i| format!("{i:.5}"))
         );
     }

@@ -6,8 +6,11 @@ use std::fmt::Write;
 
 use super::svg::{esc, Chart};
 use super::thermal::{thermal_svg, ColourScale, Marker};
-use super::{history_svg, mean_residual_per_sensor, parity_svg, plan_svg, STYLE};
-use crate::diagnosis::hypothesis_flags;
+use super::{
+    effect_locations, history_svg, mean_residual_per_sensor, param_label, parity_svg, plan_svg,
+    STYLE,
+};
+use crate::diagnosis::{alternative_note, hypothesis_flags};
 use crate::hall::Hall;
 use crate::snapshots::HallSnapshot;
 use crate::story::{StoryOutcome, StoryReport};
@@ -187,18 +190,50 @@ pub fn story_html(hall: &Hall, snaps: &[HallSnapshot], story: &StoryReport) -> S
         if d.top_significant().is_none() {
             h.push_str("<p class=\"note\">No significant missing effect: none of the candidates explains enough of the residual, on held-out data, to be worth its parameters.</p>");
         }
-        h.push_str("<table><tr><th>hypothesis</th><th>explains</th><th>predicted MAE (C)</th><th>flags</th><th>entry for hall.json <code>effects</code></th></tr>");
+        h.push_str(
+            "<p>Best first: the significant hypotheses, then the others, each in order of the \
+             BIC change it brings (lower is better supported).</p>\
+             <table><tr><th>hypothesis</th><th>explains</th><th>predicted MAE (C)</th>\
+             <th>BIC change</th><th>flags</th><th>entry for hall.json <code>effects</code></th></tr>",
+        );
+        let best = d.top_significant();
         for s in &d.hypotheses {
             // The story keeps no refit: nothing is refuted by model runs.
-            let flags = hypothesis_flags(s.significant, false, s.inert, s.identifiable, s.in_range);
+            let mut flags =
+                hypothesis_flags(s.significant, false, s.inert, s.identifiable, s.in_range);
+            if let (Some(b), true) = (best, s.significant) {
+                let note = (b.name != s.name)
+                    .then(|| {
+                        alternative_note(
+                            &b.name,
+                            b.explained_fraction,
+                            s.explained_fraction,
+                            s.delta_bic
+                                .zip(b.delta_bic)
+                                .map_or(f64::NAN, |(a, b)| a - b),
+                        )
+                    })
+                    .flatten();
+                if let Some(note) = note {
+                    flags = format!("{flags}: {note}");
+                }
+            }
+            // A fit outside its range clamps to an entry that does nothing: none is offered.
+            let entry = match &s.entry {
+                Some(e) => format!(
+                    "<code>{}</code>",
+                    esc(&serde_json::to_string(e).unwrap_or_default())
+                ),
+                None => "none (fitted outside its range, which no entry gives)".to_string(),
+            };
             let _ = write!(
                 h,
-                "<tr><td>{}</td><td>{:.0}%</td><td>{:.3}</td><td>{}</td><td><code>{}</code></td></tr>",
+                "<tr><td>{}</td><td>{:.0}%</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{entry}</td></tr>",
                 esc(&s.name),
                 100.0 * s.explained_fraction,
                 s.predicted_mae_c,
-                flags,
-                esc(&serde_json::to_string(&s.entry).unwrap_or_default())
+                s.delta_bic.map_or("-".into(), |b| format!("{b:+.1}")),
+                esc(&flags),
             );
         }
         h.push_str("</table>");
@@ -304,8 +339,10 @@ pub fn story_html(hall: &Hall, snaps: &[HallSnapshot], story: &StoryReport) -> S
             let _ = write!(h, "<th>calibration {}</th>", i + 1);
         }
         h.push_str("</tr>");
+        // `hall` is the last calibration's: every effect added so far.
+        let locations = effect_locations(hall);
         for (name, _) in &last.best_params.0 {
-            let _ = write!(h, "<tr><td>{}</td>", esc(name));
+            let _ = write!(h, "<tr><td>{}</td>", esc(&param_label(name, &locations)));
             for s in &story.steps {
                 let _ = write!(
                     h,

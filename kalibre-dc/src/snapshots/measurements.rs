@@ -169,6 +169,22 @@ pub fn parse_measurements(
                 ),
             )
         })?;
+        // The fits square these: a value near f64::MAX overflows them into NaN later,
+        // where nothing names the file.
+        if !kalibre_core::within_magnitude(v) {
+            return Err(Error::format(
+                file,
+                at(Some(2)),
+                format!(
+                    "{} for output `{}` of scenario `{}` is beyond +/-{}, more than the fit can \
+                     square",
+                    kalibre_core::number(v),
+                    show(output),
+                    show(label),
+                    kalibre_core::number(kalibre_core::MAX_MAGNITUDE)
+                ),
+            ));
+        }
         let sd = match fields.get(3) {
             None => None,
             Some(text) => Some(parse_decimal(text).filter(|v| *v > 0.0).ok_or_else(|| {
@@ -185,6 +201,24 @@ pub fn parse_measurements(
                 )
             })?),
         };
+        // Each value is divided by its sd: the quotient must fit too.
+        if let Some(sd) = sd.filter(|sd| {
+            !kalibre_core::within_magnitude(*sd) || !kalibre_core::within_magnitude(v / sd)
+        }) {
+            return Err(Error::format(
+                file,
+                at(Some(3)),
+                format!(
+                    "sd {} of output `{}` of scenario `{}` is out of scale: the value and the \
+                     value over its sd ({}) must be within +/-{}",
+                    kalibre_core::number(sd),
+                    show(output),
+                    show(label),
+                    kalibre_core::number(v / sd),
+                    kalibre_core::number(kalibre_core::MAX_MAGNITUDE)
+                ),
+            ));
+        }
         let slot = &mut values[s].get_or_insert_with(|| vec![None; outputs.len()])[k];
         if let Some((_, _, first)) = *slot {
             return Err(Error::format(
@@ -309,6 +343,25 @@ mod tests {
             let e = parse(text).unwrap_err().to_string();
             assert!(e.contains("m.csv") && e.contains(needle), "{needle}: {e}");
         }
+    }
+
+    #[test]
+    fn values_and_sds_beyond_what_a_fit_can_square_are_named() {
+        let e = parse_full("scenario,output,value\nwinter,t_in,1e308\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("m.csv"), "{e}");
+        assert!(e.contains("line 2, column value"), "{e}");
+        assert!(e.contains("beyond +/-1e150"), "{e}");
+        for sd in ["1e308", "1e-308"] {
+            let text = format!("scenario,output,value,sd\nwinter,t_in,7.5,{sd}\n");
+            let e = parse_full(&text).unwrap_err().to_string();
+            assert!(e.contains("line 2, column sd"), "{sd}: {e}");
+            assert!(e.contains("out of scale"), "{sd}: {e}");
+        }
+        // 1e150 itself, and an sd that keeps the quotient within it, are fine.
+        let ok = "scenario,output,value,sd\nwinter,t_in,1e150,1\nwinter,t_out,1e-100,1e-200\n";
+        assert!(parse_full(ok).is_ok());
     }
 
     #[test]

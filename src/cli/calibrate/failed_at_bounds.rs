@@ -14,14 +14,15 @@ use kalibre_core::ParamSpace;
 /// The longest reason the summary quotes.
 const REASON_CHARS: usize = 160;
 
-/// Of the failed runs of the model `fingerprint` in `journal`: the most common reason,
+/// Of the failed runs of the model of `fingerprints` (its own and those earlier versions
+/// gave it) in `journal`: the most common reason,
 /// and those at a bound of `space` (how many, and the bound most of them share), as
 /// clauses for the summary's note. `None` when the journal holds no failed run of it.
 /// `bounds_in` names where the bounds are given (`hall.json`); `replayed`: this
 /// calibration replayed the failures (`--replay-failed`) rather than run them.
 pub(super) fn clause(
     journal: &Path,
-    fingerprint: &str,
+    fingerprints: &[String],
     space: &ParamSpace,
     bounds_in: &str,
     replayed: bool,
@@ -37,7 +38,10 @@ pub(super) fn clause(
         let Ok(run) = serde_json::from_str::<serde_json::Value>(line) else {
             continue;
         };
-        if run["status"] != "failed" || run["fingerprint"] != fingerprint {
+        let ours = run["fingerprint"]
+            .as_str()
+            .is_some_and(|f| fingerprints.iter().any(|fp| fp == f));
+        if run["status"] != "failed" || !ours {
             continue;
         }
         let same_names = run["param_names"].as_array().is_some_and(|n| {
@@ -146,6 +150,7 @@ mod tests {
             std::process::id()
         ));
         let write = |lines: &[String]| std::fs::write(&journal, lines.concat()).unwrap();
+        let m = ["m".to_string()];
         write(&[
             line("failed", "m", [2.9999999999999996, 0.4]),
             line("failed", "m", [1.0, 0.4]),
@@ -153,7 +158,7 @@ mod tests {
             line("failed", "other", [0.1, 0.0]),
         ]);
         assert_eq!(
-            clause(&journal, "m", &space, "hall.json", false).as_deref(),
+            clause(&journal, &m, &space, "hall.json", false).as_deref(),
             Some(
                 "all 2 failed runs in the journal: model run timed out after 3 s; 1 of the 2 \
                  failed runs in the journal sit at a bound, 1 of them at a = 3 (upper); if the \
@@ -162,20 +167,26 @@ mod tests {
             )
         );
         assert!(
-            clause(&journal, "m", &space, "model.toml's [[params]]", true)
+            clause(&journal, &m, &space, "model.toml's [[params]]", true)
                 .unwrap()
                 .ends_with(
                     "narrow that bound in model.toml's [[params]] (this resume replayed them, \
                  --replay-failed)"
                 )
         );
+        // The runs of a model's legacy fingerprint are its runs.
+        let renamed = ["m2".to_string(), "m".to_string()];
+        assert_eq!(
+            clause(&journal, &renamed, &space, "hall.json", false),
+            clause(&journal, &m, &space, "hall.json", false)
+        );
         write(&[line("failed", "m", [1.0, 0.4])]);
         assert_eq!(
-            clause(&journal, "m", &space, "hall.json", false).as_deref(),
+            clause(&journal, &m, &space, "hall.json", false).as_deref(),
             Some("the one failed run in the journal: model run timed out after 3 s")
         );
         write(&[line("ok", "m", [1.0, 0.4])]);
-        assert_eq!(clause(&journal, "m", &space, "hall.json", false), None);
+        assert_eq!(clause(&journal, &m, &space, "hall.json", false), None);
         std::fs::remove_file(&journal).unwrap();
     }
 }

@@ -36,7 +36,12 @@ pub(super) fn openfoam_findings(
             .settings(&args.out.join("openfoam"), args.grid_m)?,
     )
     .map_err(|e| of_err(e.in_hall_file(&args.hall_path().display().to_string())))?;
-    let store = RunStore::open(journal, model.fingerprint())?;
+    let store = RunStore::open_with_aliases(
+        journal,
+        model.fingerprint(),
+        &model.legacy_fingerprints(),
+        false,
+    )?;
     let names: Vec<String> = report
         .best
         .params

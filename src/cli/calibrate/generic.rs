@@ -164,7 +164,7 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         .then(|| {
             super::failed_at_bounds::clause(
                 &journal,
-                &cfg.command.fingerprint(),
+                &[cfg.command.fingerprint()],
                 space,
                 &format!("{}'s [[params]]", config.display()),
                 args.replay_failed,

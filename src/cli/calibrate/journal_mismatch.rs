@@ -39,14 +39,17 @@ pub(super) fn explain(
         (false, _) => differences.join("; "),
         (true, true) => format!(
             "the same model settings, parameters and hall ({} reads as {}, on which they \
-             were made), so the model's configuration changed since (another --config, or \
-             another kalibre version made them)",
+             were made, bounds and initial values aside), so the model's configuration \
+             changed since (another --config), or another kalibre version made them (before \
+             bounds and initial values were left out of the model's fingerprint, runs were \
+             journaled under the ones they were made with: calibrate with those to reuse \
+             them)",
             hall_file.display(),
             out.join(hall_changes::RUNS_HALL).display()
         ),
         (true, false) => "the same model settings and parameters, so hall.json (its \
-                          geometry, servers, effects, initial values or bounds) or the \
-                          model's configuration changed since"
+                          geometry, servers or effects) or the model's configuration \
+                          changed since"
             .to_string(),
     };
     CliError::Input(format!(

@@ -68,8 +68,14 @@ fn check_model_flags(args: &CalibrateArgs) -> CliResult {
 }
 
 /// What a calibration with one of the models gives: its report, the prior's report, the
-/// model's fingerprint and the parameter space it searched.
-type Calibrated = (Report, PenaltyReport, String, ParamSpace);
+/// model's fingerprints (its own first, then those earlier versions gave it:
+/// [`Model::legacy_fingerprints`]) and the parameter space it searched.
+type Calibrated = (Report, PenaltyReport, Vec<String>, ParamSpace);
+
+/// A model's fingerprint, then its legacy ones: every fingerprint its runs have.
+fn fingerprints<M: Model>(model: &M) -> Vec<String> {
+    [vec![model.fingerprint()], model.legacy_fingerprints()].concat()
+}
 
 /// Runs the calibration with the chosen model.
 fn calibrate_with_model<'o>(
@@ -101,7 +107,7 @@ fn calibrate_with_model<'o>(
             let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)
                 .map_err(refused)?;
             let space = c.model.layout().space().clone();
-            Ok((c.report, c.penalty_report, c.model.fingerprint(), space))
+            Ok((c.report, c.penalty_report, fingerprints(&c.model), space))
         }
         ModelArg::Openfoam => {
             let model = OpenFoamModel::new(
@@ -124,7 +130,7 @@ fn calibrate_with_model<'o>(
             )
             .map_err(refused)?;
             let space = model.layout().space().clone();
-            Ok((c.report, c.penalty_report, model.fingerprint(), space))
+            Ok((c.report, c.penalty_report, fingerprints(&model), space))
         }
         ModelArg::Command => {
             let path = args
@@ -144,7 +150,7 @@ fn calibrate_with_model<'o>(
             )
             .map_err(refused)?;
             let space = model.layout.space().clone();
-            Ok((c.report, c.penalty_report, model.fingerprint(), space))
+            Ok((c.report, c.penalty_report, fingerprints(&model), space))
         }
     }
 }
@@ -346,7 +352,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         args.quiet,
     );
     let started = Instant::now();
-    let (report, penalty_report, fingerprint, space) = with_threads(args.threads, || {
+    let (report, penalty_report, fingerprints, space) = with_threads(args.threads, || {
         calibrate_with_model(
             &args,
             &hall,
@@ -367,7 +373,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
                 .map_or_else(|| "hall.json".to_string(), |h| h.display().to_string());
             failed_at_bounds::clause(
                 &journal,
-                &fingerprint,
+                &fingerprints,
                 &space,
                 &bounds_in,
                 args.replay_failed,
@@ -375,6 +381,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         })
         .flatten();
     let mut report = report;
+    let fingerprint = fingerprints.into_iter().next().unwrap_or_default();
     let mut record = model_record(&args, &hall, &settings, fingerprint)?;
     if args.model != ModelArg::Command {
         record.scenario_keys = Some(scenario_keys(&snaps));

@@ -7,12 +7,13 @@ use std::path::Path;
 use crate::cli::{CliError, CliResult};
 
 /// Each snapshot label's scenario keys in `journal` (for reports that carry none),
-/// after refusing a journal with runs of a model other than `fingerprint`'s. A missing
+/// after refusing a journal with runs of a model other than the one of `fingerprints`
+/// (its fingerprint and those earlier versions gave it). A missing
 /// journal gives none; one that cannot be read, or lines that are not JSON, are named
 /// in a warning, as the check cannot see into them.
 pub(super) fn scenario_keys(
     journal: &Path,
-    fingerprint: &str,
+    fingerprints: &[String],
     hall: &Path,
     model_name: &str,
 ) -> CliResult<HashMap<String, HashSet<String>>> {
@@ -40,7 +41,9 @@ pub(super) fn scenario_keys(
             }
             continue;
         };
-        other |= v["fingerprint"].as_str().is_some_and(|f| f != fingerprint);
+        other |= v["fingerprint"]
+            .as_str()
+            .is_some_and(|f| !fingerprints.iter().any(|ours| ours == f));
         if let (Some(label), Some(key)) = (v["scenario"].as_str(), v["scenario_key"].as_str()) {
             keys.entry(label.to_string())
                 .or_default()

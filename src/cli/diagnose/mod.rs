@@ -296,24 +296,29 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     }
     let model = HallModel::new(&hall, sim.clone())
         .map_err(|e| e.in_hall_file(&hall_path.display().to_string()))?;
-    // The solver, and the fingerprint of the model the calibration must have run.
-    let (solver, fp): (Box<dyn EffectSolver>, String) = match openfoam {
+    // The solver, and the fingerprints of the model the calibration must have run: its
+    // own, then those earlier versions gave it (their reports and runs are its too).
+    let fingerprints = |m: &dyn Model<Scenario = snapshots::OperatingState>| {
+        [vec![m.fingerprint()], m.legacy_fingerprints()].concat()
+    };
+    let (solver, fps): (Box<dyn EffectSolver>, Vec<String>) = match openfoam {
         false => (
             Box::new(Simulator::new(&hall, sim.clone())?),
-            model.fingerprint(),
+            fingerprints(&model),
         ),
         true => {
             let of = of_args.settings(&args.calibration.join("openfoam"), grid_m)?;
             super::openfoam_args::check_mesh(&hall, &hall_path, of.grid_m, args.grid_m.is_some())?;
             super::out_dir::note_interrupted_runs(remove_interrupted_runs(&of.cache_root));
-            let fp = OpenFoamModel::new(&hall, of.clone())
-                .map_err(|e| of_err(e.in_hall_file(&hall_path.display().to_string())))?
-                .fingerprint();
-            (Box::new(OpenFoamEffectSolver::new(&hall, of)?), fp)
+            let fps = fingerprints(
+                &OpenFoamModel::new(&hall, of.clone())
+                    .map_err(|e| of_err(e.in_hall_file(&hall_path.display().to_string())))?,
+            );
+            (Box::new(OpenFoamEffectSolver::new(&hall, of)?), fps)
         }
     };
     if let Some(recorded_fp) = recorded.as_ref().and_then(|m| m.fingerprint.as_ref()) {
-        if *recorded_fp != fp {
+        if !fps.contains(recorded_fp) {
             return Err(CliError::Input(format!(
                 "{}: /model/fingerprint: runs of another model (a different hall.json, \
                  effects, --grid-m, --model or OpenFOAM option) than `{}` with --model \
@@ -333,7 +338,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     report.best.params = NamedValues::new(&space.names(), &params);
     let journal_keys = journal::scenario_keys(
         &args.calibration.join("runs.jsonl"),
-        &fp,
+        &fps,
         &hall_path,
         chosen,
     )?;
@@ -417,11 +422,13 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     print_where_it_fails(&hall, &report, heat.as_deref());
     odd_snapshots::print_odd_snapshots(&odd_snapshots::odd_snapshots(&report.residuals));
     println!(
-        "\nmissing effects, best first (MAE now {:.3} C; `explains`: the share of the residual, \
-         as the ranking weighs the sensors, that the effect removes; `predicted MAE`: over \
-         every sensor, linearised, with the calibrated parameters refitted beside the effect, \
-         as a recalibration with it refits them):",
-        d.diagnosis.mae
+        "\nmissing effects, best first: the significant ones, then the others, each in order \
+         of `BIC` (the change of the Bayesian information criterion the effect brings: lower \
+         is better supported, {} or less is needed to be significant); MAE now {:.3} C; \
+         `explains`: the share of the residual, as the ranking weighs the sensors, that the \
+         effect removes; `predicted MAE`: over every sensor, linearised, with the calibrated \
+         parameters refitted beside the effect, as a recalibration with it refits them:",
+        -settings.diagnose.bic_threshold, d.diagnosis.mae
     );
     // Said only when it weighs: on data the model reproduces the share is about 0.
     if let Some(share) = d.diagnosis.model_form_share.filter(|c| *c >= 0.01) {
@@ -448,23 +455,45 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         // Several places or kinds can each take up the same residual: the first is the
         // best-supported reading, the rest are often it read another way.
         println!(
-            "  {} are significant, often one residual read several ways: add the first, \
+            "  {} are significant, often one residual read several ways (those marked an \
+             alternative below read the same part of it as the first): add the first, \
              recalibrate and diagnose again; the others fall away if they were the same",
             significant.len()
         );
     }
-    for (h, s) in d.diagnosis.hypotheses.iter().zip(&d.suggestions).take(8) {
+    let best = significant.first().copied();
+    for (i, (h, s)) in d
+        .diagnosis
+        .hypotheses
+        .iter()
+        .zip(&d.suggestions)
+        .enumerate()
+        .take(8)
+    {
         let flags = print::flags(h);
         println!(
-            "  {:<48} explains {:>4.0}%  predicted MAE {:.3} C  {}",
+            "  {:<48} explains {:>4.0}%  predicted MAE {:.3} C  BIC {:+.1}  {}",
             h.name,
             100.0 * h.explained_fraction,
             h.predicted_mae,
+            h.delta_bic,
             flags
         );
-        let entry = || serde_json::to_string(s).unwrap_or_default();
-        if !h.in_range {
-            println!("    {}", print::outside_range(h));
+        // A fit outside its range has no entry: clamped, it would do nothing.
+        let Some(entry) = d.entry(i) else {
+            println!("    {}; no entry to add", print::outside_range(h));
+            continue;
+        };
+        let entry = || serde_json::to_string(entry).unwrap_or_default();
+        if let Some(best) = best.filter(|b| h.significant && b.name != h.name) {
+            if let Some(note) = kalibre_dc::diagnosis::alternative_note(
+                &best.name,
+                best.explained_fraction,
+                h.explained_fraction,
+                h.delta_bic - best.delta_bic,
+            ) {
+                println!("    {note}");
+            }
         }
         if h.significant && !h.identifiable {
             println!("    {}", print::not_identifiable(h));

@@ -18,12 +18,11 @@ pub(super) fn write_next_hall(
     d: &kalibre_dc::diagnosis::HallDiagnosis,
     path: &std::path::Path,
 ) -> CliResult<Option<String>> {
-    let top = d
-        .diagnosis
-        .hypotheses
-        .iter()
-        .zip(&d.suggestions)
-        .find(|(h, _)| h.significant);
+    // A significant hypothesis is fitted in its range; one outside it has no entry (its
+    // clamped entry would do nothing), so it is never written.
+    let top = (d.diagnosis.hypotheses.iter().enumerate())
+        .filter(|(_, h)| h.significant)
+        .find_map(|(i, h)| d.entry(i).map(|e| (h, e)));
     let Some((h, entry)) = top else {
         // A file there from before is not this diagnosis's hall: said, so that a script
         // reading it next knows.

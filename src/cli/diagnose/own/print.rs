@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use kalibre_core::diagnose::{Diagnosis, HypothesisResult, CLOSE_ALTERNATIVE_BIC};
+use kalibre_core::diagnose::{Diagnosis, HypothesisResult, Refit, CLOSE_ALTERNATIVE_BIC};
 use kalibre_core::external::CommandModelConfig;
 use kalibre_core::Model;
 
@@ -400,12 +400,42 @@ fn print_refits(o: &Outcome<'_>, unit: &str) {
                     (Some(m), _) => format!("{}{unit} worse", significant(m, 4)),
                     (None, why) => format!("failed ({})", why.as_deref().unwrap_or("no reason")),
                 };
-                format!("{}: {read}", values.join(", "))
+                let held = if s.clamped.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({} held at its bound)", s.clamped.join(", "))
+                };
+                format!("{}: {read}{held}", values.join(", "))
             })
             .collect();
         let stopped = (r.stopped.as_ref())
             .map(|w| format!(" (stopped: {w})"))
             .unwrap_or_default();
         println!("  {:<32} {}{stopped}", r.name, steps.join("; "));
+        if let Some(note) = refuted_at_bounds(r) {
+            println!("  {:<32} {note}", "");
+        }
     }
+}
+
+/// A refit none of whose runs read better, where some run held calibrated parameters at
+/// their bounds: the refutation may be the box's, as for the single check.
+fn refuted_at_bounds(r: &Refit) -> Option<String> {
+    let ran = r.steps.iter().any(|s| s.mae.is_some());
+    if !ran || r.best().is_some() {
+        return None;
+    }
+    let mut held: Vec<&str> = Vec::new();
+    for name in r.steps.iter().flat_map(|s| &s.clamped) {
+        if !held.contains(&name.as_str()) {
+            held.push(name);
+        }
+    }
+    (!held.is_empty()).then(|| {
+        format!(
+            "no run read better, but the fit moved {} beyond its bounds, held there for the \
+             runs: with a wider range it may read otherwise",
+            held.join(", ")
+        )
+    })
 }

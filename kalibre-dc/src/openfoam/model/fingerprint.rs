@@ -1,0 +1,145 @@
+//! The OpenFOAM model's fingerprint, and the one versions before it gave the same model
+//! (read as its own in journals: [`kalibre_core::Model::legacy_fingerprints`]).
+
+use super::super::geometry::CaseExtras;
+use super::super::{OpenFoamError, OpenFoamSettings};
+use super::{hash_hex, json, GENERATOR};
+use crate::effects::Effect;
+use crate::hall::{AlphaMode, Hall};
+
+/// What the model's fingerprints hash, beside the hall and its effects.
+pub(super) struct Inputs<'a> {
+    /// The checked settings (only those that change results serialise).
+    pub(super) settings: &'a OpenFoamSettings,
+    /// How alpha is calibrated (the layout's mode).
+    pub(super) mode: AlphaMode,
+    /// Whether the case has containment panels (only then does their leak count).
+    pub(super) panels: bool,
+    /// What the effects add to the mesh.
+    pub(super) extras: &'a CaseExtras,
+}
+
+/// `(fingerprint, legacy fingerprint)` of the model of `hall` with `effects`.
+///
+/// The fingerprint covers the generator version, the hall as a run computes with it
+/// ([`Hall::model_json`]: without the calibrated parameters' bounds and initial values),
+/// the settings, the alpha mode, the panels' leak for a contained hall and what the
+/// effects add to the mesh (their openings and gaps, which their placements give and an
+/// effect whose upper bounds are 0 lacks). The legacy one is exactly what versions before
+/// it computed: `hall.json` with bounds and initial values and the effects' entries.
+pub(super) fn fingerprints(
+    hall: &Hall,
+    effects: &[Box<dyn Effect>],
+    inputs: &Inputs<'_>,
+) -> Result<(String, String), OpenFoamError> {
+    let settings_json = json(inputs.settings)?;
+    let mode_key = format!("{:?}", inputs.mode);
+    let leak_key = format!(
+        "containment_leak_fraction={}",
+        inputs.settings.containment_leak_fraction
+    );
+    let extras_key = format!("{:?}", inputs.extras);
+    let model_json = hall.model_json(inputs.mode, effects);
+    let mut parts: Vec<&[u8]> = vec![
+        GENERATOR.as_bytes(),
+        model_json.as_bytes(),
+        settings_json.as_bytes(),
+        mode_key.as_bytes(),
+    ];
+    if inputs.panels {
+        parts.push(leak_key.as_bytes());
+    }
+    if *inputs.extras != CaseExtras::default() {
+        parts.push(extras_key.as_bytes());
+    }
+    let fingerprint = format!("{GENERATOR}:{}", hash_hex(&parts));
+
+    let specs: Vec<_> = effects.iter().map(|e| e.to_spec()).collect();
+    let hall_json = hall.physics_json();
+    let effects_json = json(&specs)?;
+    let mut parts: Vec<&[u8]> = vec![
+        GENERATOR.as_bytes(),
+        hall_json.as_bytes(),
+        settings_json.as_bytes(),
+        effects_json.as_bytes(),
+        mode_key.as_bytes(),
+    ];
+    if inputs.panels {
+        parts.push(leak_key.as_bytes());
+    }
+    let legacy = format!("{GENERATOR}:{}", hash_hex(&parts));
+    Ok((fingerprint, legacy))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::super::geometry::CaseGeometry;
+    use super::super::case_extras;
+    use super::*;
+    use crate::effects::EffectRegistry;
+
+    /// of-dev-clean, with two effects (one of bounds of its own) when `with_effects`.
+    fn hall(with_effects: bool) -> Hall {
+        let text = include_str!("../../../../data/openfoam/of-dev-clean/hall.json");
+        let mut json: serde_json::Value = serde_json::from_str(text).unwrap();
+        if with_effects {
+            json["effects"] = serde_json::json!([
+                { "kind": "crac_supply_offset", "crac": "crac-1", "offset_c": 0.5,
+                  "offset_c_bounds": [-2.0, 2.0] },
+                { "kind": "rack_recirculation", "rack": "A1" }
+            ]);
+        }
+        serde_json::from_value(json).unwrap()
+    }
+
+    fn fingerprints_of(hall: &Hall) -> (String, String) {
+        let settings = OpenFoamSettings::default().check().unwrap();
+        let effects = EffectRegistry::builtin().build_all(hall).unwrap();
+        let extras = case_extras(hall, &effects).unwrap();
+        let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras).unwrap();
+        let inputs = Inputs {
+            settings: &settings,
+            mode: hall.calibrate.alpha,
+            panels: !geometry.panels.is_empty(),
+            extras: &extras,
+        };
+        fingerprints(hall, &effects, &inputs).unwrap()
+    }
+
+    /// The legacy fingerprints are the values `OpenFoamModel::new` gave these halls with
+    /// default settings before bounds and initial values were left out.
+    #[test]
+    fn the_legacy_fingerprint_is_the_one_earlier_versions_gave() {
+        let (_, plain) = fingerprints_of(&hall(false));
+        assert_eq!(plain, "kalibre-dc-openfoam/3:1b0fbf5f369cf5ea");
+        let (_, with_effects) = fingerprints_of(&hall(true));
+        assert_eq!(with_effects, "kalibre-dc-openfoam/3:d1e498253969f313");
+    }
+
+    #[test]
+    fn bounds_and_initial_values_are_not_in_the_fingerprint() {
+        let base = hall(true);
+        let (fingerprint, legacy) = fingerprints_of(&base);
+        let mut searched = base.clone();
+        searched.server_types[0].alpha_cfm_per_w.max = 1.0;
+        searched.server_types[1].alpha_cfm_per_w.initial = 0.4;
+        searched.effects[0]
+            .fields
+            .insert("offset_c_bounds".into(), serde_json::json!([-1.0, 1.0]));
+        searched.effects[1]
+            .fields
+            .insert("fraction".into(), serde_json::json!(0.3));
+        let (same, other_legacy) = fingerprints_of(&searched);
+        assert_eq!(same, fingerprint);
+        assert_ne!(other_legacy, legacy);
+        // Where the effect acts, and the hall's physics, are the model's.
+        let mut moved = base.clone();
+        moved.effects[1]
+            .fields
+            .insert("rack".into(), serde_json::json!("B2"));
+        assert_ne!(fingerprints_of(&moved).0, fingerprint);
+        let mut cooler = base;
+        cooler.cracs[0].rated_flow_m3_s *= 1.1;
+        assert_ne!(fingerprints_of(&cooler).0, fingerprint);
+    }
+}
