@@ -345,20 +345,13 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             let eval = state.absorb(self.validator, obs, iteration, &unit, &params, results)?;
             let improved = match row_weights {
                 Some(w) => {
-                    // The prior judges a weighted step as it judges every other run: a
-                    // lower misfit bought with rises it rules out is not the best point.
-                    let prior0 = state.prior_cost(&space.from_unit(u0)?);
-                    let prior1 = state.prior_cost(&params);
                     // `absorb` keeps a point's outputs only when every snapshot ran.
                     let better = state
                         .ok_runs
                         .last()
                         .filter(|_| eval.validation.is_some())
                         .map(|(_, o)| o.clone())
-                        .filter(|o| {
-                            weighted_mae(&residuals(obs, o), w) + prior1
-                                < weighted_mae(r0, w) + prior0
-                        });
+                        .filter(|o| weighted_mae(&residuals(obs, o), w) < weighted_mae(r0, w));
                     let improved = better.is_some();
                     if let Some(outputs) = better {
                         state.promote(self.validator, obs, iteration, &unit, &params, outputs)?;

@@ -82,12 +82,6 @@ impl<'r> State<'r> {
         }
     }
 
-    /// The weighted prior at `params` when the prior judges the best run (0 otherwise):
-    /// what [`Self::rank`] adds to a score.
-    pub(crate) fn prior_cost(&self, params: &[f64]) -> f64 {
-        self.rank(0.0, params)
-    }
-
     /// Books one point's runs: counts, training samples, validation and the best point.
     pub(crate) fn absorb<S, V: Validator>(
         &mut self,
