@@ -168,11 +168,7 @@ fn a_fit_above_its_range_and_an_unidentifiable_one_are_said_as_such() {
     assert!(o.status.success(), "{}", stderr(&o));
     let (hall, snapshots) = (dir.join("hall/hall.json"), dir.join("hall/snapshots.csv"));
     let cal = dir.join("cal");
-    let o = run(on_files("calibrate", &hall, &snapshots)
-        .args(QUICK_CALIBRATION)
-        .arg("--out")
-        .arg(&cal));
-    assert!(o.status.success(), "{}", stderr(&o));
+    calibrate_quickly(&hall, &snapshots, &cal);
     let o = run(on_files("diagnose", &hall, &snapshots)
         .arg("--calibration")
         .arg(&cal));
@@ -211,11 +207,7 @@ fn parameters_of_two_effects_of_one_kind_say_where_each_acts() {
     ]);
     std::fs::write(&hall, serde_json::to_string_pretty(&h).unwrap()).unwrap();
     let cal = dir.join("cal");
-    let o = run(on_files("calibrate", &hall, &snapshots)
-        .args(QUICK_CALIBRATION)
-        .arg("--out")
-        .arg(&cal));
-    assert!(o.status.success(), "{}", stderr(&o));
+    calibrate_quickly(&hall, &snapshots, &cal);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(cal.join("report.json")).unwrap()).unwrap();
     let params = report["best"]["params"].as_object().unwrap();
@@ -235,4 +227,13 @@ fn parameters_of_two_effects_of_one_kind_say_where_each_acts() {
         assert!(html.contains(label), "{label} not in report.html");
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A quick calibration of `hall` against `snapshots` into `cal`, which must succeed.
+fn calibrate_quickly(hall: &std::path::Path, snapshots: &std::path::Path, cal: &std::path::Path) {
+    let o = run(on_files("calibrate", hall, snapshots)
+        .args(QUICK_CALIBRATION)
+        .arg("--out")
+        .arg(cal));
+    assert!(o.status.success(), "{}", stderr(&o));
 }

@@ -159,6 +159,17 @@ fn edited_hall(name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> std::pa
     path
 }
 
+/// `diagnose` of of-dev-clean against the calibration in `out`, which must succeed.
+fn diagnoses_the_clean_hall(out: &Path) {
+    let d = run(diagnose_cmd(
+        &data("of-dev-clean/hall.json"),
+        &data("of-dev-clean/snapshots.csv"),
+        out,
+    )
+    .args(["--threads", "1"]));
+    assert_eq!(d.status.code(), Some(0), "{}", stderr(&d));
+}
+
 fn report(out: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
 }
@@ -196,13 +207,7 @@ fn an_edited_bound_or_initial_value_keeps_the_journals_runs() {
     assert!(journaled > first_runs);
 
     // `diagnose` takes the report written under other bounds as this model's.
-    let d = run(diagnose_cmd(
-        &data("of-dev-clean/hall.json"),
-        &data("of-dev-clean/snapshots.csv"),
-        &out,
-    )
-    .args(["--threads", "1"]));
-    assert_eq!(d.status.code(), Some(0), "{}", stderr(&d));
+    diagnoses_the_clean_hall(&out);
 
     let cooler = edited_hall("journal-bounds-flow", |h| {
         h["server_types"][0]["alpha_cfm_per_w"]["max"] = 1.0.into();
@@ -241,13 +246,7 @@ fn a_journal_and_report_of_the_previous_fingerprint_are_this_models() {
     old("runs.jsonl");
     old("report.json");
 
-    let d = run(diagnose_cmd(
-        &data("of-dev-clean/hall.json"),
-        &data("of-dev-clean/snapshots.csv"),
-        &out,
-    )
-    .args(["--threads", "1"]));
-    assert_eq!(d.status.code(), Some(0), "{}", stderr(&d));
+    diagnoses_the_clean_hall(&out);
 
     let (again, _) = calibrate(&out, &["--iterations", "1"]);
     assert_eq!(

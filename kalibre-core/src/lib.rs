@@ -128,7 +128,9 @@ pub use error::{Error, Result};
 pub use fsio::write_atomic;
 pub use gp::GaussianProcess;
 pub use model::{check_outputs, scenario_digest, Model, ModelError, Outputs};
-pub use number::{number, some_names, within_magnitude, MAX_MAGNITUDE};
+pub use number::{
+    number, some_names, unprintable_name, within_magnitude, MAX_MAGNITUDE, MAX_NAME_CHARS,
+};
 pub use observe::{Event, Observe};
 pub use param::{Param, ParamSpace, Scale};
 pub use search::{

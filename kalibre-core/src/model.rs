@@ -220,6 +220,12 @@ pub trait Model: Sync {
         Vec::new()
     }
 
+    /// Every fingerprint the model's runs may be journaled under: [`Self::fingerprint`]
+    /// first, then [`Self::legacy_fingerprints`].
+    fn run_fingerprints(&self) -> Vec<String> {
+        [vec![self.fingerprint()], self.legacy_fingerprints()].concat()
+    }
+
     /// Runs the model. Failure is a value: return a [`ModelError`] (the loop also catches
     /// a panic and journals it as a failed run, but a panic may leave the model's own
     /// state half-updated).

@@ -1,5 +1,5 @@
 //! Numbers and lists in messages: as written, unless that would take many digits or
-//! names; and the largest magnitude kalibre fits.
+//! names; the largest magnitude kalibre fits; and which names can be printed.
 
 /// The largest magnitude of a number kalibre fits (a bound, a measurement, its `sd`, a
 /// model's output): the fits square differences and sum them over every output, so a
@@ -54,4 +54,30 @@ pub fn some_names(names: &[String]) -> String {
         n if n > SHOWN => format!("{}, ... ({n} in all)", names[..SHOWN].join(", ")),
         _ => names.join(", "),
     }
+}
+
+/// The longest name (an id, a snapshot or scenario label) kalibre takes: names are
+/// printed in messages, reports, journals and file names.
+pub const MAX_NAME_CHARS: usize = 200;
+
+/// Why a name (an id, a snapshot or scenario label) cannot be printed as it is, if it
+/// cannot: a control character (an escape sequence would reach the terminal, a NUL byte
+/// no argument or file can carry) or more than [`MAX_NAME_CHARS`] characters.
+///
+/// ```
+/// use kalibre_core::unprintable_name;
+/// assert_eq!(unprintable_name("winter"), None);
+/// assert!(unprintable_name("win\u{7}ter").unwrap().contains("U+0007"));
+/// assert!(unprintable_name(&"x".repeat(201)).unwrap().contains("201 characters"));
+/// ```
+pub fn unprintable_name(name: &str) -> Option<String> {
+    if let Some(c) = name.chars().find(|c| c.is_control()) {
+        return Some(format!(
+            "holds a control character (U+{:04X}); expected printable text",
+            c as u32
+        ));
+    }
+    let n = name.chars().count();
+    (n > MAX_NAME_CHARS)
+        .then(|| format!("is {n} characters long; expected at most {MAX_NAME_CHARS}"))
 }

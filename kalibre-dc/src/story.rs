@@ -178,6 +178,22 @@ impl DiagnosisStep {
             .iter()
             .find(|h| h.significant && h.entry.is_some())
     }
+
+    /// For `h`, a significant hypothesis below [`Self::top_significant`]: that it reads
+    /// the same part of the residual as the top one
+    /// ([`crate::diagnosis::alternative_note`]), if it does.
+    pub fn alternative_note(&self, h: &Suggestion) -> Option<String> {
+        let best = self
+            .top_significant()
+            .filter(|b| h.significant && b.name != h.name)?;
+        let above = (h.delta_bic.zip(best.delta_bic)).map_or(f64::NAN, |(a, b)| a - b);
+        crate::diagnosis::alternative_note(
+            &best.name,
+            best.explained_fraction,
+            h.explained_fraction,
+            above,
+        )
+    }
 }
 
 /// How the story ended.

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 
 use clap::Args;
-use kalibre_dc::diagnosis::{alternative_note, hypothesis_flags};
+use kalibre_dc::diagnosis::hypothesis_flags;
 use kalibre_dc::hall::{EffectSpec, Hall};
 use kalibre_dc::sim::{RackHeat, SimConfig};
 use kalibre_dc::snapshots::OperatingState;
@@ -326,19 +326,7 @@ fn print_event(
                     h.predicted_mae_c,
                     h.delta_bic.map_or("-".into(), |b| format!("{b:+.1}"))
                 );
-                let Some(best) = top.filter(|t| h.significant && t.name != h.name) else {
-                    continue;
-                };
-                let above = h
-                    .delta_bic
-                    .zip(best.delta_bic)
-                    .map_or(f64::NAN, |(a, b)| a - b);
-                if let Some(note) = alternative_note(
-                    &best.name,
-                    best.explained_fraction,
-                    h.explained_fraction,
-                    above,
-                ) {
+                if let Some(note) = step.alternative_note(h) {
                     println!("      {note}");
                 }
             }

@@ -15,7 +15,7 @@ use super::command::{ExternalCommand, FailureKind, KeepRuns, RetryPolicy};
 use super::parse::OutputParser;
 use super::{ExternalError, NamedScenario};
 use crate::diagnose::{group_candidates, CandidateEffect, CandidateParam};
-use crate::{Param, ParamSpace, Scale};
+use crate::{unprintable_name, Param, ParamSpace, Scale};
 
 /// The most `retries` a `model.toml` may ask for: a run that fails that often will not
 /// succeed on the next try.
@@ -229,27 +229,6 @@ fn join(prefix: &str, key: &str) -> String {
     } else {
         format!("{prefix}.{key}")
     }
-}
-
-/// The longest scenario label, parameter, output or variable name, in characters: names
-/// are printed in messages, reports and journals. The same as a hall's ids and snapshot
-/// labels (`kalibre_dc::hall::MAX_NAME_CHARS`; kalibre-dc depends on this crate, not the
-/// other way, so the rule is repeated here).
-const MAX_NAME_CHARS: usize = 200;
-
-/// Why a name cannot be printed as it is, if it cannot: a control character (an escape
-/// sequence would reach the terminal, a NUL byte no argument or file can carry) or more
-/// than [`MAX_NAME_CHARS`] characters. The rule of `kalibre_dc::hall::unprintable_name`.
-fn unprintable_name(name: &str) -> Option<String> {
-    if let Some(c) = name.chars().find(|c| c.is_control()) {
-        return Some(format!(
-            "holds a control character (U+{:04X}); expected printable text",
-            c as u32
-        ));
-    }
-    let n = name.chars().count();
-    (n > MAX_NAME_CHARS)
-        .then(|| format!("is {n} characters long; expected at most {MAX_NAME_CHARS}"))
 }
 
 /// Why a scenario label is refused, if it is: the rules of a hall's snapshot labels

@@ -11,24 +11,8 @@ use super::types::{Hall, SupplyKind, HALL_SCHEMA};
 use crate::snapshots::number;
 use crate::{Error, Result};
 
-/// The longest id or snapshot label, in characters: names are printed in messages,
-/// reports and file names.
-pub const MAX_NAME_CHARS: usize = 200;
-
-/// Why a name (an id, a snapshot label) cannot be printed as it is, if it cannot: a
-/// control character (an escape sequence would reach the terminal) or more than
-/// [`MAX_NAME_CHARS`] characters.
-pub fn unprintable_name(name: &str) -> Option<String> {
-    if let Some(c) = name.chars().find(|c| c.is_control()) {
-        return Some(format!(
-            "holds a control character (U+{:04X}); expected printable text",
-            c as u32
-        ));
-    }
-    let n = name.chars().count();
-    (n > MAX_NAME_CHARS)
-        .then(|| format!("is {n} characters long; expected at most {MAX_NAME_CHARS}"))
-}
+// One rule for every name, shared with a model of your own's (kalibre-core).
+pub use kalibre_core::{unprintable_name, MAX_NAME_CHARS};
 
 /// A point as `[x, y, z]`, each coordinate readable however large.
 fn point(p: &[f64; 3]) -> String {

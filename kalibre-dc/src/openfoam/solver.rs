@@ -123,16 +123,14 @@ impl EffectSolver for OpenFoamEffectSolver {
             .copied()
             .collect();
         use kalibre_core::Model;
-        let key = run_key(&model.fingerprint(), state, &values);
-        let path = self.result_path(&key);
-        let n = self.hall.sensors.len();
         // Results kept by earlier versions are under the model's legacy fingerprints.
-        let legacy = model.legacy_fingerprints();
-        let kept = legacy
-            .iter()
-            .map(|f| self.result_path(&run_key(f, state, &values)));
-        for kept in std::iter::once(path.clone()).chain(kept) {
-            if let Ok(text) = std::fs::read_to_string(&kept) {
+        let paths: Vec<PathBuf> = (model.run_fingerprints().iter())
+            .map(|f| self.result_path(&run_key(f, state, &values)))
+            .collect();
+        let path = &paths[0];
+        let n = self.hall.sensors.len();
+        for kept in &paths {
+            if let Ok(text) = std::fs::read_to_string(kept) {
                 // A kept result of another length (a changed hall) is solved again.
                 if let Ok(v) = serde_json::from_str::<Vec<f64>>(&text) {
                     if v.len() == n && v.iter().all(|x| x.is_finite()) {
@@ -150,7 +148,7 @@ impl EffectSolver for OpenFoamEffectSolver {
             serde_json::to_string(&out.values).map_err(|e| Error::Simulation(e.to_string()))?;
         let tmp = path.with_extension(format!("tmp{}", std::process::id()));
         std::fs::write(&tmp, text).map_err(|e| Error::io(&tmp, e))?;
-        std::fs::rename(&tmp, &path).map_err(|e| Error::io(&path, e))?;
+        std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))?;
         Ok(out.values)
     }
 

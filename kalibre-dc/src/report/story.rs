@@ -10,7 +10,7 @@ use super::{
     effect_locations, history_svg, mean_residual_per_sensor, param_label, parity_svg, plan_svg,
     STYLE,
 };
-use crate::diagnosis::{alternative_note, hypothesis_flags};
+use crate::diagnosis::hypothesis_flags;
 use crate::hall::Hall;
 use crate::snapshots::HallSnapshot;
 use crate::story::{StoryOutcome, StoryReport};
@@ -196,27 +196,12 @@ pub fn story_html(hall: &Hall, snaps: &[HallSnapshot], story: &StoryReport) -> S
              <table><tr><th>hypothesis</th><th>explains</th><th>predicted MAE (C)</th>\
              <th>BIC change</th><th>flags</th><th>entry for hall.json <code>effects</code></th></tr>",
         );
-        let best = d.top_significant();
         for s in &d.hypotheses {
             // The story keeps no refit: nothing is refuted by model runs.
             let mut flags =
                 hypothesis_flags(s.significant, false, s.inert, s.identifiable, s.in_range);
-            if let (Some(b), true) = (best, s.significant) {
-                let note = (b.name != s.name)
-                    .then(|| {
-                        alternative_note(
-                            &b.name,
-                            b.explained_fraction,
-                            s.explained_fraction,
-                            s.delta_bic
-                                .zip(b.delta_bic)
-                                .map_or(f64::NAN, |(a, b)| a - b),
-                        )
-                    })
-                    .flatten();
-                if let Some(note) = note {
-                    flags = format!("{flags}: {note}");
-                }
+            if let Some(note) = d.alternative_note(s) {
+                flags = format!("{flags}: {note}");
             }
             // A fit outside its range clamps to an entry that does nothing: none is offered.
             let entry = match &s.entry {

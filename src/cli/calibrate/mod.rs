@@ -72,11 +72,6 @@ fn check_model_flags(args: &CalibrateArgs) -> CliResult {
 /// [`Model::legacy_fingerprints`]) and the parameter space it searched.
 type Calibrated = (Report, PenaltyReport, Vec<String>, ParamSpace);
 
-/// A model's fingerprint, then its legacy ones: every fingerprint its runs have.
-fn fingerprints<M: Model>(model: &M) -> Vec<String> {
-    [vec![model.fingerprint()], model.legacy_fingerprints()].concat()
-}
-
 /// Runs the calibration with the chosen model.
 fn calibrate_with_model<'o>(
     args: &CalibrateArgs,
@@ -107,7 +102,12 @@ fn calibrate_with_model<'o>(
             let c = calibrate_hall(&hall, snaps, settings, Some(journal), observers)
                 .map_err(refused)?;
             let space = c.model.layout().space().clone();
-            Ok((c.report, c.penalty_report, fingerprints(&c.model), space))
+            Ok((
+                c.report,
+                c.penalty_report,
+                c.model.run_fingerprints(),
+                space,
+            ))
         }
         ModelArg::Openfoam => {
             let model = OpenFoamModel::new(
@@ -130,7 +130,7 @@ fn calibrate_with_model<'o>(
             )
             .map_err(refused)?;
             let space = model.layout().space().clone();
-            Ok((c.report, c.penalty_report, fingerprints(&model), space))
+            Ok((c.report, c.penalty_report, model.run_fingerprints(), space))
         }
         ModelArg::Command => {
             let path = args
@@ -150,7 +150,7 @@ fn calibrate_with_model<'o>(
             )
             .map_err(refused)?;
             let space = model.layout.space().clone();
-            Ok((c.report, c.penalty_report, fingerprints(&model), space))
+            Ok((c.report, c.penalty_report, model.run_fingerprints(), space))
         }
     }
 }

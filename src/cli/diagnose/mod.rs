@@ -298,22 +298,18 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         .map_err(|e| e.in_hall_file(&hall_path.display().to_string()))?;
     // The solver, and the fingerprints of the model the calibration must have run: its
     // own, then those earlier versions gave it (their reports and runs are its too).
-    let fingerprints = |m: &dyn Model<Scenario = snapshots::OperatingState>| {
-        [vec![m.fingerprint()], m.legacy_fingerprints()].concat()
-    };
     let (solver, fps): (Box<dyn EffectSolver>, Vec<String>) = match openfoam {
         false => (
             Box::new(Simulator::new(&hall, sim.clone())?),
-            fingerprints(&model),
+            model.run_fingerprints(),
         ),
         true => {
             let of = of_args.settings(&args.calibration.join("openfoam"), grid_m)?;
             super::openfoam_args::check_mesh(&hall, &hall_path, of.grid_m, args.grid_m.is_some())?;
             super::out_dir::note_interrupted_runs(remove_interrupted_runs(&of.cache_root));
-            let fps = fingerprints(
-                &OpenFoamModel::new(&hall, of.clone())
-                    .map_err(|e| of_err(e.in_hall_file(&hall_path.display().to_string())))?,
-            );
+            let fps = OpenFoamModel::new(&hall, of.clone())
+                .map_err(|e| of_err(e.in_hall_file(&hall_path.display().to_string())))?
+                .run_fingerprints();
             (Box::new(OpenFoamEffectSolver::new(&hall, of)?), fps)
         }
     };
