@@ -111,17 +111,17 @@ fn thread_and_run_counts_that_would_thrash_are_refused() {
         (
             "--population",
             "100000000",
-            "`population`: must be at most 10000",
+            "--population: must be at most 10000",
         ),
         (
             "--de-iterations",
             "4000000000",
-            "`iterations`: must be in 1..=100000",
+            "--de-iterations: must be in 1..=100000",
         ),
         (
             "--adam-steps",
             "4000000000",
-            "`steps`: must be in 1..=1000000",
+            "--adam-steps: must be in 1..=1000000",
         ),
         ("--epochs", "4000000000", "--epochs: must be in 1..=100000"),
     ] {
@@ -163,7 +163,7 @@ fn search_settings_out_of_their_ranges_are_refused_by_flag() {
         (
             "--crossover",
             "1e308",
-            "`crossover`: must be in [0, 1], got 1e308",
+            "--crossover: must be in [0, 1], got 1e308",
         ),
         (
             "--rise-range",

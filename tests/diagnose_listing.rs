@@ -189,8 +189,9 @@ fn a_fit_above_its_range_and_an_unidentifiable_one_are_said_as_such() {
 }
 
 /// Two effects of one kind: the second's parameters are `<kind>#2/<name>`
-/// (`docs/formats.md`), and the calibration's report.html says beside each where its
-/// effect acts, so that `rack_recirculation#2/fraction` reads as the one in rack B04.
+/// (`docs/formats.md`), and the calibration's report.html and terminal summary say beside
+/// each where its effect acts, so that `rack_recirculation#2/fraction` reads as the one in
+/// rack B04.
 #[test]
 fn parameters_of_two_effects_of_one_kind_say_where_each_acts() {
     let dir = tmp("listing-two-of-a-kind");
@@ -207,7 +208,16 @@ fn parameters_of_two_effects_of_one_kind_say_where_each_acts() {
     ]);
     std::fs::write(&hall, serde_json::to_string_pretty(&h).unwrap()).unwrap();
     let cal = dir.join("cal");
-    calibrate_quickly(&hall, &snapshots, &cal);
+    let stdout = calibrate_quickly(&hall, &snapshots, &cal);
+    for label in [
+        "rack_recirculation/fraction (rack A05)",
+        "rack_recirculation#2/fraction (rack B04)",
+    ] {
+        assert!(
+            stdout.lines().any(|l| l.trim_start().starts_with(label)),
+            "{label} not among the best parameters: {stdout}"
+        );
+    }
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(cal.join("report.json")).unwrap()).unwrap();
     let params = report["best"]["params"].as_object().unwrap();
@@ -229,11 +239,17 @@ fn parameters_of_two_effects_of_one_kind_say_where_each_acts() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A quick calibration of `hall` against `snapshots` into `cal`, which must succeed.
-fn calibrate_quickly(hall: &std::path::Path, snapshots: &std::path::Path, cal: &std::path::Path) {
+/// A quick calibration of `hall` against `snapshots` into `cal`, which must succeed; its
+/// terminal output.
+fn calibrate_quickly(
+    hall: &std::path::Path,
+    snapshots: &std::path::Path,
+    cal: &std::path::Path,
+) -> String {
     let o = run(on_files("calibrate", hall, snapshots)
         .args(QUICK_CALIBRATION)
         .arg("--out")
         .arg(cal));
     assert!(o.status.success(), "{}", stderr(&o));
+    String::from_utf8_lossy(&o.stdout).into_owned()
 }

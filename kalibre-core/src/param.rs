@@ -360,6 +360,19 @@ impl ParamSpace {
     pub fn check_physical(&self, physical: &[f64]) -> Result<()> {
         self.check_len(physical.len())?;
         for (p, &x) in self.params.iter().zip(physical) {
+            if x.is_finite() && p.lower == p.upper && x != p.lower {
+                // "outside bounds [0, 0]" reads as a typo; equal bounds are a choice.
+                return Err(Error::InvalidParam {
+                    name: p.name.clone(),
+                    reason: format!(
+                        "value {}, but this model holds it at {} (equal bounds: a fixed \
+                         parameter, or a candidate effect held absent; the values are of a \
+                         model that has it free)",
+                        number(x),
+                        number(p.lower)
+                    ),
+                });
+            }
             if !x.is_finite() || x < p.lower || x > p.upper {
                 return Err(Error::InvalidParam {
                     name: p.name.clone(),
@@ -379,6 +392,16 @@ impl ParamSpace {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_value_off_a_held_parameter_says_it_is_held() {
+        let s = ParamSpace::new()
+            .with("loss", 0.0, 0.0, 0.0, Scale::Linear)
+            .unwrap();
+        let e = s.check_physical(&[2.0]).unwrap_err().to_string();
+        assert!(e.contains("this model holds it at 0 (equal bounds"), "{e}");
+        assert!(s.check_physical(&[0.0]).is_ok());
+    }
 
     fn space() -> ParamSpace {
         ParamSpace::new()

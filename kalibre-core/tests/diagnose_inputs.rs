@@ -155,7 +155,12 @@ fn bad_input_gets_clear_errors() {
     // Noise that cannot be estimated: as many parameters as residuals, fitted exactly.
     let one = Residuals::new(rows(2, 1), vec![0.3, -0.1], Array2::eye(2), names()).unwrap();
     let e = diagnose(&one, &[], &DiagnoseSettings::new()).unwrap_err();
-    assert!(msg(e).contains("give noise_sigma"));
+    let m = msg(e);
+    assert!(
+        m.contains("2 measured values for 2 calibrated parameters"),
+        "{m}"
+    );
+    assert!(m.contains("give noise_sigma"), "{m}");
     // A single output in a single snapshot cannot be held out.
     let single = Residuals::new(rows(1, 1), vec![0.3], Array2::zeros((1, 0)), vec![]).unwrap();
     let e = diagnose(&single, &[], &DiagnoseSettings::new().with_noise_sigma(0.1)).unwrap_err();

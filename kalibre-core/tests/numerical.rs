@@ -297,3 +297,45 @@ fn variants_are_not_run_past_the_wall_budget() {
     assert_eq!(variant.calls(), obs.snapshots().len());
     assert!(r.numerical_checks[0].error.is_none());
 }
+
+/// A prior that costs 10 per unit of `a` above `limit`.
+struct AtMost {
+    limit: f64,
+}
+
+impl kalibre_core::Regularizer for AtMost {
+    fn value_and_gradient(&self, p: &[f64]) -> (f64, Vec<f64>) {
+        let over = (p[0] - self.limit).max(0.0);
+        (10.0 * over, vec![if over > 0.0 { 10.0 } else { 0.0 }, 0.0])
+    }
+}
+
+/// The weighted polish accepts a step by its weighted misfit plus the prior, as every
+/// other run is judged: with a prior that rules out `a` above 1.5 (truth 1.7), the
+/// polish does not carry the best point to the truth past it, where the misfit alone
+/// would take it.
+#[test]
+fn the_weighted_polish_is_judged_with_the_prior_too() {
+    let obs = observations_with(&[1.0, 2.0, 3.0], |id, k, y| {
+        let noise = 0.01 * if (id + k) % 2 == 0 { 1.0 } else { -1.0 };
+        Some(y + noise + if k == 0 { 0.6 } else { 0.0 })
+    });
+    let (coarse, fine, space) = (Biased { bias: 0.0 }, Biased { bias: 0.6 }, space());
+    let prior = AtMost { limit: 1.5 };
+    let settings = Settings {
+        seed: 5,
+        max_iterations: 2,
+        polish_iterations: 10,
+        numerical_weighting: true,
+        prior_in_best: true,
+        ..Settings::default()
+    };
+    let report = Calibrator::new(&coarse, QuadSurface::default(), &obs, &space)
+        .with_settings(settings)
+        .with_regularizer(&prior, 1.0)
+        .with_numerical_variant("finer grid", &fine)
+        .run()
+        .unwrap();
+    let a = report.best.params.get("a").unwrap();
+    assert!(a < 1.55, "a = {a}: {:?}", report.best);
+}

@@ -67,9 +67,14 @@ impl CalibratedModel {
                 "/model",
                 &format!(
                     "the calibration of a model of your own ({config}, with --measurements), \
-                     not of a hall: diagnose takes a hall's calibration, and `kalibre simulate \
-                     --model command --config {config} --params {}` (no --hall) runs that \
-                     model at its parameters",
+                     not of a hall: `--hall` takes a hall's calibration; `kalibre diagnose \
+                     --model command --config {config} --measurements ... --calibration {}` \
+                     diagnoses that model, and `kalibre simulate --model command --config \
+                     {config} --params {}` runs it at its parameters",
+                    (report_path.parent())
+                        .filter(|d| !d.as_os_str().is_empty())
+                        .unwrap_or(Path::new("."))
+                        .display(),
                     report_path.display()
                 ),
             ));

@@ -7,7 +7,7 @@ use kalibre_core::calibrate::REPORT_SCHEMA;
 use kalibre_core::ParamSpace;
 
 use super::calibrated_model::CalibratedModel;
-use super::{CliError, CliResult};
+use super::{say, CliError, CliResult};
 
 /// Reads a `--params` file: a JSON object, or a calibration's `report.json` with the model
 /// it recorded (if any).
@@ -68,28 +68,47 @@ pub(in crate::cli) fn load_params(
     })?;
     let mut values = space.initial();
     for (name, v) in map {
+        // The key as a JSON pointer (RFC 6901: `alpha/db` is `alpha~1db`), and the name
+        // beside it where the escape hides it.
+        let escaped = name.replace('~', "~0").replace('/', "~1");
+        let field = if escaped == *name {
+            format!("{pointer}/{name}")
+        } else {
+            format!("{pointer}/{escaped} (`{name}`)")
+        };
         let i = space.index_of(name).ok_or_else(|| {
             CliError::Input(format!(
-                "{file}: {pointer}/{name}: unknown parameter (known: {})",
+                "{file}: {field}: unknown parameter (known: {})",
                 super::some_names(&space.names())
             ))
         })?;
-        let x = v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
-            CliError::Input(format!(
-                "{file}: {pointer}/{name}: expected a finite number"
-            ))
-        })?;
+        let x = v
+            .as_f64()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| CliError::Input(format!("{file}: {field}: expected a finite number")))?;
         values[i] = x;
     }
     // A report names every parameter it calibrated: one missing is an edit, not a value
     // to take from the hall (a hand-written object may leave some at their initial).
+    let names = space.names();
+    let missing: Vec<&String> = names.iter().filter(|n| !map.contains_key(*n)).collect();
     if !pointer.is_empty() {
-        if let Some(missing) = space.names().iter().find(|n| !map.contains_key(*n)) {
+        if let Some(missing) = missing.first() {
             return Err(CliError::Input(format!(
                 "{file}: {pointer}: no value of `{missing}` (a calibration report has every \
                  calibrated parameter; is it of another hall?)"
             )));
         }
+    } else if !missing.is_empty() {
+        // Documented, but a short object is as likely a slip as a choice: said once.
+        let some: Vec<String> = missing.iter().map(|n| n.to_string()).collect();
+        say!(
+            "note: {file} gives no value of {} of the {} parameters ({}): they keep their \
+             initial values",
+            missing.len(),
+            names.len(),
+            super::some_names(&some)
+        );
     }
     space
         .check_physical(&values)

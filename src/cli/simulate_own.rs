@@ -59,6 +59,20 @@ pub(super) fn run(args: &SimulateArgs) -> CliResult {
     let params = match &args.params {
         Some(file) => {
             let json = read_params_json(file)?;
+            // A hall's calibration names its parameters alike only by chance: refused by
+            // what it is, before its names are (`alpha/db: unknown parameter`).
+            let kind = (json.get("model"))
+                .and_then(|m| m.get("kind"))
+                .and_then(|k| k.as_str());
+            if let Some(kind) = kind.filter(|k| *k != "command") {
+                return Err(CliError::Input(format!(
+                    "{}: /model/kind: the calibration of a hall (the `{kind}` model), not of a \
+                     model of your own: `kalibre simulate --hall HALL --snapshots SNAPSHOTS \
+                     --params {}` runs it",
+                    file.display(),
+                    file.display()
+                )));
+            }
             let recorded = json.get("model").and_then(|m| m.get("fingerprint"));
             if let Some(f) = recorded.and_then(|f| f.as_str()) {
                 if f != cfg.command.fingerprint() {
@@ -106,11 +120,12 @@ pub(super) fn run(args: &SimulateArgs) -> CliResult {
     if args.params.is_none() {
         say!("note: no --params: the model ran at the initial values of model.toml's [[params]]");
     }
+    let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
     say!(
-        "wrote {} ({} scenarios x {} outputs, from the model of {})",
+        "wrote {} ({} x {}, from the model of {})",
         args.out.display(),
-        cfg.scenarios.len(),
-        cfg.command.output_names().len(),
+        count(cfg.scenarios.len(), "scenario"),
+        count(cfg.command.output_names().len(), "output"),
         path.display()
     );
     Ok(())

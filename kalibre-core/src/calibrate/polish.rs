@@ -345,13 +345,17 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             let eval = state.absorb(self.validator, obs, iteration, &unit, &params, results)?;
             let improved = match row_weights {
                 Some(w) => {
+                    // Judged as every best point is (docs/formats.md): the misfit, here
+                    // weighted, plus the prior when it judges too.
+                    let here = weighted_mae(r0, w) + state.prior_cost(&space.from_unit(u0)?);
+                    let prior = state.prior_cost(&params);
                     // `absorb` keeps a point's outputs only when every snapshot ran.
                     let better = state
                         .ok_runs
                         .last()
                         .filter(|_| eval.validation.is_some())
                         .map(|(_, o)| o.clone())
-                        .filter(|o| weighted_mae(&residuals(obs, o), w) < weighted_mae(r0, w));
+                        .filter(|o| weighted_mae(&residuals(obs, o), w) + prior < here);
                     let improved = better.is_some();
                     if let Some(outputs) = better {
                         state.promote(self.validator, obs, iteration, &unit, &params, outputs)?;

@@ -65,6 +65,12 @@ impl<'r> State<'r> {
         })
     }
 
+    /// The weighted prior at `params` when it judges the best point (0 otherwise; not
+    /// finite there: infinite), in the score's units: what [`Self::rank`] adds.
+    pub(crate) fn prior_cost(&self, params: &[f64]) -> f64 {
+        self.rank(0.0, params)
+    }
+
     /// A point's rank: its score plus, when the prior judges too, the weighted prior at
     /// its parameters (both in the score's units for the DC prior: kelvin). A prior that
     /// is not finite there ranks the point last.

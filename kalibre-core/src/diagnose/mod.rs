@@ -202,10 +202,21 @@ pub fn diagnose(
         Some(s) => (s, false),
         None => {
             if n <= base.rank || rss0 == 0.0 {
+                // Too few measured values for the calibrated parameters: the user's data,
+                // not a fault of the ranking.
+                let why = if n <= base.rank {
+                    format!(
+                        "{n} measured values for {} calibrated parameters leave no degree \
+                         of freedom",
+                        base.rank
+                    )
+                } else {
+                    format!("the calibrated parameters, refit, fit all {n} measured values exactly")
+                };
                 return Err(Error::Mismatch(format!(
-                    "cannot estimate the noise: {n} residuals, {} fitted exactly by the current \
-                     parameters; give noise_sigma",
-                    if rss0 == 0.0 { "all" } else { "too few not" }
+                    "cannot estimate the noise: {why}: measure more values (outputs or \
+                     scenarios) than there are parameters, or give noise_sigma (the \
+                     diagnosis settings' noise)"
                 )));
             }
             // Under a Gaussian `sqrt(RSS_0 / (n - rank))`; under a Student-t the same

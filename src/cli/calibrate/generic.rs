@@ -193,7 +193,6 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         style,
         None,
         None,
-        None,
         failed_at_bounds.as_deref(),
     );
     if let Some(line) = held_at_bounds(&report, &cfg.space) {

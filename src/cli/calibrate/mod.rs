@@ -420,12 +420,16 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         under_read: kalibre_dc::sim::coldest_under_read(&hall, &report.residuals),
     });
     kalibre_core::write_atomic(&html_path, html).map_err(|e| io_err(&html_path, e))?;
+    let locations = kalibre_dc::report::effect_locations(&hall);
     print_summary(
         &report,
         wall_s,
         summary::Style::Hall,
-        Some(&penalty_report),
-        intakes.as_ref(),
+        Some(summary::HallFacts {
+            penalty: &penalty_report,
+            intakes: intakes.as_ref(),
+            locations: &locations,
+        }),
         fluctuation.as_ref().map(|f| f.describe()).as_deref(),
         failed_at_bounds.as_deref(),
     );

@@ -67,11 +67,25 @@ pub(super) fn settings(args: &CalibrateArgs) -> CliResult<HallCalibrationSetting
         .with_iterations(args.de_iterations)
         .with_give_up_after(Some(kalibre_core::search::HYBRID_DE_GIVE_UP_AFTER))
         .build()
-        .map_err(|e| CliError::Input(format!("--population/--crossover/--de-iterations: {e}")))?;
+        .map_err(|e| {
+            CliError::Input(match &e {
+                // The setting's flag, not the library's field name.
+                kalibre_core::Error::InvalidSetting { name, reason } => {
+                    let flag = match name.as_str() {
+                        "population" => "--population",
+                        "crossover" => "--crossover",
+                        "iterations" | "max_iterations" => "--de-iterations",
+                        _ => "--population/--crossover/--de-iterations",
+                    };
+                    format!("{flag}: {reason}")
+                }
+                e => format!("--population/--crossover/--de-iterations: {e}"),
+            })
+        })?;
     let adam = Adam::builder()
         .with_steps(args.adam_steps)
         .build()
-        .map_err(|e| CliError::Input(format!("--adam-steps: {e}")))?;
+        .map_err(|e| CliError::Input(format!("--adam-steps: {}", setting_reason(&e))))?;
     if args.linear_correction == Some(true) && !args.output_correction {
         return Err(CliError::Input(
             "--linear-correction true: the linear term corrects the output correction, \
@@ -202,4 +216,13 @@ pub(in crate::cli) fn check_finer_grids(hall: &Hall, cell_m: f64, factors: &[f64
         )));
     }
     Ok(())
+}
+
+/// What an algorithm's setting error says, without the library's field name (the CLI
+/// names its flag instead).
+fn setting_reason(e: &kalibre_core::Error) -> String {
+    match e {
+        kalibre_core::Error::InvalidSetting { reason, .. } => reason.clone(),
+        e => e.to_string(),
+    }
 }

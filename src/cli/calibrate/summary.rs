@@ -50,7 +50,10 @@ fn print_uncertainty(report: &Report, style: Style) {
                     kalibre_dc::report::percent(100.0 * d, true)
                 ),
                 (Some(r), _) => format!("{} (+/-{:.0}%{grid})", p.name, 100.0 * r),
-                (None, _) => format!("{} (free)", p.name),
+                // No finite spread: the slopes the spreads used (see "slopes of the
+                // spreads"; the surrogate's are crude early on) do not pin it, which
+                // need not mean the data cannot.
+                (None, _) => format!("{} (no finite spread from these slopes)", p.name),
             }
         })
         .collect();
@@ -206,13 +209,22 @@ pub(super) fn held_at_bounds(report: &Report, space: &kalibre_core::ParamSpace) 
     })
 }
 
+/// What the summary of a hall's calibration adds: the rise prior at the best point, the
+/// server intakes there, and where each effect of a kind the hall has more than once acts
+/// (`kalibre_dc::report::effect_locations`), so that `rack_recirculation#2/fraction`
+/// reads with its rack.
+pub(super) struct HallFacts<'a> {
+    pub penalty: &'a kalibre_dc::surrogate::PenaltyReport,
+    pub intakes: Option<&'a Intakes>,
+    pub locations: &'a [(String, String)],
+}
+
 /// The end-of-run summary table.
 pub(super) fn print_summary(
     report: &Report,
     wall_s: f64,
     style: Style,
-    penalty: Option<&kalibre_dc::surrogate::PenaltyReport>,
-    intakes: Option<&Intakes>,
+    hall: Option<HallFacts>,
     fluctuation: Option<&str>,
     failed_at_bounds: Option<&str>,
 ) {
@@ -284,6 +296,10 @@ pub(super) fn print_summary(
         kalibre_dc::report::likelihood_text(report)
     );
     print_uncertainty(report, style);
+    let (penalty, intakes) = (
+        hall.as_ref().map(|h| h.penalty),
+        hall.as_ref().and_then(|h| h.intakes),
+    );
     if let Some(line) = intakes.and_then(intakes_line) {
         println!("  {:<28} {line}", "server intakes (model)");
     }
@@ -340,8 +356,10 @@ pub(super) fn print_summary(
         );
     }
     println!("  best parameters:");
+    let locations = hall.as_ref().map_or(&[][..], |h| h.locations);
     for (name, value) in &report.best.params.0 {
-        println!("    {name:<30} {value:.5}");
+        let label = kalibre_dc::report::param_label(name, locations);
+        println!("    {label:<30} {value:.5}");
     }
 }
 
@@ -384,6 +402,10 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report, style: 
     let Some(best) = u.best.as_ref().filter(|b| b.score < report.best.score) else {
         return;
     };
+    let (theirs, ours) = (
+        style.error(Some(best.mae_c)),
+        style.error(Some(report.best.mae_c)),
+    );
     eprintln!(
         "kalibre: warning: {}: {} journaled run(s) of this model were not used by this \
          calibration (it stopped: {}); among them, line {} has MAE {}, better than \
@@ -395,8 +417,13 @@ pub(super) fn warn_unreached(journal: &std::path::Path, report: &Report, style: 
         u.runs,
         report.stop_reason,
         best.line,
-        style.error(Some(best.mae_c)),
-        style.error(Some(report.best.mae_c)),
+        theirs,
+        if theirs == ours {
+            // Equal to the printed digits: the difference, so that "better" is seen.
+            format!("{ours} (by {:.1e})", report.best.mae_c - best.mae_c)
+        } else {
+            ours
+        },
         match style {
             // A diagnosis steps each calibrated parameter from the calibration's best,
             // which can land lower when the loop had not converged.

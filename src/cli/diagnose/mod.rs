@@ -257,10 +257,12 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
             report.schema
         )));
     }
-    check_same_measurements(&report_path, &report.residuals, &snaps_path, &hall, &snaps)?;
     // The model the calibration ran, as it recorded it: its grid, alpha mode and
-    // OpenFOAM options stand unless given again here.
+    // OpenFOAM options stand unless given again here. Read before the readings are
+    // compared, so that a model of your own's calibration is named as such, not blamed
+    // on `--snapshots`.
     let recorded = CalibratedModel::of_report(&report_path, report.model.as_ref())?;
+    check_same_measurements(&report_path, &report.residuals, &snaps_path, &hall, &snaps)?;
     let openfoam = args.model == DiagnoseModel::Openfoam;
     let chosen = if openfoam { "openfoam" } else { "builtin" };
     if let Some(m) = recorded.as_ref().filter(|m| m.kind != chosen) {

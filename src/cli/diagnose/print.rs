@@ -48,12 +48,14 @@ pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis, robust_nu
     if d.unexplained.is_empty() {
         return;
     }
-    // Their residuals are those left with the best significant hypothesis added (so they
-    // can differ from the worst sensors' above), else the calibrated model's own.
+    // Their residuals are those the ranking compares: left with the best significant
+    // hypothesis added, else with the calibrated parameters refit (linearised, as every
+    // hypothesis is); so they can differ from the worst sensors' above, which are the
+    // calibrated model's own.
     let best = d.significant().next().map(|h| h.name.as_str());
     let after = match best {
         Some(name) => format!("left with {name} added"),
-        None => "the calibrated model's".to_string(),
+        None => "left with the calibrated parameters refit".to_string(),
     };
     println!(
         "\nsensors no candidate explains (the model's own physics there, or a faulty or misplaced sensor; \
@@ -69,7 +71,8 @@ pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis, robust_nu
             .collect();
         let mut notes = Vec::new();
         if !resting.is_empty() {
-            notes.push(format!("{} rests on it alone", resting.join(", ")));
+            let verb = if resting.len() == 1 { "rests" } else { "rest" };
+            notes.push(format!("{} {verb} on it alone", resting.join(", ")));
         }
         // How far other plausible physics (the model-form variants) moves it: when that
         // is of the residual's size, the model's own physics there is the likely cause.

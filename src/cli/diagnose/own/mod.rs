@@ -109,7 +109,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     };
     eprintln!(
         "diagnosing {} candidate effect(s) of {}: about {planned} model runs ({n_snap} \
-         scenarios x (the calibrated point, a step of each calibrated parameter and of each \
+         scenario(s) x (the calibrated point, a step of each calibrated parameter and of each \
          candidate's)), {n_snap} at the leading candidate's fit, {n_snap} at the calibrated \
          parameters' own refit if the calibration had not converged{refit_runs}, through {}",
         cfg.candidates.len(),
@@ -136,8 +136,14 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         store: &store,
     };
     let rank = |hypotheses: &[Hypothesis]| {
-        diagnose(&lin.residuals, hypotheses, &settings)
-            .map_err(|e| CliError::Run(format!("diagnosis of {}: {e}", config.display())))
+        diagnose(&lin.residuals, hypotheses, &settings).map_err(|e| {
+            let msg = format!("diagnosis of {}: {e}", config.display());
+            // A mismatch is the data's (too few measured values for the parameters).
+            match e {
+                kalibre_core::Error::Mismatch(_) => CliError::Input(msg),
+                _ => CliError::Run(msg),
+            }
+        })
     };
     let run_err = |e: kalibre_core::Error| CliError::Run(e.to_string());
     let mut hypotheses = lin.hypotheses.clone();

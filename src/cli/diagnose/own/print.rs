@@ -187,18 +187,24 @@ pub(super) fn text(
                 significant(*m, 4)
             ),
             Ok(m) => format!(
-                "the model run there reads {}{unit}, no better than now{}, so a candidate's \
+                "the model run there reads {}{unit}, no better than now, so a candidate's \
                  run must beat the calibrated MAE",
                 significant(*m, 4),
-                if floor.beyond.is_empty() {
-                    " (the linearised refit overshoots)"
-                } else {
-                    ""
-                }
             ),
             Err(why) => format!("the model could not run there ({why})"),
         };
-        if floor.beyond.is_empty() {
+        let no_better = floor.mae.as_ref().is_ok_and(|m| *m >= d.mae);
+        if floor.beyond.is_empty() && no_better {
+            // The run refutes the linearisation, not the calibration: more iterations
+            // would not find what the refit promised.
+            println!(
+                "  refitting the calibrated parameters alone would give MAE {}{unit} \
+                 (linearised), but {run}: the linearisation misleads there (the model is \
+                 not linear over the refit's step), so the predicted MAEs below are \
+                 optimistic by as much",
+                significant(d.refit_mae, 4)
+            );
+        } else if floor.beyond.is_empty() {
             println!(
                 "  refitting the calibrated parameters alone would already give MAE {}{unit} \
                  (linearised); {run}: the calibration has not converged, and every predicted \
@@ -343,7 +349,7 @@ fn print_unexplained(d: &Diagnosis, scaled: bool, calibration_nu: Option<f64>) {
     }
     let after = match d.significant().next() {
         Some(h) => format!("left with {} added", h.name),
-        None => "the calibrated model's".to_string(),
+        None => "left with the calibrated parameters refit".to_string(),
     };
     println!(
         "\noutputs no candidate explains (the model's own form there, or a faulty \
