@@ -151,16 +151,7 @@ fn a_refit_the_model_run_refutes_is_blamed_on_the_linearisation() {
 fn measurements_too_few_for_the_parameters_are_bad_input() {
     let two = "scenario,output,value\nwinter,t_in,35.5\nwinter,t_out,10.5\n";
     let (dir, own) = project("own-too-few", two);
-    let o = run(own("calibrate").args([
-        "--iterations",
-        "1",
-        "--polish",
-        "0",
-        "--quiet",
-        "--out",
-        "cal",
-    ]));
-    assert!(o.status.success(), "{}", stderr(&o));
+    calibrate_in_one_iteration(&own);
     let o = run(own("diagnose").args(["--calibration", "cal"]));
     // Notes come first (the scenarios not measured, the runs planned); the error last.
     let err = stderr(&o);
@@ -177,16 +168,7 @@ fn measurements_too_few_for_the_parameters_are_bad_input() {
 #[test]
 fn a_hall_diagnosis_of_this_calibration_names_the_model_of_your_own() {
     let (dir, own) = project("own-as-hall", MEASUREMENTS);
-    let o = run(own("calibrate").args([
-        "--iterations",
-        "1",
-        "--polish",
-        "0",
-        "--quiet",
-        "--out",
-        "cal",
-    ]));
-    assert!(o.status.success(), "{}", stderr(&o));
+    calibrate_in_one_iteration(&own);
     let hall = data("of-dev-clean");
     let o = run(&mut diagnose_cmd(
         &hall.join("hall.json"),
@@ -238,4 +220,12 @@ fn simulate_says_which_parameters_a_short_params_object_leaves_and_refuses_a_hal
         "/model/kind: the calibration of a hall (the `builtin` model)",
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `kalibre calibrate` of the project into `cal`: one iteration, no polish; it must succeed.
+fn calibrate_in_one_iteration(own: &impl Fn(&str) -> Command) {
+    let o = run(own("calibrate")
+        .args(["--iterations", "1", "--polish", "0", "--quiet"])
+        .args(["--out", "cal"]));
+    assert!(o.status.success(), "{}", stderr(&o));
 }
