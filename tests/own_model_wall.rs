@@ -1,5 +1,5 @@
 //! A model of your own, a wall between two air streams whose outer temperature goes as
-//! `q / h`, and what `kalibre diagnose` says of it.
+//! `q / h`, and what kalibre says of it.
 //! - Calibrated briefly, the calibrated parameters' own linearised refit (`floor` in
 //!   `--json`) promises a low MAE only by taking `h` through zero; the model run there
 //!   (clamped into the box) reads far worse. The text blames the linearisation, not the
@@ -8,6 +8,7 @@
 //! - Its calibration given to a hall's diagnosis is named as a model of your own's, not
 //!   blamed on the snapshots; a hall's calibration given to it is named as a hall's.
 //! - A `--params` object that leaves parameters out says which keep their initial values.
+//! - A design that fails throughout names the run directory kept for its first failure.
 
 mod cli_support;
 
@@ -228,4 +229,36 @@ fn calibrate_in_one_iteration(own: &impl Fn(&str) -> Command) {
         .args(["--iterations", "1", "--polish", "0", "--quiet"])
         .args(["--out", "cal"]));
     assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// A model that fails at every run of the initial design: calibrate ends with the first
+/// failure's reason, its log and the directory kept for it, where the user looks first.
+#[test]
+fn a_design_that_fails_throughout_names_the_kept_run_directory() {
+    let (dir, own) = project("own-all-fail", MEASUREMENTS);
+    std::fs::write(
+        dir.join("model.py"),
+        "import sys\nprint('licence server down', file=sys.stderr)\nsys.exit(3)\n",
+    )
+    .unwrap();
+    let o = run(own("calibrate")
+        .args(["--iterations", "1", "--polish", "0", "--quiet"])
+        .args(["--out", "cal"]));
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("runs of the initial design failed")
+            && err.contains("its log: `licence server down`"),
+        "{err}"
+    );
+    let kept = err
+        .split("its directory is kept: ")
+        .nth(1)
+        .and_then(|rest| rest.split(')').next())
+        .unwrap_or_else(|| panic!("no kept directory in {err}"));
+    assert!(
+        std::path::Path::new(kept).join("stderr.log").is_file(),
+        "{kept}: {err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -240,9 +240,17 @@ pub(crate) fn design_failed(
     first_failure: Option<ModelError>,
     store: &RunStore,
 ) -> Error {
-    let why = first_failure.map_or_else(String::new, |e| match e.log_gist() {
-        Some(gist) => format!("; the first: {e}; its log: {gist}"),
-        None => format!("; the first: {e}"),
+    let why = first_failure.map_or_else(String::new, |e| {
+        let gist = e.log_gist().map(|g| format!("; its log: {g}"));
+        // Where to look first: the kept directory (the command, its inputs, its logs).
+        let kept = e
+            .run_dir()
+            .map(|d| format!(" (its directory is kept: {d})"));
+        format!(
+            "; the first: {e}{}{}",
+            gist.unwrap_or_default(),
+            kept.unwrap_or_default()
+        )
     });
     // An in-memory store keeps the reasons with the calibrator, not in a file.
     let where_ = match store.path() {
