@@ -8,6 +8,16 @@ use std::fmt;
 
 use serde::de::{self, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 
+/// A key as a token of a JSON pointer: `~` and `/` escaped (RFC 6901), so that
+/// `alpha/db` reads as one key.
+///
+/// ```
+/// assert_eq!(kalibre_dc::json_keys::escape_pointer_token("a/b~c"), "a~1b~0c");
+/// ```
+pub fn escape_pointer_token(token: &str) -> String {
+    token.replace('~', "~0").replace('/', "~1")
+}
+
 /// The JSON pointer of the first object in `text` that repeats a key (`""` for the
 /// top-level object) and that key, or `None` when no object repeats a key (or `text` is
 /// not JSON: the full parse reports that).
@@ -60,10 +70,8 @@ struct Walk<'f> {
 
 impl Walk<'_> {
     fn child(&self, segment: &str) -> Self {
-        // RFC 6901: `~` and `/` in a key are escaped.
-        let escaped = segment.replace('~', "~0").replace('/', "~1");
         Walk {
-            pointer: format!("{}/{escaped}", self.pointer),
+            pointer: format!("{}/{}", self.pointer, escape_pointer_token(segment)),
             found: self.found,
         }
     }

@@ -70,7 +70,7 @@ pub(in crate::cli) fn load_params(
     for (name, v) in map {
         // The key as a JSON pointer (RFC 6901: `alpha/db` is `alpha~1db`), and the name
         // beside it where the escape hides it.
-        let escaped = name.replace('~', "~0").replace('/', "~1");
+        let escaped = kalibre_dc::json_keys::escape_pointer_token(name);
         let field = if escaped == *name {
             format!("{pointer}/{name}")
         } else {
@@ -91,7 +91,10 @@ pub(in crate::cli) fn load_params(
     // A report names every parameter it calibrated: one missing is an edit, not a value
     // to take from the hall (a hand-written object may leave some at their initial).
     let names = space.names();
-    let missing: Vec<&String> = names.iter().filter(|n| !map.contains_key(*n)).collect();
+    let missing: Vec<String> = (names.iter())
+        .filter(|n| !map.contains_key(*n))
+        .cloned()
+        .collect();
     if !pointer.is_empty() {
         if let Some(missing) = missing.first() {
             return Err(CliError::Input(format!(
@@ -101,13 +104,12 @@ pub(in crate::cli) fn load_params(
         }
     } else if !missing.is_empty() {
         // Documented, but a short object is as likely a slip as a choice: said once.
-        let some: Vec<String> = missing.iter().map(|n| n.to_string()).collect();
         say!(
             "note: {file} gives no value of {} of the {} parameters ({}): they keep their \
              initial values",
             missing.len(),
             names.len(),
-            super::some_names(&some)
+            super::some_names(&missing)
         );
     }
     space

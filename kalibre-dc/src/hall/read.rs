@@ -7,6 +7,7 @@ use serde::Deserialize;
 use serde_path_to_error::Segment;
 
 use super::types::{Hall, HALL_SCHEMA};
+use crate::json_keys::escape_pointer_token;
 use crate::{Error, Result};
 
 /// Just the schema tag: read first so that a file of another schema (or version) is
@@ -194,19 +195,9 @@ pub(crate) fn json_pointer(path: &serde_path_to_error::Path) -> String {
     out
 }
 
-/// Escapes `~` and `/` in a pointer token (RFC 6901).
-pub(crate) fn escape_pointer_token(token: &str) -> String {
-    token.replace('~', "~0").replace('/', "~1")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn pointer_escapes_tilde_and_slash() {
-        assert_eq!(escape_pointer_token("a/b~c"), "a~1b~0c");
-    }
 
     #[test]
     fn unknown_field_points_at_the_field() {
