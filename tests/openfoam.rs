@@ -523,3 +523,33 @@ fn unsupported_effects_are_refused_by_name() {
         "{err}"
     );
 }
+
+/// The meshed case is keyed by its mesh: an edited bound or initial value finds the case
+/// meshed before (no second mesh), while a sensor moved to another probe point meshes a
+/// case of its own.
+#[test]
+fn an_edited_bound_reuses_the_meshed_case() {
+    require_openfoam();
+    let (hall, _) = small_layout();
+    let root = tmp("bounds-reuse");
+    let first = OpenFoamModel::new(&hall, small_settings(&root)).unwrap();
+    let mut searched = hall.clone();
+    let alpha = &mut searched.server_types[0].alpha_cfm_per_w;
+    alpha.max = alpha.initial * 1.5;
+    alpha.initial = 0.5 * (alpha.min + alpha.initial);
+    let again = OpenFoamModel::new(&searched, small_settings(&root)).unwrap();
+    assert_eq!(again.case_dir(), first.case_dir());
+    let cases = |root: &std::path::Path| {
+        std::fs::read_dir(root)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().starts_with("case-"))
+            .count()
+    };
+    assert_eq!(cases(&root), 1, "one meshed case under {}", root.display());
+    let mut moved = hall.clone();
+    moved.sensors[0].position_m[2] += 0.2;
+    let other = OpenFoamModel::new(&moved, small_settings(&root)).unwrap();
+    assert_ne!(other.case_dir(), first.case_dir());
+    assert_eq!(cases(&root), 2);
+}

@@ -31,6 +31,7 @@ pub struct MeshSummary {
 #[derive(Debug, Clone)]
 pub struct CaseDir {
     dir: PathBuf,
+    key: String,
     project_dir: PathBuf,
 }
 
@@ -90,11 +91,13 @@ fn case_arg(case: &Path) -> Vec<String> {
 impl CaseDir {
     /// The meshed case for `g` under `settings.cache_root`, named by `key`; built when
     /// absent (in a temporary directory renamed into place, so parallel builders never
-    /// see half a case).
+    /// see half a case). A complete case under `legacy_key` (the name an earlier version
+    /// gave the same case) is used as it is rather than meshed again.
     pub fn open_or_build(
         g: &CaseGeometry,
         settings: &OpenFoamSettings,
         key: &str,
+        legacy_key: &str,
     ) -> Result<Self, OpenFoamError> {
         for p in [
             "blockMesh",
@@ -110,9 +113,21 @@ impl CaseDir {
         let root = &settings.cache_root;
         std::fs::create_dir_all(root).map_err(|e| OpenFoamError::io(root, e))?;
         let root = std::path::absolute(root).map_err(|e| OpenFoamError::io(root, e))?;
+        let legacy = root.join(format!("case-{legacy_key}"));
+        if legacy_key != key
+            && legacy.join(READY).is_file()
+            && !root.join(format!("case-{key}")).join(READY).is_file()
+        {
+            return Ok(CaseDir {
+                dir: legacy,
+                key: legacy_key.to_string(),
+                project_dir: settings.project_dir.clone(),
+            });
+        }
         let dir = root.join(format!("case-{key}"));
         let this = CaseDir {
             dir: dir.clone(),
+            key: key.to_string(),
             project_dir: settings.project_dir.clone(),
         };
         if dir.join(READY).is_file() {
@@ -128,6 +143,7 @@ impl CaseDir {
         let tmp = tmp_dir.to_path_buf();
         let built = CaseDir {
             dir: tmp.clone(),
+            key: key.to_string(),
             project_dir: settings.project_dir.clone(),
         };
         built.build(g, settings)?;
@@ -148,6 +164,11 @@ impl CaseDir {
     /// The case directory.
     pub fn path(&self) -> &Path {
         &self.dir
+    }
+
+    /// The key that names the case directory (`case-<key>`) and its runs (`runs-<key>`).
+    pub fn key(&self) -> &str {
+        &self.key
     }
 
     fn mesh_step(&self, step: &str, program: &str, extra: &[&str]) -> Result<(), OpenFoamError> {

@@ -95,6 +95,40 @@ fn hash_hex(parts: &[&[u8]]) -> String {
     format!("{h:016x}")
 }
 
+/// `(key, legacy key)` of the meshed case: the key names the case directory and its runs.
+///
+/// The key hashes what the mesh is built from (the hall on the grid with the effects'
+/// openings and gaps, and the settings), so editing a bound, an initial value or a
+/// power meshes nothing again. The legacy key is the one versions before gave (the hall's
+/// physics JSON, bounds included): a case meshed under it is used as it is.
+fn case_keys(
+    hall: &Hall,
+    geometry: &CaseGeometry,
+    extras: &CaseExtras,
+    settings_json: &str,
+) -> (String, String) {
+    let geometry_key = geometry.mesh_description();
+    let key = hash_hex(&[
+        GENERATOR.as_bytes(),
+        b"mesh-from-geometry",
+        geometry_key.as_bytes(),
+        settings_json.as_bytes(),
+        CASE_SAMPLES.as_bytes(),
+    ]);
+    let hall_json = hall.physics_json();
+    let extras_key = format!("{extras:?}");
+    let mut legacy_parts: Vec<&[u8]> = vec![
+        GENERATOR.as_bytes(),
+        hall_json.as_bytes(),
+        settings_json.as_bytes(),
+    ];
+    if *extras != CaseExtras::default() {
+        legacy_parts.push(extras_key.as_bytes());
+    }
+    legacy_parts.push(CASE_SAMPLES.as_bytes());
+    (key, hash_hex(&legacy_parts))
+}
+
 impl OpenFoamModel {
     /// The model of `hall` with its own effects (`hall.effects`) and alpha mode.
     pub fn new(hall: &Hall, settings: OpenFoamSettings) -> Result<Self, OpenFoamError> {
@@ -122,22 +156,8 @@ impl OpenFoamModel {
         }
         let extras = case_extras(hall, &effects)?;
         let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras)?;
-        // The case directory's key is what it has been (the hall's physics JSON,
-        // bounds included), so that cases meshed before are found again; an edited
-        // bound meshes the case again, which costs no model run.
-        let hall_json = hall.physics_json();
         let settings_json = json(&settings)?;
-        let extras_key = format!("{extras:?}");
-        let mut case_parts: Vec<&[u8]> = vec![
-            GENERATOR.as_bytes(),
-            hall_json.as_bytes(),
-            settings_json.as_bytes(),
-        ];
-        if extras != CaseExtras::default() {
-            case_parts.push(extras_key.as_bytes());
-        }
-        case_parts.push(CASE_SAMPLES.as_bytes());
-        let case_key = hash_hex(&case_parts);
+        let (case_key, legacy_case_key) = case_keys(hall, &geometry, &extras, &settings_json);
         let (fingerprint, legacy_fingerprint) = fingerprint::fingerprints(
             hall,
             &effects,
@@ -150,11 +170,11 @@ impl OpenFoamModel {
                 extras: &extras,
             },
         )?;
-        let case = CaseDir::open_or_build(&geometry, &settings, &case_key)?;
+        let case = CaseDir::open_or_build(&geometry, &settings, &case_key, &legacy_case_key)?;
         if settings.np > 1 && (which("mpirun").is_none() || which("decomposePar").is_none()) {
             return Err(OpenFoamError::NotInstalled("mpirun / decomposePar".into()));
         }
-        let runs = RunDirs::new(case.path().with_file_name(format!("runs-{case_key}")));
+        let runs = RunDirs::new(case.path().with_file_name(format!("runs-{}", case.key())));
         Ok(OpenFoamModel {
             hall: hall.clone(),
             sensor_names: hall.sensors.iter().map(|s| s.id.clone()).collect(),

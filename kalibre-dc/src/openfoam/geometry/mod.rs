@@ -132,6 +132,14 @@ fn geo(field: impl Into<String>, message: impl Into<String>) -> OpenFoamError {
 }
 
 impl CaseGeometry {
+    /// Everything the mesh is built from, as text (for the case directory's key): the
+    /// geometry without its per-cell solid map, which the solid boxes give.
+    pub fn mesh_description(&self) -> String {
+        let mut g = self.clone();
+        g.solid = Vec::new();
+        format!("{g:?}")
+    }
+
     /// Places `hall` on a grid of cell size `h` (m). Every box edge must lie on a grid line.
     pub fn new(hall: &Hall, h: f64) -> Result<Self, OpenFoamError> {
         Self::with_extras(hall, h, &CaseExtras::default())

@@ -142,4 +142,41 @@ mod tests {
         cooler.cracs[0].rated_flow_m3_s *= 1.1;
         assert_ne!(fingerprints_of(&cooler).0, fingerprint);
     }
+
+    fn case_keys_of(hall: &Hall) -> (String, String) {
+        let settings = OpenFoamSettings::default().check().unwrap();
+        let effects = EffectRegistry::builtin().build_all(hall).unwrap();
+        let extras = case_extras(hall, &effects).unwrap();
+        let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras).unwrap();
+        let settings_json = serde_json::to_string(&settings).unwrap();
+        super::super::case_keys(hall, &geometry, &extras, &settings_json)
+    }
+
+    /// A case meshed by an earlier version is found under the name it gave; an edited
+    /// bound or initial value meshes nothing again, while moved geometry or a moved
+    /// gap does.
+    #[test]
+    fn the_case_is_keyed_by_its_mesh_and_found_under_its_earlier_name() {
+        let base = hall(true);
+        let (key, legacy) = case_keys_of(&base);
+        assert_eq!(case_keys_of(&hall(false)).1, "1a808ce324641dae");
+        assert_eq!(legacy, "e28b5c4085499157");
+        let mut searched = base.clone();
+        searched.server_types[0].alpha_cfm_per_w.max = 1.0;
+        searched.server_types[1].alpha_cfm_per_w.initial = 0.4;
+        searched.effects[0]
+            .fields
+            .insert("offset_c_bounds".into(), serde_json::json!([-1.0, 1.0]));
+        let (same, other_legacy) = case_keys_of(&searched);
+        assert_eq!(same, key);
+        assert_ne!(other_legacy, legacy);
+        let mut moved = base.clone();
+        moved.effects[1]
+            .fields
+            .insert("rack".into(), serde_json::json!("B2"));
+        assert_ne!(case_keys_of(&moved).0, key);
+        let mut shifted = base;
+        shifted.sensors[0].position_m[2] += 0.1;
+        assert_ne!(case_keys_of(&shifted).0, key);
+    }
 }
