@@ -160,9 +160,15 @@ fn measurements_too_few_for_the_parameters_are_bad_input() {
     let last = err.lines().last().unwrap_or_default();
     assert!(
         last.contains("2 measured values for 2 calibrated parameters leave no degree")
-            && last.contains("measure more values"),
+            && last.contains("measure more values")
+            && last.contains("kalibre diagnose --noise"),
         "{err}"
     );
+    // The noise given, as the message offers: the diagnosis runs.
+    let o = run(own("diagnose").args(["--calibration", "cal", "--noise", "0"]));
+    assert_input_error(&o, "--noise: expected the measurements' noise");
+    let o = run(own("diagnose").args(["--calibration", "cal", "--noise", "0.2"]));
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

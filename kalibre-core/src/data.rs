@@ -34,15 +34,46 @@ pub struct Observations<S> {
     scales: Option<Vec<Vec<f64>>>,
 }
 
+/// A name for a message: escaped (a control character is shown, not sent to the
+/// terminal) and cut short when long.
+fn quoted(name: &str) -> String {
+    const SHOWN: usize = 40;
+    let short: String = name.chars().take(SHOWN).collect();
+    let more = if name.chars().count() > SHOWN {
+        "..."
+    } else {
+        ""
+    };
+    format!("`{}{more}`", short.escape_debug())
+}
+
 impl<S> Observations<S> {
     /// Checked observations: output names unique and not empty (reports and journals
     /// name outputs by them), at least one snapshot, unique labels, one entry per
     /// output, every measured value finite, every snapshot with at least one measurement.
+    /// Output names and snapshot labels must be printable: not empty, no control
+    /// character, at most [`crate::MAX_NAME_CHARS`] characters ([`crate::unprintable_name`]).
+    ///
+    /// ```
+    /// use kalibre_core::{Observations, OutputInfo, Snapshot};
+    /// let outputs = || vec![OutputInfo { name: "t_out_c".into(), group: String::new() }];
+    /// let snap = |label: &str| Snapshot { label: label.into(), scenario: (), measured: vec![Some(30.1)] };
+    /// assert!(Observations::new(outputs(), vec![snap("winter")]).is_ok());
+    /// let e = Observations::new(outputs(), vec![snap("win\u{1b}[2Jter")]).unwrap_err();
+    /// assert!(e.to_string().contains("control character"), "{e}");
+    /// assert!(Observations::new(outputs(), vec![snap("")]).is_err());
+    /// ```
     pub fn new(outputs: Vec<OutputInfo>, snapshots: Vec<Snapshot<S>>) -> Result<Self> {
         let mut seen = std::collections::HashSet::with_capacity(outputs.len());
         for (k, o) in outputs.iter().enumerate() {
             if o.name.is_empty() {
                 return Err(Error::Mismatch(format!("output {k} has an empty name")));
+            }
+            if let Some(why) = crate::unprintable_name(&o.name) {
+                return Err(Error::Mismatch(format!(
+                    "output {k}: name {} {why}",
+                    quoted(&o.name)
+                )));
             }
             if !seen.insert(o.name.as_str()) {
                 return Err(Error::Mismatch(format!(
@@ -57,6 +88,19 @@ impl<S> Observations<S> {
             ));
         }
         for (i, s) in snapshots.iter().enumerate() {
+            // Labels key journaled runs and are printed in messages, reports and file
+            // names: an empty one names nothing, and the rest must be printable.
+            if s.label.is_empty() {
+                return Err(Error::Mismatch(format!(
+                    "snapshot {i} has an empty label; expected a name"
+                )));
+            }
+            if let Some(why) = crate::unprintable_name(&s.label) {
+                return Err(Error::Mismatch(format!(
+                    "snapshot {i}: label {} {why}",
+                    quoted(&s.label)
+                )));
+            }
             if snapshots[..i].iter().any(|o| o.label == s.label) {
                 return Err(Error::Mismatch(format!(
                     "duplicate snapshot label `{}`",
@@ -231,6 +275,53 @@ mod tests {
         let e = Observations::new(vec![output("a"), output("")], snap()).unwrap_err();
         assert!(e.to_string().contains("output 1 has an empty name"), "{e}");
         Observations::new(vec![output("a"), output("b")], snap()).expect("distinct names");
+    }
+
+    /// Labels key journaled runs and are printed: empty, too long or holding a control
+    /// character is refused, naming the snapshot (escaped, cut short).
+    #[test]
+    fn snapshot_labels_must_be_printable_names() {
+        let with_label = |label: String| {
+            Observations::new(
+                vec![output("a")],
+                vec![Snapshot {
+                    label,
+                    scenario: (),
+                    measured: vec![Some(20.0)],
+                }],
+            )
+        };
+        let e = with_label(String::new()).unwrap_err().to_string();
+        assert!(e.contains("snapshot 0 has an empty label"), "{e}");
+        let e = with_label("x".repeat(500)).unwrap_err().to_string();
+        assert!(
+            e.contains("is 500 characters long; expected at most 200"),
+            "{e}"
+        );
+        assert!(e.len() < 200, "the label is cut short: {e}");
+        let e = with_label("win\u{1b}[2Jter".into())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`win\\u{1b}[2Jter`") && e.contains("U+001B"),
+            "{e}"
+        );
+        assert!(
+            !e.contains('\u{1b}'),
+            "escaped, not sent to the terminal: {e}"
+        );
+        let e = Observations::new(
+            vec![output("a\nb")],
+            vec![Snapshot {
+                label: "t0".into(),
+                scenario: (),
+                measured: vec![Some(20.0)],
+            }],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("output 0: name `a\\nb`"), "{e}");
+        with_label("x".repeat(200)).expect("200 characters is the limit");
     }
 
     #[test]

@@ -22,7 +22,11 @@ pub enum ModelError {
     /// The run exceeded its wall-clock limit and was killed.
     #[error("model run timed out after {seconds} s")]
     Timeout {
-        /// The limit that was exceeded.
+        /// The limit that was exceeded. JSON has no NaN or infinity: a limit that is not
+        /// a finite number (kalibre's runners always give one; a model of your own might
+        /// not) is journaled as `null` and read back as NaN, so the run's line still
+        /// loads.
+        #[serde(deserialize_with = "null_as_nan")]
         seconds: f64,
         /// The end of the run's log, when there is one.
         #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -62,6 +66,11 @@ pub enum ModelError {
         /// The limit it breaks, in words.
         reason: String,
     },
+}
+
+/// Reads `null` (how JSON writes a non-finite number) back as NaN.
+fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 impl ModelError {
@@ -183,7 +192,9 @@ pub struct Outputs {
     pub spread: Option<Vec<f64>>,
     /// Whatever else the run computed that is not an observed output, by name (e.g. a
     /// CFD run's every server intake): journaled with the run, so that what an expensive
-    /// run gave is never lost. The calibration does not use it.
+    /// run gave is never lost. The calibration does not use it. Every value must be
+    /// finite (JSON has no NaN or infinity): the loop fails a run whose extras hold one,
+    /// naming the key, as it fails a non-finite output.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub extras: BTreeMap<String, Vec<f64>>,
 }
@@ -203,7 +214,9 @@ impl From<Vec<f64>> for Outputs {
 /// server powers of one snapshot). Parameters are physical values in the order of the
 /// calibration's [`crate::ParamSpace`].
 pub trait Model: Sync {
-    /// One operating condition.
+    /// One operating condition. The trait asks only `Sync`, but a
+    /// [`crate::Calibrator`] needs `Clone` too (and [`crate::GaussianProcess`]
+    /// `PartialEq`): derive both where you can.
     type Scenario: Sync;
 
     /// A fingerprint of everything that determines the model's answers apart from the
@@ -308,6 +321,19 @@ pub fn check_outputs(
         });
     }
     Ok(outputs)
+}
+
+/// Why a run's [`Outputs::extras`] cannot be journaled, if they cannot: the first value
+/// that is NaN or infinite, named by its key and index.
+pub(crate) fn non_finite_extra(extras: &BTreeMap<String, Vec<f64>>) -> Option<String> {
+    extras.iter().find_map(|(key, values)| {
+        let i = values.iter().position(|v| !v.is_finite())?;
+        Some(format!(
+            "extra `{key}` value {i} is not finite ({}); a run journal holds finite \
+             numbers only (give the model's extras finite values, or leave that one out)",
+            crate::number(values[i])
+        ))
+    })
 }
 
 #[cfg(test)]

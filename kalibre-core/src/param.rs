@@ -34,7 +34,8 @@ pub struct Param {
 }
 
 impl Param {
-    /// A checked parameter: finite bounds with `lower < upper` (or equal: a fixed value),
+    /// A checked parameter: a name that is not empty and holds no control character,
+    /// finite bounds with `lower < upper` (or equal: a fixed value),
     /// `lower <= initial <= upper`, and `lower > 0` on a log scale.
     pub fn new(
         name: impl Into<String>,
@@ -44,6 +45,24 @@ impl Param {
         scale: Scale,
     ) -> Result<Self> {
         let name = name.into();
+        // Names key journaled runs and are printed in every message and report. (Their
+        // length is not capped: a derived name, `alpha/` and a server id, may run past
+        // an id's limit.)
+        if name.is_empty() {
+            return Err(Error::InvalidParam {
+                name: "(unnamed)".into(),
+                reason: "the name is empty; expected a name".into(),
+            });
+        }
+        if let Some(c) = name.chars().find(|c| c.is_control()) {
+            return Err(Error::InvalidParam {
+                name: name.escape_debug().to_string(),
+                reason: format!(
+                    "the name holds a control character (U+{:04X}); expected printable text",
+                    c as u32
+                ),
+            });
+        }
         let bad = |reason: String| Error::InvalidParam {
             name: name.clone(),
             reason,
@@ -392,6 +411,41 @@ impl ParamSpace {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A name keys journaled runs and is printed: an empty one, or one with a control
+    /// character, is refused (a long one is not: `alpha/` and a server id may be long).
+    #[test]
+    fn parameter_names_must_be_printable_and_not_empty() {
+        let e = ParamSpace::new()
+            .with("", 0.0, 1.0, 0.5, Scale::Linear)
+            .unwrap_err();
+        assert!(
+            matches!(&e, Error::InvalidParam { name, reason }
+                if name == "(unnamed)" && reason.contains("empty")),
+            "{e}"
+        );
+        let e = ParamSpace::new()
+            .with("k\u{7}", 0.0, 1.0, 0.5, Scale::Linear)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`k\\u{7}`") && e.contains("U+0007"), "{e}");
+        let mut space = ParamSpace::new();
+        let literal = Param {
+            name: String::new(),
+            lower: 0.0,
+            upper: 1.0,
+            initial: 0.5,
+            scale: Scale::Linear,
+        };
+        assert!(
+            space.push(literal).is_err(),
+            "a struct literal is checked too"
+        );
+        let long = format!("alpha/{}", "s".repeat(200));
+        ParamSpace::new()
+            .with(long, 0.0, 1.0, 0.5, Scale::Linear)
+            .expect("a long derived name");
+    }
 
     #[test]
     fn a_value_off_a_held_parameter_says_it_is_held() {

@@ -160,7 +160,8 @@ fn bad_input_gets_clear_errors() {
         m.contains("2 measured values for 2 calibrated parameters"),
         "{m}"
     );
-    assert!(m.contains("give noise_sigma"), "{m}");
+    assert!(m.contains("DiagnoseSettings::noise_sigma"), "{m}");
+    assert!(m.contains("kalibre diagnose --noise"), "{m}");
     // A single output in a single snapshot cannot be held out.
     let single = Residuals::new(rows(1, 1), vec![0.3], Array2::zeros((1, 0)), vec![]).unwrap();
     let e = diagnose(&single, &[], &DiagnoseSettings::new().with_noise_sigma(0.1)).unwrap_err();

@@ -6,7 +6,10 @@ mod common;
 
 use common::*;
 use kalibre_core::calibrate::{UncertaintySlopes, REPEATED_RESIDUAL_ICC};
-use kalibre_core::{Calibrator, Report, RunStore, Settings, StopReason};
+use kalibre_core::{
+    Calibrator, Objective, Observations, OutputInfo, ParamSpace, Report, Result, RunStore, Scale,
+    SearchOutcome, Searcher, Settings, Snapshot, StopReason,
+};
 
 fn run(polish: usize, budget: Option<usize>, store: Option<RunStore>) -> (Report, usize) {
     let (model, obs, space) = (Poly::new(), observations(), space());
@@ -246,4 +249,88 @@ fn a_difference_that_fails_is_taken_on_the_other_side() {
         let got = report.best.params.get(name).unwrap();
         assert!((got - truth).abs() < 1e-3, "{name}: {got} vs {truth}");
     }
+}
+
+/// Proposes the point it starts from: the loop converges at once, and the polish
+/// linearises at the design's best.
+struct StayPut;
+
+impl Searcher for StayPut {
+    fn search(&self, objective: &dyn Objective, start: &[f64], _: u64) -> Result<SearchOutcome> {
+        Ok(SearchOutcome {
+            best_unit: start.to_vec(),
+            best_cost: objective.cost(start),
+            evaluations: 1,
+            trace: Vec::new(),
+            timed_out: false,
+        })
+    }
+}
+
+/// `best.iteration` is 0 (the design) or the number of the history record of the best
+/// point itself.
+fn assert_best_has_its_record(r: &Report) {
+    let its = r.history.iter().find(|h| h.iteration == r.best.iteration);
+    assert!(
+        r.best.iteration == 0
+            || its.is_some_and(|h| h.params == r.best.params && h.mae_c == Some(r.best.mae_c)),
+        "best at {} ({:?}) has no record of its own: {:?}",
+        r.best.iteration,
+        r.best.params,
+        r.history.iter().map(|h| h.iteration).collect::<Vec<_>>()
+    );
+    let numbers: Vec<usize> = r.history.iter().map(|h| h.iteration).collect();
+    assert!(numbers.windows(2).all(|w| w[0] < w[1]), "{numbers:?}");
+}
+
+/// The truth one finite-difference step (0.01 of the box in `a`) from the design's
+/// midpoint, where the polish linearises first: its first Jacobian run is the best
+/// point, exactly, and the report names it by a record of its own (it named an
+/// iteration without one).
+#[test]
+fn the_best_iteration_names_a_record_even_for_a_difference_run() {
+    let model = Poly::new();
+    let space = ParamSpace::new()
+        .with("a", 0.0, 4.0, 2.0, Scale::Linear)
+        .unwrap()
+        .with("b", 0.5, 3.0, 1.75, Scale::Linear)
+        .unwrap();
+    let truth = space.from_unit(&[0.5 + 0.01, 0.5]).unwrap();
+    let outputs = (0..4)
+        .map(|k| OutputInfo {
+            name: format!("s{k}"),
+            group: "cold".into(),
+        })
+        .collect();
+    let snaps = [1.0, 2.0]
+        .iter()
+        .enumerate()
+        .map(|(id, &load)| Snapshot {
+            label: format!("t{id}"),
+            scenario: Scen { id, load },
+            measured: poly_outputs(load, &truth).into_iter().map(Some).collect(),
+        })
+        .collect();
+    let obs = Observations::new(outputs, snaps).unwrap();
+    let report = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_searcher(StayPut)
+        .with_settings(Settings {
+            seed: 5,
+            max_iterations: 1,
+            polish_iterations: 3,
+            ..Settings::default()
+        })
+        .run()
+        .unwrap();
+    assert_eq!(report.best.mae_c, 0.0, "the difference run hit the truth");
+    assert_eq!(report.best.params.values(), truth);
+    assert_best_has_its_record(&report);
+    let rec = (report.history.iter())
+        .find(|h| h.iteration == report.best.iteration)
+        .unwrap();
+    assert_eq!(rec.training_samples, 0, "a polish record");
+    assert!(report.best_found_in().starts_with("the polish"));
+    // And in the ordinary polish too.
+    let (polished, _) = run(10, None, None);
+    assert_best_has_its_record(&polished);
 }

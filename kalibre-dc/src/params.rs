@@ -55,7 +55,7 @@ impl ParamLayout {
                     s.server.id, s.server.server_type
                 ))
             })?;
-            let bounds = hall.server_types[t].alpha_cfm_per_w;
+            let bounds = &hall.server_types[t].alpha_cfm_per_w;
             // Predictions check only the calibrated alphas; the fixed ones are checked here.
             if !(bounds.initial > 0.0 && bounds.initial.is_finite()) {
                 return Err(Error::Mismatch(format!(
@@ -86,7 +86,7 @@ impl ParamLayout {
                 .zip(&type_param)
                 .filter(|(_, p)| p.is_some())
             {
-                let b = t.alpha_cfm_per_w;
+                let b = &t.alpha_cfm_per_w;
                 space.push(Param::new(
                     format!("alpha/{}", t.id),
                     b.min,

@@ -591,3 +591,55 @@ fn a_strip_behind_a_rack_ends_at_the_solid_behind_it() {
     };
     assert!(!named("A01") && !named("A02") && named("A03"));
 }
+
+/// A tile behind a rack ends the strip as a solid does: the floor there already
+/// delivers the tile's share, so an opening over it would count that air twice (as a
+/// `position_m` opening over a tile is refused). A tile at the rack's back leaves none.
+#[test]
+fn a_strip_behind_a_rack_ends_at_a_tile_behind_it() {
+    let strip = |hall: &Hall| -> Result<[f64; 2], String> {
+        let e = from_spec(
+            &spec(json!({"kind": "bypass", "behind_rack": "A01", "fraction": 0.1})),
+            hall,
+        )
+        .map_err(|e| e.to_string())?;
+        let mut mods = SimMods::new(hall.cracs.len());
+        e.modify(&[0.1], hall, &mut mods).unwrap();
+        let r = mods.supply_openings[0].region;
+        Ok([r.min[1], r.max[1]])
+    };
+    let mut hall = demo_hall();
+    let rack = hall.racks.iter().find(|r| r.id == "A01").unwrap().clone();
+    let (x0, back) = (rack.position_m[0], rack.position_m[1]);
+    let open = strip(&hall).unwrap();
+    assert!(
+        (open[1] - back).abs() < 1e-9 && open[0] < back - 0.3,
+        "{open:?}"
+    );
+    // Row A exhausts towards -y: a tile 0.2 m behind A01's back, over its width.
+    let mut tile = hall.tiles[0].clone();
+    tile.position_m = [x0, back - 0.2 - 0.4];
+    tile.size_m = [rack.size_m[0], 0.4];
+    hall.tiles.push(tile);
+    hall.validate("hall.json").unwrap();
+    let got = strip(&hall).unwrap();
+    assert!((got[0] - (back - 0.2)).abs() < 1e-9, "{got:?}");
+    assert!((got[1] - back).abs() < 1e-9, "{got:?}");
+    // At the rack's back: refused by name, and not a diagnosis candidate.
+    let last = hall.tiles.len() - 1;
+    hall.tiles[last].position_m[1] = back - 0.4;
+    let e = strip(&hall).unwrap_err();
+    assert!(
+        e.contains(&format!(
+            "rack `A01` exhausts against tile {last} (/tiles/{last})"
+        )),
+        "{e}"
+    );
+    let candidates = EffectRegistry::builtin()
+        .get("bypass")
+        .unwrap()
+        .candidates(&hall);
+    assert!(!candidates
+        .iter()
+        .any(|c| c.fields["behind_rack"] == json!("A01")));
+}

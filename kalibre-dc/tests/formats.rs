@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use kalibre_dc::effects::EffectRegistry;
 use kalibre_dc::hall::Hall;
 use kalibre_dc::snapshots::{
     load_snapshots, parse_snapshots, parse_snapshots_bytes, to_observations, write_predictions,
@@ -178,6 +179,58 @@ fn tolerances_and_extra_are_honoured() {
     set(&mut v, "/racks/1/position_m/0", json!(2.598));
     let (_, field, _) = format_error(Hall::from_json_str(&v.to_string(), HALL_FILE));
     assert_eq!(field, "/racks/1");
+}
+
+/// The contract refuses unknown fields except under `extra`, which any object may carry
+/// (other tools write these files): every object takes one, it changes no physics, and
+/// the hall keeps it when written.
+#[test]
+fn every_object_may_carry_a_free_form_extra() {
+    let mut v = hall_value();
+    set(
+        &mut v,
+        "/effects",
+        json!([{ "kind": "rack_recirculation", "rack": "R1" }]),
+    );
+    let plain = Hall::from_json_str(&v.to_string(), HALL_FILE).unwrap();
+    let note = json!({ "from": "dcim", "n": [1, 2] });
+    for pointer in [
+        "/extra",
+        "/room/extra",
+        "/server_types/0/extra",
+        "/server_types/0/alpha_cfm_per_w/extra",
+        "/cracs/0/extra",
+        "/tiles/0/extra",
+        "/returns/0/extra",
+        "/racks/0/extra",
+        "/racks/0/servers/0/extra",
+        "/containment/0/extra",
+        "/sensors/0/extra",
+        "/calibrate/extra",
+        "/effects/0/extra",
+    ] {
+        set(&mut v, pointer, note.clone());
+    }
+    let noted = Hall::from_json_str(&v.to_string(), HALL_FILE).unwrap();
+    assert_eq!(noted.physics_json(), plain.physics_json());
+    let effects = EffectRegistry::builtin().build_all(&noted).unwrap();
+    assert_eq!(effects.len(), 1);
+    let written: Value = serde_json::from_str(&noted.to_json_pretty()).unwrap();
+    for pointer in [
+        "/calibrate/extra",
+        "/server_types/0/alpha_cfm_per_w/extra",
+        "/effects/0/extra",
+    ] {
+        assert_eq!(written.pointer(pointer), Some(&note), "{pointer}");
+    }
+    // Anything else is still a typo.
+    set(&mut v, "/effects/0/fraktion", json!(0.2));
+    let hall = Hall::from_json_str(&v.to_string(), HALL_FILE).unwrap();
+    let e = EffectRegistry::builtin()
+        .build_all(&hall)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("fraktion") && e.contains("unknown field"), "{e}");
 }
 
 #[test]

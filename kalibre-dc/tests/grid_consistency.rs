@@ -79,6 +79,7 @@ fn hall() -> Hall {
                 initial: 0.12,
                 min: 0.01,
                 max: 3.0,
+                extra: None,
             },
             extra: None,
         }],

@@ -195,7 +195,7 @@ fn truth_alphas_initial_guess_and_states_are_plausible() {
         "initial over mean truth {ratio}"
     );
     for ty in &synth.hall.server_types {
-        let b = ty.alpha_cfm_per_w;
+        let b = &ty.alpha_cfm_per_w;
         assert_eq!((b.min, b.max, b.initial), (0.01, 3.0, initial));
     }
     // Snapshots vary fan speed, setpoint and power; supply straddles the server draw.

@@ -148,7 +148,11 @@ pub(crate) fn is_stdout(path: &std::path::Path) -> bool {
 /// `v` to `digits` significant figures, without an exponent (a flow of 0.00356 m3/s
 /// reads as such, not as 0.0035550000000000004) unless it would take many digits.
 pub(crate) fn significant(v: f64, digits: usize) -> String {
-    if v == 0.0 || !v.is_finite() {
+    // -0 (a sum of nothing negated) reads as a sign where there is none.
+    if v == 0.0 {
+        return "0".into();
+    }
+    if !v.is_finite() {
         return v.to_string();
     }
     if !(1e-4..1e6).contains(&v.abs()) {
@@ -157,4 +161,16 @@ pub(crate) fn significant(v: f64, digits: usize) -> String {
     }
     let decimals = (digits as i32 - 1 - v.abs().log10().floor() as i32).max(0) as usize;
     format!("{v:.decimals$}")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn significant_figures_carry_no_sign_on_zero() {
+        assert_eq!(super::significant(-0.0, 3), "0");
+        assert_eq!(super::significant(0.0, 3), "0");
+        assert_eq!(super::significant(-1.23456, 3), "-1.23");
+        assert_eq!(super::significant(12345.6, 3), "12346");
+        assert_eq!(super::significant(2.0e-5, 3), "2.00e-5");
+    }
 }

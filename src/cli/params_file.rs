@@ -28,10 +28,13 @@ pub(in crate::cli) fn read_params_json(path: &Path) -> CliResult<serde_json::Val
     let file = path.display().to_string();
     let text =
         std::fs::read_to_string(path).map_err(|e| CliError::Input(format!("{file}: {e}")))?;
-    let json: serde_json::Value = serde_json::from_str(&text)
+    // A byte-order mark some Windows editors write: an encoding marker, not JSON (as
+    // hall.json takes it).
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let json: serde_json::Value = serde_json::from_str(text)
         .map_err(|e| CliError::Input(format!("{file}: not valid JSON: {e}")))?;
     // A parameter named twice would keep its last value without a word.
-    if let Some((field, message)) = kalibre_dc::json_keys::duplicate_key_problem(&text) {
+    if let Some((field, message)) = kalibre_dc::json_keys::duplicate_key_problem(text) {
         return Err(CliError::Input(format!("{file}: {field}: {message}")));
     }
     if json.get("best").is_some() {

@@ -14,7 +14,10 @@ where
     Su: Surrogate<Scenario = M::Scenario> + Sync,
 {
     /// A calibrator with default settings, the paper's hybrid searcher
-    /// (differential evolution, then Adam), [`ErrorMetrics`] and an in-memory journal.
+    /// ([`crate::search::Hybrid`]: differential evolution, then Adam, then
+    /// projected-gradient steps), [`ErrorMetrics`] and an in-memory journal. The
+    /// scenarios must be `Clone` ([`Model::Scenario`]): the fits take them as one
+    /// slice, copied once per calibration.
     pub fn new(
         model: &'a M,
         surrogate: Su,

@@ -17,6 +17,11 @@ fn discrepancy<Su: Surrogate>(
         .zip(outputs)
         .map(|(snap, model)| {
             let sur = surrogate.predict(&snap.scenario, params);
+            // A prediction of another length is no discrepancy: NaN, so the fit leaves
+            // the run out rather than zipping the outputs it has.
+            if sur.len() != model.len() {
+                return vec![f64::NAN; model.len()];
+            }
             model.iter().zip(sur).map(|(m, s)| m - s).collect()
         })
         .collect()

@@ -7,6 +7,10 @@
 //! `dim + 1` runs per snapshot after an accepted move (the Jacobian), one per snapshot
 //! after a rejected one (the Jacobian is kept, the damping raised). Every run goes through
 //! the same runner as the loop's: journaled, replayed on resume, failures recorded.
+//!
+//! A Jacobian's runs take an iteration number of their own, and the step after it the
+//! next; each step has a history record, and the Jacobian's iteration one too when one of
+//! its runs became the best point, so that the report's best iteration always has one.
 
 use std::time::Instant;
 
@@ -174,7 +178,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
             let Some(best) = state.best.as_ref() else {
                 break;
             };
-            let t_iter = Instant::now();
+            let mut t_iter = Instant::now();
             let mut model_s = 0.0;
             let stale = jac.as_ref().is_none_or(|l| l.jacobian.unit != best.unit);
             if stale {
@@ -220,6 +224,9 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                         .collect()
                 };
                 let mut failed = Vec::new();
+                // Each difference's point and what its runs gave: the record of this
+                // iteration, should one of them become the best.
+                let mut probes = Vec::with_capacity(dim);
                 for (i, res) in results.into_iter().enumerate() {
                     cols.push(match all_ran(&res) {
                         Some(out) => column(&out, steps[i]),
@@ -228,7 +235,9 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                             vec![0.0; r0.len()]
                         }
                     });
-                    state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res)?;
+                    let eval =
+                        state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res)?;
+                    probes.push((points[i].clone(), phys[i].clone(), eval));
                 }
                 // A difference that failed (the model cannot run just beyond the best
                 // point: a diverging solver at the box's edge, say) is taken on the other
@@ -259,8 +268,43 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                             cols[*i] = column(&out, -steps[*i]);
                             failed.retain(|f| f != i);
                         }
-                        state.absorb(self.validator, obs, iteration, u, p, res)?;
+                        let eval = state.absorb(self.validator, obs, iteration, u, p, res)?;
+                        probes.push((u.clone(), p.clone(), eval));
                     }
+                }
+                // The report names the best point by its iteration, and every number it
+                // names has a record: a difference that is now the best gets this
+                // iteration's (the step's record, next, is another point's).
+                let probe_best = (state.best.as_ref())
+                    .filter(|b| b.iteration == iteration)
+                    .and_then(|b| probes.iter().find(|(u, _, _)| *u == b.unit));
+                if let Some((_, params, eval)) = probe_best {
+                    let rec = record(
+                        iteration,
+                        state,
+                        eval,
+                        n_snap,
+                        self.names,
+                        params,
+                        StepInfo {
+                            fit_mse: f64::NAN,
+                            training_samples: 0,
+                            search_loss: f64::NAN,
+                            search_data_mse: f64::NAN,
+                            search_evaluations: 0,
+                            perturbed: false,
+                            wall_s: Timings {
+                                fit_s: 0.0,
+                                search_s: 0.0,
+                                model_s,
+                                total_s: t_iter.elapsed().as_secs_f64(),
+                            },
+                        },
+                    );
+                    emit(&rec);
+                    records.push(rec);
+                    // The step's record counts its own time, not the differences' again.
+                    (t_iter, model_s) = (Instant::now(), 0.0);
                 }
                 // A difference failed on both sides leaves its parameter where it is (a
                 // zero column).

@@ -1,6 +1,11 @@
 //! The calibration report (`report.json`, formats.md section 3) and its parts.
 //!
-//! Key names follow the contract (`mae_c`, `residuals[].sensor`, ...) whatever the domain.
+//! Key names follow the contract (`mae_c`, `residuals[].sensor`, ...) whatever the domain:
+//! `_c` and `sensor` are the data hall's (degrees C, a temperature sensor), kept because
+//! other tools read these files. An error (`mae_c`, `rmse_c`, `max_abs_c`) is in the
+//! outputs' own units, or in scale units when the observations have scales
+//! ([`crate::Observations::with_scales`]); a residual row's `measured_c` and
+//! `predicted_c` are always in the outputs' own units.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -86,7 +91,8 @@ fn null_as_nan<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Errors {
-    /// Mean absolute error.
+    /// Mean absolute error, in the outputs' own units (C for a data hall), or in scale
+    /// units with [`crate::Observations::with_scales`] (as every error of the report).
     pub mae_c: f64,
     /// Root-mean-square error.
     pub rmse_c: f64,
@@ -113,7 +119,8 @@ impl From<ErrorStats> for Errors {
 pub struct SnapshotErrors {
     /// Snapshot label.
     pub snapshot: String,
-    /// Mean absolute error.
+    /// Mean absolute error, in the outputs' own units (C for a data hall), or in scale
+    /// units with [`crate::Observations::with_scales`].
     pub mae_c: f64,
     /// Root-mean-square error.
     pub rmse_c: f64,
@@ -135,15 +142,17 @@ pub struct Timings {
     pub total_s: f64,
 }
 
-/// One four-step iteration.
+/// One evaluated point of the history: a four-step iteration's, or a polish step's.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IterationRecord {
-    /// 1-based iteration.
+    /// 1-based iteration (polish steps number on past the loop's).
     pub iteration: usize,
     /// Every model run so far, initial design and journal replays included.
     pub model_runs: usize,
-    /// Overall MAE of the model at this iteration's parameters (`None`: a run failed).
+    /// Overall MAE of the model at this iteration's parameters (`None`: a run failed),
+    /// in the outputs' own units (C for a data hall), or in scale units with
+    /// [`crate::Observations::with_scales`].
     pub mae_c: Option<f64>,
     /// Overall RMSE.
     pub rmse_c: Option<f64>,
@@ -185,9 +194,13 @@ pub struct IterationRecord {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Best {
-    /// Iteration that found them (0: the initial design).
+    /// Iteration that found them: 0 for the initial design, otherwise the `iteration`
+    /// of the [`Report::history`] record of this very point (its parameters and
+    /// errors). A polish step's finite-difference runs number their own iteration,
+    /// which has a record only when one of them is the best point.
     pub iteration: usize,
-    /// Overall MAE.
+    /// Overall MAE, in the outputs' own units (C for a data hall), or in scale units
+    /// with [`crate::Observations::with_scales`].
     pub mae_c: f64,
     /// Overall RMSE.
     pub rmse_c: f64,
@@ -222,7 +235,9 @@ pub struct PassedOver {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Initial {
-    /// Overall MAE at the initial values (`None`: a run failed).
+    /// Overall MAE at the initial values (`None`: a run failed), in the outputs' own
+    /// units (C for a data hall), or in scale units with
+    /// [`crate::Observations::with_scales`].
     pub mae_c: Option<f64>,
     /// Overall RMSE.
     pub rmse_c: Option<f64>,
@@ -248,9 +263,9 @@ pub struct Residual {
     pub snapshot: String,
     /// Output (sensor) name.
     pub sensor: String,
-    /// Measured value.
+    /// Measured value, in the output's own units (C for a data hall), scales or not.
     pub measured_c: f64,
-    /// Predicted by the best model.
+    /// Predicted by the best model, in the output's own units.
     pub predicted_c: f64,
     /// With numerical weighting: the weight the polish gave this reading, `s^2 / (s^2 +
     /// u^2)` (`u` how far the model's numerical variants move it); absent otherwise.
@@ -372,7 +387,10 @@ pub struct Report {
     pub numerical_checks: Vec<super::NumericalCheck>,
     /// The model at the initial values.
     pub initial: Initial,
-    /// One record per four-step iteration.
+    /// One record per four-step iteration, then one per polish step (its Levenberg-
+    /// Marquardt point) and one per polish iteration of finite differences whose run
+    /// became the best point ([`Best::iteration`]); numbers increase, with gaps where a
+    /// Jacobian's runs have no record.
     pub history: Vec<IterationRecord>,
     /// Residuals of the best model, per snapshot and measured output.
     pub residuals: Vec<Residual>,
@@ -420,7 +438,8 @@ impl Report {
         {
             Some(h) if h.training_samples == 0 => polish,
             None if self.best.iteration == 0 => "the initial design".to_string(),
-            // A point the polish ran between its records (a finite-difference probe).
+            // A finite-difference probe the polish ran between its records (a report
+            // written before such a best point had a record of its own).
             None if self.best.iteration > last_loop_iteration => polish,
             _ => format!("iteration {}", self.best.iteration),
         }

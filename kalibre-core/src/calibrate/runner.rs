@@ -60,7 +60,7 @@ impl<M: Model> Runner<'_, M> {
     }
 
     /// A successful run's outputs as the loop accepts them: one finite value per output,
-    /// a spread (if any) to match, and nothing the model calls impossible.
+    /// a spread (if any) to match, finite extras, and nothing the model calls impossible.
     fn checked(&self, outputs: Outputs) -> std::result::Result<Outputs, ModelError> {
         let o = check_outputs(outputs, self.output_names)?;
         if let Some(sp) = &o.spread {
@@ -70,6 +70,12 @@ impl<M: Model> Runner<'_, M> {
                     "output spread has the wrong length, or a negative or non-finite value",
                 ));
             }
+        }
+        // JSON has no NaN or infinity: a non-finite extra would be journaled as `null`,
+        // a line no later opening reads back, so the run would be lost (or the journal
+        // refused). Such a run fails here, named, like a non-finite output.
+        if let Some(reason) = crate::model::non_finite_extra(&o.extras) {
+            return Err(ModelError::failed(reason));
         }
         self.model.check_plausible(&o)?;
         Ok(o)

@@ -192,6 +192,9 @@ pub(crate) fn surrogate_slopes<Su: Surrogate>(
         let mut out = Vec::new();
         for snap in obs.snapshots() {
             let pred = surrogate.predict(&snap.scenario, &params);
+            if pred.len() != snap.measured.len() {
+                return None;
+            }
             for (o, m) in snap.measured.iter().enumerate() {
                 if m.is_some() {
                     out.push(*pred.get(o)?);

@@ -205,18 +205,28 @@ pub fn diagnose(
                 // Too few measured values for the calibrated parameters: the user's data,
                 // not a fault of the ranking.
                 let why = if n <= base.rank {
+                    // Parameters that move the readings alike take one degree of
+                    // freedom between them: the rank is what counts.
+                    let moving = match base.rank < jcols.len() {
+                        true => format!(
+                            ", which move them in only {} independent directions,",
+                            base.rank
+                        ),
+                        false => String::new(),
+                    };
                     format!(
-                        "{n} measured values for {} calibrated parameters leave no degree \
-                         of freedom",
-                        base.rank
+                        "{n} measured values for {} calibrated parameters{moving} leave no \
+                         degree of freedom",
+                        jcols.len()
                     )
                 } else {
                     format!("the calibrated parameters, refit, fit all {n} measured values exactly")
                 };
                 return Err(Error::Mismatch(format!(
                     "cannot estimate the noise: {why}: measure more values (outputs or \
-                     scenarios) than there are parameters, or give noise_sigma (the \
-                     diagnosis settings' noise)"
+                     scenarios) than there are parameters, or give the measurements' noise \
+                     if it is known (`kalibre diagnose --noise`; in the library \
+                     `DiagnoseSettings::noise_sigma`)"
                 )));
             }
             // Under a Gaussian `sqrt(RSS_0 / (n - rank))`; under a Student-t the same

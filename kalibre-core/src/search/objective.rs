@@ -18,7 +18,10 @@ pub trait Regularizer: Sync {
 }
 
 /// Mean squared error of the surrogate against every measured value of every snapshot,
-/// plus `weight * regularizer`, as a function of unit-box coordinates.
+/// plus `weight * regularizer`, as a function of unit-box coordinates. A point where the
+/// surrogate predicts another number of values than there are outputs (or gives a
+/// gradient of another length than the parameters) costs NaN: a bad point, as a NaN
+/// prediction makes it.
 pub struct SurrogateObjective<'a, Su: Surrogate> {
     surrogate: &'a Su,
     observations: &'a Observations<Su::Scenario>,
@@ -94,6 +97,11 @@ impl<'a, Su: Surrogate> SurrogateObjective<'a, Su> {
         let mut sum = 0.0;
         for (s, snap) in self.observations.snapshots().iter().enumerate() {
             let pred = self.surrogate.predict(&snap.scenario, params);
+            // A zip would drop the outputs a short prediction lacks and score the point
+            // a perfect fit: another length is a bad point, as a NaN is.
+            if pred.len() != snap.measured.len() {
+                return f64::NAN;
+            }
             for (k, (p, m)) in pred.iter().zip(&snap.measured).enumerate() {
                 if let Some(m) = m {
                     let r = p + self.offset(s, k, proj) - m;
@@ -132,11 +140,16 @@ where
             Err(_) => return (f64::INFINITY, vec![0.0; x_unit.len()]),
         };
         let proj = self.projections(x_unit);
+        let bad = (f64::NAN, vec![f64::NAN; x_unit.len()]);
         let mut cost = 0.0;
         let mut grad_phys = vec![0.0; params.len()];
         let mut grad_correction = vec![0.0; x_unit.len()];
         for (s, snap) in self.observations.snapshots().iter().enumerate() {
             let pred = self.surrogate.predict(&snap.scenario, &params);
+            // As in `data_mse_at`: a prediction of another length is a bad point.
+            if pred.len() != snap.measured.len() {
+                return bad;
+            }
             let mut cotangent = vec![0.0; pred.len()];
             for (k, ((c, p), m)) in cotangent
                 .iter_mut()
@@ -154,6 +167,9 @@ where
                 corr.add_vjp(s, &cotangent, &mut grad_correction);
             }
             let g = self.surrogate.vjp(&snap.scenario, &params, &cotangent);
+            if g.len() != params.len() {
+                return bad;
+            }
             for (acc, gi) in grad_phys.iter_mut().zip(g) {
                 *acc += gi;
             }

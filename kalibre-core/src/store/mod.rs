@@ -111,6 +111,9 @@ impl RunRecord {
                 return Err(format!("{what} {i} is not finite ({})", number(*v)));
             }
         }
+        if let Some(reason) = crate::model::non_finite_extra(&self.extras) {
+            return Err(reason);
+        }
         if let (Some(spread), Some(outputs)) = (&self.spread, &self.outputs) {
             if spread.len() != outputs.len() {
                 return Err(format!(
@@ -208,7 +211,8 @@ impl RunStore {
         }
     }
 
-    /// Opens (or creates) the journal at `path` for runs of the model with `fingerprint`.
+    /// Opens (or creates, with any missing directories) the journal at `path` for runs
+    /// of the model with `fingerprint`.
     ///
     /// A torn last line is cut off the file before the next run is appended (nothing is
     /// written until then), so that later lines start clean; bad lines
@@ -296,6 +300,11 @@ impl RunStore {
         replay_failed: bool,
     ) -> Result<Self> {
         let path = path.to_path_buf();
+        // `out/runs.jsonl` for a fresh `out/`: the journal goes where it was asked to,
+        // not a bare "not found".
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
         let mut file = OpenOptions::new()
             .read(true)
             .append(true)
@@ -483,7 +492,17 @@ impl RunStore {
                 path: path.display().to_string(),
                 reason,
             };
-            let mut line = Vec::new();
+            let body = serde_json::to_vec(&rec).map_err(|e| journal(e.to_string()))?;
+            // The promise is that a restart finds every run: a line the next opening
+            // could not read back (a float JSON writes as `null` where a number must be)
+            // is refused here, before the file is touched, never written.
+            if let Err(e) = serde_json::from_slice::<RunRecord>(&body) {
+                return Err(journal(format!(
+                    "run at scenario `{scenario}` not recorded: its line would not read \
+                     back ({e})"
+                )));
+            }
+            let mut line = Vec::with_capacity(body.len() + 2);
             match repair {
                 Some(Repair::CutTo(len)) => {
                     file.set_len(len).map_err(|e| Error::io(path, e))?;
@@ -491,7 +510,7 @@ impl RunStore {
                 Some(Repair::Newline) => line.push(b'\n'),
                 None => {}
             }
-            serde_json::to_writer(&mut line, &rec).map_err(|e| journal(e.to_string()))?;
+            line.extend_from_slice(&body);
             line.push(b'\n');
             // One write per line keeps a crash to a torn tail, never an interleaving.
             file.write_all(&line).map_err(|e| Error::io(path, e))?;

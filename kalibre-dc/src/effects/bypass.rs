@@ -5,7 +5,7 @@
 //! | field | required | meaning |
 //! |---|---|---|
 //! | `position_m`, `size_m` | one placement | floor opening: `[x, y]` minimum corner and `[dx, dy]` size (m), inside the room and not under a rack or CRAC |
-//! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep, or to the wall, rack or CRAC behind it if that is nearer) behind its exhaust; a rack that exhausts against one is refused |
+//! | `behind_rack` | one placement | rack id: the floor strip (rack width, `depth_m` deep, or to the wall, rack, CRAC or tile behind it if that is nearer) behind its exhaust; a rack that exhausts against one is refused |
 //! | `depth_m` | no | depth of the `behind_rack` strip (m), default 0.4 |
 //! | `fraction` | no | initial share of the CRAC flow, default 0.05 |
 //! | `fraction_bounds` | no | bounds, within and default `[0, 0.5]` |
@@ -208,14 +208,31 @@ impl EffectFactory for BypassFactory {
                     }
                     // The strip ends at the first rack or CRAC behind the exhaust, as it
                     // ends at the wall: air cannot enter under a solid, and a strip
-                    // partly under one would lose that part of the flow.
+                    // partly under one would lose that part of the flow. It ends at a
+                    // tile too: the floor there delivers the tile's share already, and
+                    // an opening over it would count that air twice.
                     let mut against = "a wall".to_string();
                     let column = |r: &Aabb| Aabb {
                         min: r.min,
                         max: [r.max[0], r.max[1], room[2]],
                     };
-                    for (what, other, o) in hall.solid_boxes() {
-                        if other == id || !column(&region).overlaps(&o, GEOMETRY_TOL_M) {
+                    let solids = hall
+                        .solid_boxes()
+                        .filter(|(_, other, _)| *other != id)
+                        .map(|(what, other, o)| (format!("{what} `{other}`"), o));
+                    let tiles = hall.tiles.iter().enumerate().map(|(i, t)| {
+                        let tile = Aabb {
+                            min: [t.position_m[0], t.position_m[1], 0.0],
+                            max: [
+                                t.position_m[0] + t.size_m[0],
+                                t.position_m[1] + t.size_m[1],
+                                room[2],
+                            ],
+                        };
+                        (format!("tile {i} (/tiles/{i})"), tile)
+                    });
+                    for (what, o) in solids.chain(tiles) {
+                        if !column(&region).overlaps(&o, GEOMETRY_TOL_M) {
                             continue;
                         }
                         if sign > 0.0 {
@@ -223,7 +240,7 @@ impl EffectFactory for BypassFactory {
                         } else {
                             region.min[axis] = region.min[axis].max(o.max[axis]);
                         }
-                        against = format!("{what} `{other}`");
+                        against = what;
                     }
                     if region.max[axis] - region.min[axis] <= 1e-9 {
                         return Err(f.error(

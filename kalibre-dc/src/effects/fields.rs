@@ -26,8 +26,8 @@ impl<'a> Fields<'a> {
     }
 
     /// Refuses, before any field is read, a field that is none of `fields` nor a
-    /// parameter of `params` (its value or its `_bounds`): a typo is named first, not a
-    /// required field that the reading then misses.
+    /// parameter of `params` (its value or its `_bounds`) nor the free-form `extra`: a
+    /// typo is named first, not a required field that the reading then misses.
     pub fn expecting(self, fields: &[&str], params: &[&str]) -> Result<Self> {
         let known: Vec<String> = (fields.iter().map(|f| f.to_string()))
             .chain(
@@ -36,7 +36,10 @@ impl<'a> Fields<'a> {
                     .flat_map(|p| [p.to_string(), format!("{p}_bounds")]),
             )
             .collect();
-        let mut unknown: Vec<&String> = self.map.keys().filter(|k| !known.contains(k)).collect();
+        // `extra` is free-form in every object of the format, an entry's too.
+        let mut unknown: Vec<&String> = (self.map.keys())
+            .filter(|k| *k != "extra" && !known.contains(k))
+            .collect();
         unknown.sort();
         match unknown.first() {
             None => Ok(self),
@@ -159,10 +162,11 @@ impl<'a> Fields<'a> {
         Param::new(name, lo, hi, x, Scale::Linear).map_err(|e| self.error(name, e))
     }
 
-    /// Rejects fields that were not read.
+    /// Rejects fields that were not read (but the free-form `extra`).
     pub fn finish(self) -> Result<()> {
-        let mut unknown: Vec<&String> =
-            self.map.keys().filter(|k| !self.used.contains(k)).collect();
+        let mut unknown: Vec<&String> = (self.map.keys())
+            .filter(|k| *k != "extra" && !self.used.contains(k))
+            .collect();
         unknown.sort();
         match unknown.first() {
             None => Ok(()),

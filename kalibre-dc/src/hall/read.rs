@@ -46,6 +46,11 @@ impl Hall {
         if let Some((field, message)) = crate::json_keys::duplicate_key_problem(text) {
             return Err(Error::format(file, field, message));
         }
+        // serde also reads a struct from an array, field by field in declaration order:
+        // a guess the contract forbids, and one no unknown-field check would catch.
+        if let Some((field, message)) = positional_object(text, &hall) {
+            return Err(Error::format(file, field, message));
+        }
         hall.validate(file)?;
         Ok(hall)
     }
@@ -100,6 +105,55 @@ fn check_schema_tag(text: &str, file: &str) -> Result<()> {
     }
 }
 
+/// What is said where an object with named fields was given as an array.
+const POSITIONAL: &str =
+    "expected an object with named fields, found an array: fields are read by name, never \
+     by position";
+
+/// The pointer of the first place where `text` gives as an array what the hall holds as
+/// an object (a struct read by position), and the message naming the fields expected.
+fn positional_object(text: &str, hall: &Hall) -> Option<(String, String)> {
+    let original: serde_json::Value = serde_json::from_str(text).ok()?;
+    let written = serde_json::to_value(hall).ok()?;
+    let (pointer, fields) = first_positional(&original, &written, String::new())?;
+    let pointer = if pointer.is_empty() {
+        "/".into()
+    } else {
+        pointer
+    };
+    let named = fields
+        .iter()
+        .map(|f| format!("`{f}`"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    Some((pointer, format!("{POSITIONAL} ({named})")))
+}
+
+/// Walks the text's value beside the hall's own serialisation, which writes every struct
+/// as an object: an array there was read by position.
+fn first_positional(
+    original: &serde_json::Value,
+    written: &serde_json::Value,
+    pointer: String,
+) -> Option<(String, Vec<String>)> {
+    use serde_json::Value;
+    match (original, written) {
+        (Value::Array(_), Value::Object(fields)) => {
+            Some((pointer, fields.keys().cloned().collect()))
+        }
+        (Value::Array(a), Value::Array(b)) => a
+            .iter()
+            .zip(b)
+            .enumerate()
+            .find_map(|(i, (x, y))| first_positional(x, y, format!("{pointer}/{i}"))),
+        (Value::Object(a), Value::Object(b)) => a.iter().find_map(|(k, x)| {
+            let y = b.get(k)?;
+            first_positional(x, y, format!("{pointer}/{}", escape_pointer_token(k)))
+        }),
+        _ => None,
+    }
+}
+
 /// Maps a serde error to [`Error::Format`]: a missing field gets the pointer of the field
 /// itself, so that the pointer says where to add it.
 fn structural_error(
@@ -120,6 +174,11 @@ fn structural_error(
         // The whole document of the wrong type (`null`, `[]`) has the root's pointer.
         if pointer.is_empty() {
             pointer.push('/');
+        }
+        // An array of the wrong length where a struct belongs: serde would say how many
+        // elements it takes, as if the array could be right.
+        if text.starts_with("invalid length ") && text.contains(", expected struct ") {
+            return Error::format(file, pointer, POSITIONAL);
         }
         return Error::format(file, pointer, text);
     }
@@ -236,6 +295,51 @@ mod tests {
         let err = utf8(b"{\n\"a\": \"\xff\"}", "h.json").unwrap_err();
         match err {
             Error::Format { field, .. } => assert_eq!(field, "line 2"),
+            other => panic!("unexpected error {other:?}"),
+        }
+    }
+
+    /// The development hall with `edit` applied to its JSON: the error's field and message.
+    fn dev_hall_error(edit: impl FnOnce(&mut serde_json::Value)) -> (String, String) {
+        let text = include_str!("../../../data/openfoam/of-dev-clean/hall.json");
+        let mut json: serde_json::Value = serde_json::from_str(text).unwrap();
+        edit(&mut json);
+        match Hall::from_json_str(&json.to_string(), "h.json").unwrap_err() {
+            Error::Format { field, message, .. } => (field, message),
+            other => panic!("unexpected error {other:?}"),
+        }
+    }
+
+    /// serde reads a struct from an array by field order; the reader refuses that guess
+    /// wherever it would be made, naming the fields it expects.
+    #[test]
+    fn an_object_written_as_an_array_is_refused_where_it_is() {
+        let (field, message) = dev_hall_error(|h| {
+            h["server_types"][1]["alpha_cfm_per_w"] = serde_json::json!([0.12, 0.01, 3.0])
+        });
+        assert_eq!(field, "/server_types/1/alpha_cfm_per_w");
+        assert!(message.contains("found an array"), "{message}");
+        assert!(message.contains("`initial`, `max`, `min`"), "{message}");
+        let (field, _) = dev_hall_error(|h| h["room"] = serde_json::json!([[12.0, 8.4, 3.0]]));
+        assert_eq!(field, "/room");
+        let (field, _) = dev_hall_error(|h| h["calibrate"] = serde_json::json!(["per_server"]));
+        assert_eq!(field, "/calibrate");
+        let (field, _) = dev_hall_error(|h| {
+            let server = h["racks"][0]["servers"][0].clone();
+            let fields: Vec<_> = ["id", "type", "u", "height_u"]
+                .iter()
+                .map(|k| server[*k].clone())
+                .collect();
+            h["racks"][0]["servers"][0] = serde_json::Value::Array(fields);
+        });
+        assert_eq!(field, "/racks/0/servers/0");
+        // Of the wrong length, the same: not "expected struct Hall with 13 elements".
+        let err = Hall::from_json_str("[]", "h.json").unwrap_err();
+        match err {
+            Error::Format { field, message, .. } => {
+                assert_eq!(field, "/");
+                assert!(message.starts_with(POSITIONAL), "{message}");
+            }
             other => panic!("unexpected error {other:?}"),
         }
     }

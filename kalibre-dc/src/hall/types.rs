@@ -71,7 +71,7 @@ pub struct ServerType {
 }
 
 /// `0 < min <= initial <= max`, in cfm/W.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AlphaBounds {
     /// Initial value.
@@ -80,6 +80,9 @@ pub struct AlphaBounds {
     pub min: f64,
     /// Upper bound.
     pub max: f64,
+    /// Free-form data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extra: Option<serde_json::Value>,
 }
 
 /// How a CRAC delivers its supply air.
@@ -299,12 +302,15 @@ pub enum AlphaMode {
 }
 
 /// The `calibrate` section.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct CalibrateSpec {
     /// How alpha is calibrated.
     #[serde(default)]
     pub alpha: AlphaMode,
+    /// Free-form data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extra: Option<serde_json::Value>,
 }
 
 /// One `effects` entry: a `kind` and that kind's fields, interpreted by the effect registry.

@@ -96,7 +96,7 @@ impl Hall {
         )?;
         for (i, t) in self.server_types.iter().enumerate() {
             let p = format!("/server_types/{i}/alpha_cfm_per_w");
-            let a = t.alpha_cfm_per_w;
+            let a = &t.alpha_cfm_per_w;
             c.finite(a.initial, &format!("{p}/initial"))?;
             c.finite(a.min, &format!("{p}/min"))?;
             c.finite(a.max, &format!("{p}/max"))?;
@@ -231,13 +231,13 @@ impl Hall {
                 if !types.contains(s.server_type.as_str()) {
                     let mut known: Vec<&str> = types.iter().copied().collect();
                     known.sort_unstable();
+                    let expected = match known.is_empty() {
+                        true => "`server_types` defines none".to_string(),
+                        false => format!("expected one of: {}", known.join(", ")),
+                    };
                     return Err(c.err(
                         format!("{sp}/type"),
-                        format!(
-                            "unknown server type `{}`; expected one of: {}",
-                            s.server_type,
-                            known.join(", ")
-                        ),
+                        format!("unknown server type `{}`; {expected}", s.server_type),
                     ));
                 }
                 if s.u < 1 || s.u > r.units {
@@ -406,7 +406,7 @@ impl Hall {
                 return Err(c.err(
                     p,
                     format!(
-                        "sensor `{}` at {:?} is outside the room; expected a point within [0, {}] x [0, {}] x [0, {}] m",
+                        "sensor `{}` at {} is outside the room; expected a point within [0, {}] x [0, {}] x [0, {}] m",
                         s.id,
                         point(&s.position_m),
                         number(room.max[0]),
@@ -420,7 +420,7 @@ impl Hall {
                     return Err(c.err(
                         p,
                         format!(
-                            "sensor `{}` at {:?} is inside {what} `{id}`; expected a point in the air, not inside a solid",
+                            "sensor `{}` at {} is inside {what} `{id}`; expected a point in the air, not inside a solid",
                             s.id,
                             point(&s.position_m)
                         ),

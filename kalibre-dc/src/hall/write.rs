@@ -43,6 +43,13 @@ impl Hall {
         }
         hall.containment.iter_mut().for_each(|c| c.extra = None);
         hall.sensors.iter_mut().for_each(|s| s.extra = None);
+        hall.calibrate.extra = None;
+        for t in &mut hall.server_types {
+            t.alpha_cfm_per_w.extra = None;
+        }
+        hall.effects.iter_mut().for_each(|e| {
+            e.fields.remove("extra");
+        });
         // As in `to_json_pretty`: a hall always serialises.
         serde_json::to_string(&hall).expect("a hall always serialises to JSON")
     }

@@ -133,6 +133,7 @@ pub(crate) fn build<R: Rng>(
                     initial: 0.12,
                     min: 0.01,
                     max: 3.0,
+                    extra: None,
                 },
                 extra: None,
             })

@@ -27,6 +27,7 @@ fn server_types() -> Vec<ServerType> {
                 initial: 0.12,
                 min: 0.01,
                 max: 3.0,
+                extra: None,
             },
             extra: None,
         })

@@ -72,6 +72,7 @@ fn predicts_held_out_simulator_runs() {
             initial: 0.12,
             min: 0.06,
             max: 0.4,
+            extra: None,
         };
     }
     let model = HallModel::new(&h, SimConfig::default()).unwrap();

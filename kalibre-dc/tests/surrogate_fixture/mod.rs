@@ -60,6 +60,7 @@ pub fn hall(shape: Shape, mode: AlphaMode) -> Hall {
                 initial: 0.12,
                 min: 0.01,
                 max: 3.0,
+                extra: None,
             },
             extra: None,
         })
@@ -171,7 +172,10 @@ pub fn hall(shape: Shape, mode: AlphaMode) -> Hall {
         racks,
         containment,
         sensors,
-        calibrate: CalibrateSpec { alpha: mode },
+        calibrate: CalibrateSpec {
+            alpha: mode,
+            extra: None,
+        },
         effects: Vec::new(),
         extra: None,
     }

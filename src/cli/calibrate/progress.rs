@@ -169,7 +169,11 @@ impl Observe for Progress {
                 let mut phase = self.phase.lock().unwrap_or_else(|p| p.into_inner());
                 // Polish steps fit no surrogate (no training samples); their record
                 // numbers count on past the loop's, two per step with a new Jacobian.
+                // A Jacobian's runs have a record (with no search loss) only when one
+                // of them became the best point: no step of its own.
+                let differences = record.training_samples == 0 && record.search_loss.is_nan();
                 *phase = match (*phase, record.training_samples) {
+                    _ if differences => *phase,
                     (Phase::Polish(k), 0) => Phase::Polish(k + 1),
                     (_, 0) => Phase::Polish(1),
                     _ => Phase::Iteration(record.iteration),
@@ -241,7 +245,8 @@ mod tests {
             per_group: Default::default(),
             fit_mse: f64::NAN,
             training_samples,
-            search_loss: f64::NAN,
+            // A step predicts its loss; a Jacobian's own record has none.
+            search_loss: 0.1,
             search_data_mse: f64::NAN,
             search_evaluations: 0,
             failed_runs: 0,
@@ -317,6 +322,14 @@ mod tests {
         p.observe(&Event::IterationDone {
             record: &record(12, 0, 0.4),
         });
+        // A finite difference of step 2's Jacobian became the best point: its record
+        // is no step.
+        p.observe(&Event::IterationDone {
+            record: &IterationRecord {
+                search_loss: f64::NAN,
+                ..record(13, 0, 0.35)
+            },
+        });
         p.observe(&Event::IterationDone {
             record: &record(14, 0, 0.3),
         });
@@ -331,7 +344,11 @@ mod tests {
             "{text}"
         );
         assert!(
-            lines[3].contains(", polish step 2, best MAE 0.300 C"),
+            lines[3].contains(", polish step 1, best MAE 0.350 C"),
+            "{text}"
+        );
+        assert!(
+            lines[4].contains(", polish step 2, best MAE 0.300 C"),
             "{text}"
         );
         // More parameters than the polish takes: no polish in the plan.

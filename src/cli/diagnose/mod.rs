@@ -87,6 +87,12 @@ pub struct DiagnoseArgs {
     /// default 4).
     #[arg(long)]
     nu: Option<f64>,
+    /// The measurements' noise (standard deviation, in their units: C for a hall's
+    /// sensors), when it is known: the ranking then takes it instead of estimating it
+    /// from the residuals. Needed when there are no more measured values than
+    /// calibrated parameters, which leave nothing to estimate it from.
+    #[arg(long, value_name = "SIGMA")]
+    noise: Option<f64>,
     /// Skip the single-output check (by default a hypothesis must stay significant with
     /// any one sensor left out, so that one sensor the model misses cannot carry it).
     #[arg(long)]
@@ -187,6 +193,8 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
                 .into(),
         ));
     }
+    // A flag's value is checked before any file is read.
+    noise_arg(args.noise)?;
     if args.model == DiagnoseModel::Command {
         return own::run(&args);
     }
@@ -244,7 +252,9 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     journal::check_regular_files(&args.calibration)?;
     let text = std::fs::read_to_string(&report_path)
         .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
-    let mut report: Report = serde_json::from_str(&text).map_err(|e| {
+    // A byte-order mark from an editor that touched the file is no reason to refuse it.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let mut report: Report = serde_json::from_str(text).map_err(|e| {
         CliError::Input(format!(
             "{}: not a kalibre report: {e}",
             report_path.display()
@@ -330,7 +340,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     let space = model.layout().space();
     // By name, as JSON objects are unordered (a report rewritten by another tool keeps
     // its values); every calibrated parameter must be there, within its bounds.
-    let report_json: serde_json::Value = serde_json::from_str(&text)
+    let report_json: serde_json::Value = serde_json::from_str(text)
         .map_err(|e| CliError::Input(format!("{}: {e}", report_path.display())))?;
     let params = load_params(&report_path, &report_json, space)?;
     report.best.params = NamedValues::new(&space.names(), &params);
@@ -348,6 +358,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         &snaps,
     )?;
     let robust_nu = args.likelihood.robust_nu(args.nu)?;
+    let noise = noise_arg(args.noise)?;
     let mut settings = HallDiagnosisSettings {
         sim,
         ..HallDiagnosisSettings::default()
@@ -357,6 +368,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     settings.diagnose.sensor_bias_rival_bic = args.sensor_bias_rival;
     settings.model_form = !args.no_model_form;
     settings.diagnose.robust_nu = robust_nu;
+    settings.diagnose.noise_sigma = noise;
     settings.refit_top = args.refit;
     settings.refit_iterations = args.refit_iterations;
     if args.model == DiagnoseModel::Openfoam {
@@ -579,4 +591,16 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         println!("\n{line}");
     }
     Ok(())
+}
+
+/// `--noise`, checked: a finite standard deviation above 0.
+pub(super) fn noise_arg(noise: Option<f64>) -> CliResult<Option<f64>> {
+    match noise {
+        Some(s) if !(s.is_finite() && s > 0.0) => Err(CliError::Input(format!(
+            "--noise: expected the measurements' noise, a finite standard deviation above 0, \
+             got {}",
+            kalibre_dc::snapshots::number(s)
+        ))),
+        _ => Ok(noise),
+    }
 }

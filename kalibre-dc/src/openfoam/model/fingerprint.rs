@@ -92,11 +92,24 @@ mod tests {
         serde_json::from_value(json).unwrap()
     }
 
-    fn fingerprints_of(hall: &Hall) -> (String, String) {
+    /// What `OpenFoamModel::new` builds before its keys, with default settings.
+    fn parts_of(
+        hall: &Hall,
+    ) -> (
+        OpenFoamSettings,
+        CaseExtras,
+        CaseGeometry,
+        Vec<Box<dyn Effect>>,
+    ) {
         let settings = OpenFoamSettings::default().check().unwrap();
         let effects = EffectRegistry::builtin().build_all(hall).unwrap();
         let extras = case_extras(hall, &effects).unwrap();
         let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras).unwrap();
+        (settings, extras, geometry, effects)
+    }
+
+    fn fingerprints_of(hall: &Hall) -> (String, String) {
+        let (settings, extras, geometry, effects) = parts_of(hall);
         let inputs = Inputs {
             settings: &settings,
             mode: hall.calibrate.alpha,
@@ -104,6 +117,35 @@ mod tests {
             extras: &extras,
         };
         fingerprints(hall, &effects, &inputs).unwrap()
+    }
+
+    fn case_keys_of(hall: &Hall) -> (String, String) {
+        let (settings, extras, geometry, _) = parts_of(hall);
+        let settings_json = serde_json::to_string(&settings).unwrap();
+        super::super::case_keys(hall, &geometry, &extras, &settings_json)
+    }
+
+    /// `base` with other bounds and initial values (of alphas and effects).
+    fn searched(base: &Hall) -> Hall {
+        let mut searched = base.clone();
+        searched.server_types[0].alpha_cfm_per_w.max = 1.0;
+        searched.server_types[1].alpha_cfm_per_w.initial = 0.4;
+        searched.effects[0]
+            .fields
+            .insert("offset_c_bounds".into(), serde_json::json!([-1.0, 1.0]));
+        searched.effects[1]
+            .fields
+            .insert("fraction".into(), serde_json::json!(0.3));
+        searched
+    }
+
+    /// `base` with its recirculation gap through another rack.
+    fn moved(base: &Hall) -> Hall {
+        let mut moved = base.clone();
+        moved.effects[1]
+            .fields
+            .insert("rack".into(), serde_json::json!("B2"));
+        moved
     }
 
     /// The legacy fingerprints are the values `OpenFoamModel::new` gave these halls with
@@ -120,36 +162,14 @@ mod tests {
     fn bounds_and_initial_values_are_not_in_the_fingerprint() {
         let base = hall(true);
         let (fingerprint, legacy) = fingerprints_of(&base);
-        let mut searched = base.clone();
-        searched.server_types[0].alpha_cfm_per_w.max = 1.0;
-        searched.server_types[1].alpha_cfm_per_w.initial = 0.4;
-        searched.effects[0]
-            .fields
-            .insert("offset_c_bounds".into(), serde_json::json!([-1.0, 1.0]));
-        searched.effects[1]
-            .fields
-            .insert("fraction".into(), serde_json::json!(0.3));
-        let (same, other_legacy) = fingerprints_of(&searched);
+        let (same, other_legacy) = fingerprints_of(&searched(&base));
         assert_eq!(same, fingerprint);
         assert_ne!(other_legacy, legacy);
         // Where the effect acts, and the hall's physics, are the model's.
-        let mut moved = base.clone();
-        moved.effects[1]
-            .fields
-            .insert("rack".into(), serde_json::json!("B2"));
-        assert_ne!(fingerprints_of(&moved).0, fingerprint);
+        assert_ne!(fingerprints_of(&moved(&base)).0, fingerprint);
         let mut cooler = base;
         cooler.cracs[0].rated_flow_m3_s *= 1.1;
         assert_ne!(fingerprints_of(&cooler).0, fingerprint);
-    }
-
-    fn case_keys_of(hall: &Hall) -> (String, String) {
-        let settings = OpenFoamSettings::default().check().unwrap();
-        let effects = EffectRegistry::builtin().build_all(hall).unwrap();
-        let extras = case_extras(hall, &effects).unwrap();
-        let geometry = CaseGeometry::with_extras(hall, settings.grid_m, &extras).unwrap();
-        let settings_json = serde_json::to_string(&settings).unwrap();
-        super::super::case_keys(hall, &geometry, &extras, &settings_json)
     }
 
     /// A case meshed by an earlier version is found under the name it gave; an edited
@@ -161,20 +181,10 @@ mod tests {
         let (key, legacy) = case_keys_of(&base);
         assert_eq!(case_keys_of(&hall(false)).1, "1a808ce324641dae");
         assert_eq!(legacy, "e28b5c4085499157");
-        let mut searched = base.clone();
-        searched.server_types[0].alpha_cfm_per_w.max = 1.0;
-        searched.server_types[1].alpha_cfm_per_w.initial = 0.4;
-        searched.effects[0]
-            .fields
-            .insert("offset_c_bounds".into(), serde_json::json!([-1.0, 1.0]));
-        let (same, other_legacy) = case_keys_of(&searched);
+        let (same, other_legacy) = case_keys_of(&searched(&base));
         assert_eq!(same, key);
         assert_ne!(other_legacy, legacy);
-        let mut moved = base.clone();
-        moved.effects[1]
-            .fields
-            .insert("rack".into(), serde_json::json!("B2"));
-        assert_ne!(case_keys_of(&moved).0, key);
+        assert_ne!(case_keys_of(&moved(&base)).0, key);
         let mut shifted = base;
         shifted.sensors[0].position_m[2] += 0.1;
         assert_ne!(case_keys_of(&shifted).0, key);

@@ -79,12 +79,22 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
     let report_path = args.calibration.join("report.json");
     let (report, params) = read_report(&report_path, &cfg, config, obs.scales().is_some())?;
     check_same_measurements(&report_path, &report, &obs, measurements)?;
+    let noise = super::noise_arg(args.noise)?;
+    if noise.is_some() && obs.scales().is_some() {
+        // The residuals the ranking reads are then in scale units, not the readings'.
+        return Err(CliError::Input(format!(
+            "--noise: {} gives the outputs scales, so the diagnosis weighs residuals in \
+             scale units: leave --noise out (a scale is the noise a residual is measured in)",
+            config.display()
+        )));
+    }
     let settings = DiagnoseSettings::new()
         .with_single_output_check(!args.no_single_output_check)
         .with_robust_nu(args.likelihood.robust_nu(args.nu)?);
     let settings = DiagnoseSettings {
         ambiguity_check: !args.no_ambiguity_check,
         sensor_bias_rival_bic: args.sensor_bias_rival,
+        noise_sigma: noise,
         ..settings
     };
     let _lock = super::super::out_dir::lock(&args.calibration, "diagnose")?;
