@@ -546,21 +546,25 @@ fn a_whole_hall_offset_beside_one_for_every_crac_is_refused() {
     assert!(e.starts_with(&format!("hall.json: /effects/{last}")), "{e}");
 }
 
+/// The y range (m) of the floor strip a `bypass` behind `rack` opens, or the entry's
+/// error.
+fn strip_y(hall: &Hall, rack: &str) -> Result<[f64; 2], String> {
+    let e = from_spec(
+        &spec(json!({"kind": "bypass", "behind_rack": rack, "fraction": 0.1})),
+        hall,
+    )
+    .map_err(|e| e.to_string())?;
+    let mut mods = SimMods::new(hall.cracs.len());
+    e.modify(&[0.1], hall, &mut mods).unwrap();
+    let r = mods.supply_openings[0].region;
+    Ok([r.min[1], r.max[1]])
+}
+
 /// The strip behind a rack ends at a CRAC (or rack) behind the exhaust, as it ends at
 /// the wall: no air enters under a solid. A rack whose exhaust touches one has no strip.
 #[test]
 fn a_strip_behind_a_rack_ends_at_the_solid_behind_it() {
-    let strip = |hall: &Hall, rack: &str| -> Result<[f64; 2], String> {
-        let e = from_spec(
-            &spec(json!({"kind": "bypass", "behind_rack": rack, "fraction": 0.1})),
-            hall,
-        )
-        .map_err(|e| e.to_string())?;
-        let mut mods = SimMods::new(hall.cracs.len());
-        e.modify(&[0.1], hall, &mut mods).unwrap();
-        let r = mods.supply_openings[0].region;
-        Ok([r.min[1], r.max[1]])
-    };
+    let strip = strip_y;
     let mut hall = demo_hall();
     // Row A (y 1.8-3.0) exhausts towards -y; a CRAC 0.2 m behind A01 (x 1.8-2.4).
     hall.cracs[0].position_m = [1.8, 0.0, 0.0];
@@ -597,17 +601,7 @@ fn a_strip_behind_a_rack_ends_at_the_solid_behind_it() {
 /// `position_m` opening over a tile is refused). A tile at the rack's back leaves none.
 #[test]
 fn a_strip_behind_a_rack_ends_at_a_tile_behind_it() {
-    let strip = |hall: &Hall| -> Result<[f64; 2], String> {
-        let e = from_spec(
-            &spec(json!({"kind": "bypass", "behind_rack": "A01", "fraction": 0.1})),
-            hall,
-        )
-        .map_err(|e| e.to_string())?;
-        let mut mods = SimMods::new(hall.cracs.len());
-        e.modify(&[0.1], hall, &mut mods).unwrap();
-        let r = mods.supply_openings[0].region;
-        Ok([r.min[1], r.max[1]])
-    };
+    let strip = |hall: &Hall| strip_y(hall, "A01");
     let mut hall = demo_hall();
     let rack = hall.racks.iter().find(|r| r.id == "A01").unwrap().clone();
     let (x0, back) = (rack.position_m[0], rack.position_m[1]);

@@ -220,17 +220,8 @@ impl EffectFactory for BypassFactory {
                         .solid_boxes()
                         .filter(|(_, other, _)| *other != id)
                         .map(|(what, other, o)| (format!("{what} `{other}`"), o));
-                    let tiles = hall.tiles.iter().enumerate().map(|(i, t)| {
-                        let tile = Aabb {
-                            min: [t.position_m[0], t.position_m[1], 0.0],
-                            max: [
-                                t.position_m[0] + t.size_m[0],
-                                t.position_m[1] + t.size_m[1],
-                                room[2],
-                            ],
-                        };
-                        (format!("tile {i} (/tiles/{i})"), tile)
-                    });
+                    let tiles = (hall.tiles.iter().enumerate())
+                        .map(|(i, t)| (format!("tile {i} (/tiles/{i})"), t.column(room[2])));
                     for (what, o) in solids.chain(tiles) {
                         if !column(&region).overlaps(&o, GEOMETRY_TOL_M) {
                             continue;

@@ -1,6 +1,6 @@
 //! Geometry derived from a hall: server boxes, intake and exhaust faces, distances.
 
-use super::types::{Hall, Rack, Server, Side};
+use super::types::{Hall, Rack, Server, Side, Tile};
 
 /// An axis-aligned box `[min, max]` (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -65,6 +65,19 @@ pub struct ServerRef<'a> {
     pub rack: &'a Rack,
     /// The server.
     pub server: &'a Server,
+}
+
+impl Tile {
+    /// The column of air above the tile, from the floor up to `height_m`: what a rack,
+    /// a CRAC or a floor opening must keep clear of.
+    pub fn column(&self, height_m: f64) -> Aabb {
+        let [x, y] = self.position_m;
+        let [dx, dy] = self.size_m;
+        Aabb {
+            min: [x, y, 0.0],
+            max: [x + dx, y + dy, height_m],
+        }
+    }
 }
 
 impl ServerRef<'_> {

@@ -318,15 +318,7 @@ impl Hall {
     fn check_tiles_clear(&self, c: &Checker, room: [f64; 3]) -> Result<()> {
         for (what, id, solid) in self.solid_boxes() {
             for (i, t) in self.tiles.iter().enumerate() {
-                let tile = Aabb {
-                    min: [t.position_m[0], t.position_m[1], 0.0],
-                    max: [
-                        t.position_m[0] + t.size_m[0],
-                        t.position_m[1] + t.size_m[1],
-                        room[2],
-                    ],
-                };
-                if tile.overlaps(&solid, GEOMETRY_TOL_M) {
+                if t.column(room[2]).overlaps(&solid, GEOMETRY_TOL_M) {
                     return Err(c.err(
                         format!("/tiles/{i}"),
                         format!(
