@@ -196,6 +196,29 @@ fn a_full_stdout_or_stderr_is_an_error_not_a_panic() {
     assert_eq!(o.status.code(), Some(2));
 }
 
+/// Each output whole or not at all, the side tables before the predictions: a table that
+/// cannot be written (a full device) leaves --out as it was, not new predictions beside
+/// an old table.
+#[test]
+fn a_side_table_that_cannot_be_written_leaves_the_predictions_as_they_were() {
+    let dir = tmp("full-table");
+    let pred = dir.join("pred.csv");
+    std::fs::write(&pred, "old\n").unwrap();
+    for flag in ["--servers", "--heat-sources"] {
+        let o = simulate(&[
+            "--out".as_ref(),
+            os(&pred),
+            flag.as_ref(),
+            "/dev/full".as_ref(),
+        ]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{flag}: {err}");
+        assert!(err.contains("/dev/full"), "{flag}: {err}");
+        assert_eq!(std::fs::read_to_string(&pred).unwrap(), "old\n", "{flag}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_hidden_effect_of_size_zero_or_not_a_number_is_refused() {
     let dir = tmp("inert");

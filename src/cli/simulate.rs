@@ -515,16 +515,18 @@ pub fn run(args: SimulateArgs) -> CliResult {
         labels.push(state.label.clone());
         predicted.push(solution.sensor_c().to_vec());
     }
-    let csv = snapshots::write_predictions(&hall, &labels, &predicted);
-    kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
+    // Each file whole or not at all, the side tables first: a failure there leaves the
+    // predictions of --out as they were, not new predictions beside old tables.
     if let Some(path) = &args.servers {
-        std::fs::write(path, kalibre_dc::sim::write_server_air(&air))
+        kalibre_core::write_atomic(path, kalibre_dc::sim::write_server_air(&air))
             .map_err(|e| io_err(path, e))?;
     }
     if let Some(path) = &args.heat_sources {
-        std::fs::write(path, kalibre_dc::sim::write_rack_heat(&sources))
+        kalibre_core::write_atomic(path, kalibre_dc::sim::write_rack_heat(&sources))
             .map_err(|e| io_err(path, e))?;
     }
+    let csv = snapshots::write_predictions(&hall, &labels, &predicted);
+    kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
     say_if_uncalibrated(&args);
     for (label, check) in labels.iter().zip(&checks) {
         say!("{}", inlet_line(label, check));

@@ -121,11 +121,12 @@ pub(super) fn run(
         labels.push(label.clone());
         predicted.push(out.values);
     }
+    // Each file whole or not at all, the side table first (as the built-in model's).
+    if let Some(path) = &args.servers {
+        kalibre_core::write_atomic(path, write_server_air(&air)).map_err(|e| io_err(path, e))?;
+    }
     let csv = snapshots::write_predictions(&hall, &labels, &predicted);
     kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
-    if let Some(path) = &args.servers {
-        std::fs::write(path, write_server_air(&air)).map_err(|e| io_err(path, e))?;
-    }
     super::simulate::say_if_uncalibrated(args);
     for (label, check) in labels.iter().zip(&checks) {
         say!("{}", inlet_line(label, check));

@@ -10,7 +10,8 @@
 //!
 //! A Jacobian's runs take an iteration number of their own, and the step after it the
 //! next; each step has a history record, and the Jacobian's iteration one too when one of
-//! its runs became the best point, so that the report's best iteration always has one.
+//! its runs became the best point, so that the report's best iteration always has one
+//! (but 0, the initial design, which is recorded under `initial`).
 
 use std::time::Instant;
 

@@ -116,7 +116,8 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     no_model_form: bool,
     /// Write FILE: the hall with the top significant suggestion added to its effects, and
-    /// the calibrated values as every parameter's initial value (a warm start), ready for
+    /// the calibrated values refitted beside it (the linearised joint fit that sized the
+    /// suggestion) as every parameter's initial value (a warm start), ready for
     /// the next `kalibre calibrate --hall FILE`. Not written when nothing is significant.
     #[arg(long = "write-hall", value_name = "FILE")]
     write_hall: Option<PathBuf>,
