@@ -26,7 +26,7 @@ pub enum ModelError {
         /// a finite number (kalibre's runners always give one; a model of your own might
         /// not) is journaled as `null` and read back as NaN, so the run's line still
         /// loads.
-        #[serde(deserialize_with = "null_as_nan")]
+        #[serde(deserialize_with = "crate::number::null_as_nan")]
         seconds: f64,
         /// The end of the run's log, when there is one.
         #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -66,11 +66,6 @@ pub enum ModelError {
         /// The limit it breaks, in words.
         reason: String,
     },
-}
-
-/// Reads `null` (how JSON writes a non-finite number) back as NaN.
-fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 impl ModelError {

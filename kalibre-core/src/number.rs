@@ -71,13 +71,29 @@ pub const MAX_NAME_CHARS: usize = 200;
 /// assert!(unprintable_name(&"x".repeat(201)).unwrap().contains("201 characters"));
 /// ```
 pub fn unprintable_name(name: &str) -> Option<String> {
-    if let Some(c) = name.chars().find(|c| c.is_control()) {
-        return Some(format!(
-            "holds a control character (U+{:04X}); expected printable text",
-            c as u32
-        ));
+    if let Some(why) = control_character(name) {
+        return Some(why);
     }
     let n = name.chars().count();
     (n > MAX_NAME_CHARS)
         .then(|| format!("is {n} characters long; expected at most {MAX_NAME_CHARS}"))
+}
+
+/// Reads `null` (how JSON writes a non-finite number) back as NaN, so that a file
+/// holding one (a report with a diverged fit, a journaled timeout without a finite
+/// limit) still loads.
+pub(crate) fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// The first control character of `name`, as the reason it cannot be printed as it is
+/// (an escape sequence would reach the terminal, a NUL byte no argument or file can
+/// carry).
+pub(crate) fn control_character(name: &str) -> Option<String> {
+    let c = name.chars().find(|c| c.is_control())?;
+    Some(format!(
+        "holds a control character (U+{:04X}); expected printable text",
+        c as u32
+    ))
 }

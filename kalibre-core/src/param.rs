@@ -54,13 +54,10 @@ impl Param {
                 reason: "the name is empty; expected a name".into(),
             });
         }
-        if let Some(c) = name.chars().find(|c| c.is_control()) {
+        if let Some(why) = crate::number::control_character(&name) {
             return Err(Error::InvalidParam {
                 name: name.escape_debug().to_string(),
-                reason: format!(
-                    "the name holds a control character (U+{:04X}); expected printable text",
-                    c as u32
-                ),
+                reason: format!("the name {why}"),
             });
         }
         let bad = |reason: String| Error::InvalidParam {

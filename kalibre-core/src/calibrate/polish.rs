@@ -225,9 +225,6 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                         .collect()
                 };
                 let mut failed = Vec::new();
-                // Each difference's point and what its runs gave: the record of this
-                // iteration, should one of them become the best.
-                let mut probes = Vec::with_capacity(dim);
                 for (i, res) in results.into_iter().enumerate() {
                     cols.push(match all_ran(&res) {
                         Some(out) => column(&out, steps[i]),
@@ -236,9 +233,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                             vec![0.0; r0.len()]
                         }
                     });
-                    let eval =
-                        state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res)?;
-                    probes.push((points[i].clone(), phys[i].clone(), eval));
+                    state.absorb(self.validator, obs, iteration, &points[i], &phys[i], res)?;
                 }
                 // A difference that failed (the model cannot run just beyond the best
                 // point: a diverging solver at the box's edge, say) is taken on the other
@@ -269,8 +264,7 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                             cols[*i] = column(&out, -steps[*i]);
                             failed.retain(|f| f != i);
                         }
-                        let eval = state.absorb(self.validator, obs, iteration, u, p, res)?;
-                        probes.push((u.clone(), p.clone(), eval));
+                        state.absorb(self.validator, obs, iteration, u, p, res)?;
                     }
                 }
                 // The report names the best point by its iteration, and every number it
@@ -278,15 +272,15 @@ impl<M: Model, V: Validator> Polish<'_, '_, M, V> {
                 // iteration's (the step's record, next, is another point's).
                 let probe_best = (state.best.as_ref())
                     .filter(|b| b.iteration == iteration)
-                    .and_then(|b| probes.iter().find(|(u, _, _)| *u == b.unit));
-                if let Some((_, params, eval)) = probe_best {
+                    .map(|b| (b.params.clone(), b.eval(n_snap)));
+                if let Some((params, eval)) = probe_best {
                     let rec = record(
                         iteration,
                         state,
-                        eval,
+                        &eval,
                         n_snap,
                         self.names,
-                        params,
+                        &params,
                         StepInfo {
                             fit_mse: f64::NAN,
                             training_samples: 0,

@@ -81,12 +81,6 @@ impl<'de> Deserialize<'de> for NamedValues {
     }
 }
 
-/// Reads `null` (how JSON writes a non-finite number) back as NaN, so a report with a
-/// diverged fit or search still loads.
-fn null_as_nan<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
-}
-
 /// MAE, RMSE and max absolute error of a set of values.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -167,16 +161,16 @@ pub struct IterationRecord {
     /// Per output group (e.g. aisle).
     pub per_group: BTreeMap<String, Errors>,
     /// Surrogate training MSE after step 1.
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::number::null_as_nan")]
     pub fit_mse: f64,
     /// Training samples of step 1 (augmented copies included).
     pub training_samples: usize,
     /// Search loss at the proposal (step 2).
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::number::null_as_nan")]
     pub search_loss: f64,
     /// The data term of the search loss (surrogate MSE against the measurements) at the
     /// proposal; `search_loss` minus this is the weighted regulariser.
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::number::null_as_nan")]
     pub search_data_mse: f64,
     /// Objective evaluations of the search.
     pub search_evaluations: usize,

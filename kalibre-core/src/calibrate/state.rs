@@ -19,6 +19,18 @@ pub(crate) struct BestPoint {
     pub(crate) outputs: Vec<Vec<f64>>,
 }
 
+impl BestPoint {
+    /// What its runs gave, as [`State::absorb`] returned it: a best point ran at every one
+    /// of the `n_snap` snapshots.
+    pub(crate) fn eval(&self, n_snap: usize) -> PointEval {
+        PointEval {
+            validation: Some(self.validation.clone()),
+            score: Some(self.score),
+            ok_runs: n_snap,
+        }
+    }
+}
+
 /// What one point's runs gave.
 pub(crate) struct PointEval {
     pub(crate) validation: Option<Validation>,

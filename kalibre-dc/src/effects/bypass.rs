@@ -156,15 +156,9 @@ impl EffectFactory for BypassFactory {
                     // On a tile, the floor there would deliver the tile's share and the
                     // opening's: the same double count that overlapping tiles are refused
                     // for.
-                    let slab = |min: [f64; 2], max: [f64; 2]| Aabb {
-                        min: [min[0], min[1], 0.0],
-                        max: [max[0], max[1], 1.0],
-                    };
-                    let opening = slab([p[0], p[1]], [p[0] + sz[0], p[1] + sz[1]]);
-                    if let Some(i) = hall.tiles.iter().position(|t| {
-                        let end = [t.position_m[0] + t.size_m[0], t.position_m[1] + t.size_m[1]];
-                        opening.overlaps(&slab(t.position_m, end), GEOMETRY_TOL_M)
-                    }) {
+                    if let Some(i) = (hall.tiles.iter())
+                        .position(|t| column.overlaps(&t.column(room[2]), GEOMETRY_TOL_M))
+                    {
                         return Err(f.error(
                             "position_m",
                             format!(

@@ -36,15 +36,18 @@ impl<'a> Fields<'a> {
                     .flat_map(|p| [p.to_string(), format!("{p}_bounds")]),
             )
             .collect();
-        // `extra` is free-form in every object of the format, an entry's too.
-        let mut unknown: Vec<&String> = (self.map.keys())
-            .filter(|k| *k != "extra" && !known.contains(k))
-            .collect();
-        unknown.sort();
-        match unknown.first() {
+        match self.first_unknown(|k| known.iter().any(|f| f == k)) {
             None => Ok(self),
             Some(k) => Err(self.error(k, format!("unknown field (known: {})", known.join(", ")))),
         }
+    }
+
+    /// The first field, in name order, that `known` does not take, leaving out the
+    /// free-form `extra` (which every object of the format may carry, an entry too).
+    fn first_unknown(&self, known: impl Fn(&str) -> bool) -> Option<&'a String> {
+        (self.map.keys())
+            .filter(|k| *k != "extra" && !known(k))
+            .min()
     }
 
     /// An error about `field`.
@@ -164,11 +167,7 @@ impl<'a> Fields<'a> {
 
     /// Rejects fields that were not read (but the free-form `extra`).
     pub fn finish(self) -> Result<()> {
-        let mut unknown: Vec<&String> = (self.map.keys())
-            .filter(|k| *k != "extra" && !self.used.contains(k))
-            .collect();
-        unknown.sort();
-        match unknown.first() {
+        match self.first_unknown(|k| self.used.iter().any(|f| f == k)) {
             None => Ok(()),
             Some(k) => Err(Error::Effect {
                 kind: self.kind.to_string(),

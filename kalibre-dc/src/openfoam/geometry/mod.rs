@@ -133,11 +133,30 @@ fn geo(field: impl Into<String>, message: impl Into<String>) -> OpenFoamError {
 
 impl CaseGeometry {
     /// Everything the mesh is built from, as text (for the case directory's key): the
-    /// geometry without its per-cell solid map, which the solid boxes give.
+    /// geometry without its per-cell solid map, which the solid boxes give. (Every field
+    /// is named, so that a field added later must be placed here or left out on
+    /// purpose.)
     pub fn mesh_description(&self) -> String {
-        let mut g = self.clone();
-        g.solid = Vec::new();
-        format!("{g:?}")
+        let CaseGeometry {
+            h,
+            n,
+            size_m,
+            solids,
+            servers,
+            tiles,
+            openings,
+            gaps,
+            returns,
+            panels,
+            panel_zones,
+            probes,
+            fluid_cells,
+            solid: _,
+        } = self;
+        format!(
+            "{h:?} {n:?} {size_m:?} {solids:?} {servers:?} {tiles:?} {openings:?} {gaps:?} \
+             {returns:?} {panels:?} {panel_zones:?} {probes:?} {fluid_cells:?}"
+        )
     }
 
     /// Places `hall` on a grid of cell size `h` (m). Every box edge must lie on a grid line.
