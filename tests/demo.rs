@@ -176,7 +176,48 @@ fn demo_names_the_hidden_effect_and_the_error_falls() {
         serde_json::from_str(&std::fs::read_to_string(out.join("hall-with-effect.json")).unwrap())
             .unwrap();
     assert_eq!(hall["effects"][0]["kind"], "rack_recirculation");
-    assert!(out.join("diagnosis-1.json").is_file());
+    // Each diagnosis-N.json is the document `diagnose --json` prints: the ranking, and
+    // where step N's calibration fails, worst sensor first, with the racks warming each.
+    let diagnosis: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis-1.json")).unwrap())
+            .unwrap();
+    let step1: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("step-1/report.json")).unwrap())
+            .unwrap();
+    let mut by_sensor: std::collections::BTreeMap<&str, (f64, f64)> = Default::default();
+    for r in step1["residuals"].as_array().unwrap() {
+        let e = by_sensor.entry(r["sensor"].as_str().unwrap()).or_default();
+        e.0 += r["predicted_c"].as_f64().unwrap() - r["measured_c"].as_f64().unwrap();
+        e.1 += 1.0;
+    }
+    let worst_mean = by_sensor
+        .iter()
+        .map(|(s, (sum, n))| (*s, sum / n))
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .unwrap();
+    let listed = diagnosis["worst_sensors"]
+        .as_array()
+        .expect("worst_sensors");
+    assert_eq!(listed.len(), 5, "{listed:?}");
+    assert_eq!(listed[0]["sensor"], worst_mean.0, "{listed:?}");
+    assert!((listed[0]["mean_residual_c"].as_f64().unwrap() - worst_mean.1).abs() < 1e-9);
+    assert!(
+        listed
+            .iter()
+            .all(|w| w["warming"].is_object() || w["warming"].is_null()),
+        "{listed:?}"
+    );
+    assert!(
+        stdout.contains(&format!("    {:<12}", worst_mean.0)),
+        "{stdout}"
+    );
+    // The demo's snapshots are steady: none is off at every sensor.
+    assert_eq!(
+        diagnosis["odd_snapshots"],
+        serde_json::json!([]),
+        "{diagnosis}"
+    );
+    assert!(diagnosis["hypotheses"].is_array());
     assert!(out.join("step-2/report.json").is_file());
     assert!(!out.join("step-7").exists() && !out.join("diagnosis-5.json").exists());
     assert!(out.join("notes.txt").is_file());

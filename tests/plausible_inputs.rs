@@ -1,12 +1,13 @@
 //! Inputs that parse but describe no hall: a CRAC air flow or server powers in the wrong
 //! unit. `simulate`, `calibrate` and `diagnose` warn, naming the files, the snapshot and
-//! the figure that gives it away, and go on (the user may mean it).
+//! the figure that gives it away, and go on (the user may mean it); a rise no model run
+//! could give is refused before any run.
 
 mod cli_support;
 
 use std::path::Path;
 
-use cli_support::{data, kalibre, run, stderr, tmp};
+use cli_support::{assert_input_error, data, kalibre, on_files, run, stderr, tmp};
 
 /// `kalibre simulate` of `hall` and `snapshots` into `dir`: its stderr, after checking it
 /// succeeded.
@@ -121,4 +122,54 @@ fn unit_slips_in_flow_or_power_are_named_and_real_halls_are_not() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("rated_flow_m3_s"), "{err}");
     assert!(err.contains("report.json is a directory"), "{err}");
+}
+
+#[test]
+fn a_rise_no_model_can_give_is_refused_naming_the_inputs() {
+    let dir = tmp("plausible-impossible");
+    let hall = data("of-dev-clean/hall.json");
+    let snaps = data("of-dev-clean/snapshots.csv");
+    // Every fan of t0 a billionth of full speed: a valid ratio, but 60 kW on 3.5e-9 m3/s
+    // of air is a rise of about 1e10 K, and every run would fail as implausible.
+    let text = std::fs::read_to_string(&snaps).unwrap();
+    let still: String = text
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            if f.len() == 4 && f[0] == "t0" && f[1] == "fan_speed" {
+                format!("{},{},{},1e-9\n", f[0], f[1], f[2])
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    let still_path = dir.join("still.csv");
+    std::fs::write(&still_path, still).unwrap();
+    let o = run(on_files("simulate", &hall, &still_path)
+        .arg("--out")
+        .arg(dir.join("predicted.csv")));
+    assert_input_error(&o, "still.csv: snapshot `t0`");
+    let err = stderr(&o);
+    for needle in ["hall.json", "fan_speed", "10000 C"] {
+        assert!(err.contains(needle), "`{needle}` not in {err}");
+    }
+    assert!(!dir.join("predicted.csv").exists());
+    let o = run(on_files("calibrate", &hall, &still_path)
+        .arg("--out")
+        .arg(dir.join("cal")));
+    assert_input_error(&o, "still.csv: snapshot `t0`");
+    assert!(!dir.join("cal").join("runs.jsonl").exists());
+
+    // A what-if that takes the hall there is refused by its flag; x1000 of 60 kW on
+    // 3.5 m3/s is about 15,000 K.
+    let o = run(on_files("simulate", &hall, &snaps)
+        .args(["--power-scale", "1000", "--out"])
+        .arg(dir.join("what-if.csv")));
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("what if server powers x1000: snapshot `t0`") && err.contains("10000 C"),
+        "{err}"
+    );
+    assert!(!dir.join("what-if.csv").exists());
 }

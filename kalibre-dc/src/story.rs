@@ -25,9 +25,9 @@ use crate::effects::EffectRegistry;
 use crate::hall::{EffectSpec, Hall};
 pub use crate::next_hall::{with_effect_from_report, with_effect_refitted};
 use crate::report::{ThermalPlane, INLET_HEIGHT_M};
-use crate::sim::intake_error;
+use crate::sim::{intake_error, RackHeat};
 use crate::snapshots::HallSnapshot;
-use crate::{Error, Result};
+use crate::{Error, HallModel, Result};
 
 /// The schema tag of `story.json`.
 pub const STORY_SCHEMA: &str = "kalibre.story/1";
@@ -277,6 +277,9 @@ pub enum StoryEvent<'a> {
         full: &'a HallDiagnosis,
         /// The calibration it diagnoses (its residuals show where the model fails).
         calibration: &'a Report,
+        /// Every rack's part of every sensor's warming in the calibrated model's flow at
+        /// the first snapshot ([`HallModel::rack_heat`]).
+        heat: &'a [RackHeat],
     },
     /// The diagnosis after the last calibration failed (the story goes on).
     DiagnosisFailed {
@@ -397,17 +400,28 @@ pub fn run_story(
             Err(e) => return Err(e),
         };
         let diag = summarise(index, &full, t.elapsed().as_secs_f64());
+        // Which racks warm each sensor in the calibrated model's flow (the first
+        // snapshot, as `kalibre diagnose` says): where a missing effect would act.
+        let heat = match snaps.first() {
+            Some(first) => {
+                HallModel::new(&current, settings.calibration.sim.clone())?
+                    .rack_heat(&first.state, &best)?
+                    .1
+            }
+            None => Vec::new(),
+        };
         if let Some(dir) = out_dir {
             write_json(
                 dir,
                 &format!("diagnosis-{}.json", index + 1),
-                &full.to_json(),
+                &full.document(&current, &cal.report.residuals, Some(&heat)),
             )?;
         }
         observer(&StoryEvent::DiagnosisDone {
             step: &diag,
             full: &full,
             calibration: &cal.report,
+            heat: &heat,
         });
         let top = diag.top_significant().cloned();
         diagnoses.push(diag);

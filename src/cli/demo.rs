@@ -3,19 +3,16 @@
 //! named), add it, recalibrate (the error falls), and write the report.
 
 use std::path::PathBuf;
-use std::sync::Mutex;
 
 use clap::Args;
-use kalibre_dc::diagnosis::hypothesis_flags;
+use kalibre_dc::diagnosis::{hypothesis_flags, worst_sensors};
 use kalibre_dc::hall::{EffectSpec, Hall};
-use kalibre_dc::sim::{RackHeat, SimConfig};
-use kalibre_dc::snapshots::OperatingState;
+use kalibre_dc::sim::RackHeat;
 use kalibre_dc::story::{run_story, StoryEvent, StoryOutcome, StoryReport, StorySettings};
 use kalibre_dc::synth::{self, parse_effect_arg, Preset, SynthOptions};
 
-use super::diagnose::{sensor_line, warming_racks, worst_sensors};
+use super::diagnose::{sensor_line, warming_racks};
 use super::{with_threads, CliError, CliResult};
-use kalibre_dc::HallModel;
 
 /// The effect hidden in the demo's truth when `--effect` is not given.
 pub const DEFAULT_EFFECT: &str = "rack_recirculation";
@@ -186,23 +183,7 @@ pub fn run(args: DemoArgs) -> CliResult {
         ..StorySettings::default()
     };
     let floor = settings.reference_mae_c;
-    // The hall as calibrated so far: effects join it as the story adds them.
-    let current = Mutex::new(hall.clone());
-    let sim = settings.calibration.sim.clone();
-    let first = synth.snapshots.first().map(|s| &s.state);
-    let observer = |e: &StoryEvent<'_>| {
-        if let StoryEvent::EffectAdded { hall, .. } = e {
-            *current.lock().unwrap_or_else(|p| p.into_inner()) = (*hall).clone();
-        }
-        let warming = match (e, first) {
-            (StoryEvent::DiagnosisDone { calibration, .. }, Some(first)) => {
-                let hall = current.lock().unwrap_or_else(|p| p.into_inner());
-                Some(sensor_warming_rows(&hall, &sim, first, calibration))
-            }
-            _ => None,
-        };
-        print_event(hall, floor, e, warming.as_ref());
-    };
+    let observer = |e: &StoryEvent<'_>| print_event(hall, floor, e);
     let story = with_threads(args.threads, || {
         run_story(
             hall,
@@ -237,29 +218,8 @@ pub fn run(args: DemoArgs) -> CliResult {
     Ok(())
 }
 
-/// Which racks warm each sensor in the calibrated model's flow in `state` (rows with no
-/// cut), or why that could not be worked out.
-fn sensor_warming_rows(
-    hall: &Hall,
-    sim: &SimConfig,
-    state: &OperatingState,
-    calibration: &kalibre_core::calibrate::Report,
-) -> Result<Vec<RackHeat>, String> {
-    let model = HallModel::new(hall, sim.clone()).map_err(|e| e.to_string())?;
-    model
-        .rack_heat(state, &calibration.best.params.values())
-        .map(|(_, rows)| rows)
-        .map_err(|e| e.to_string())
-}
-
-/// Prints each step as it happens (`warming`: with a diagnosis, which racks warm each
-/// sensor in the calibrated model's flow).
-fn print_event(
-    hall: &Hall,
-    floor: Option<f64>,
-    e: &StoryEvent<'_>,
-    warming: Option<&Result<Vec<RackHeat>, String>>,
-) {
+/// Prints each step as it happens.
+fn print_event(hall: &Hall, floor: Option<f64>, e: &StoryEvent<'_>) {
     match e {
         StoryEvent::CalibrationStarted { name, index } => {
             println!("\nstep {}: {name}", index + 1)
@@ -306,9 +266,12 @@ fn print_event(
             after_step + 1
         ),
         StoryEvent::DiagnosisDone {
-            step, calibration, ..
+            step,
+            calibration,
+            heat,
+            ..
         } => {
-            print_where(hall, calibration, warming);
+            print_where(hall, calibration, heat);
             println!(
                 "  missing effects, best first: the significant ones, then the others, each in \
                  order of `BIC`, the change of the Bayesian information criterion (lower is \
@@ -348,21 +311,13 @@ fn print_event(
     }
 }
 
-/// The worst sensors, in words, each with the racks that warm it in the model's flow.
-fn print_where(
-    hall: &Hall,
-    report: &kalibre_core::calibrate::Report,
-    warming: Option<&Result<Vec<RackHeat>, String>>,
-) {
+/// The worst sensors, in words, each with the racks that warm it in the model's flow
+/// (`heat`).
+fn print_where(hall: &Hall, report: &kalibre_core::calibrate::Report, heat: &[RackHeat]) {
     println!("  worst sensors (mean over the snapshots):");
-    for (sensor, mean) in worst_sensors(report).iter().take(3) {
+    for (sensor, mean) in worst_sensors(&report.residuals).iter().take(3) {
         println!("    {}", sensor_line(hall, sensor, *mean));
-        if let Some(Ok(rows)) = warming {
-            println!("      {}", warming_racks(rows, sensor, *mean));
-        }
-    }
-    if let Some(Err(e)) = warming {
-        println!("    (which racks warm them could not be worked out: {e})");
+        println!("      {}", warming_racks(heat, sensor, *mean));
     }
 }
 

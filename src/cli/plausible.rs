@@ -1,12 +1,14 @@
 //! Warnings about inputs that read well but no hall produces: a reading colder than the
 //! supply, a unit slip in a CRAC's air flow or in the servers' powers. They warn rather
 //! than refuse, as the user may mean it (a test rig, an idle hall), and name the file and
-//! snapshot to look at.
+//! snapshot to look at. Only a rise no model run could give is refused.
 
 use std::path::Path;
 
 use kalibre_dc::hall::Hall;
 use kalibre_dc::snapshots::{self, HallSnapshot, OperatingState};
+
+use super::CliError;
 
 /// ` (N more such WHAT)` after the first of `count` findings; empty for one.
 fn more_such(count: usize, what: &str) -> String {
@@ -193,17 +195,34 @@ pub(crate) fn warn_setpoints<'a>(
 
 /// Warns of snapshots whose servers' heat and CRACs' air flow give a mean return-air
 /// rise outside the plausible band (a flow in l/s or cfm typed as m3/s, powers in kW
-/// typed as W), naming the two files and the first such snapshot.
+/// typed as W), naming the two files and the first such snapshot. Refuses them when
+/// the rise is past [`kalibre_dc::PLAUSIBLE_SENSOR_C`]: every model run would then be
+/// refused as implausible, so the refusal comes first and names the inputs.
 pub(crate) fn warn_implausible_rises<'a>(
     hall_path: &Path,
     snapshots_path: &Path,
     hall: &Hall,
     states: impl IntoIterator<Item = &'a OperatingState>,
-) {
+) -> Result<(), CliError> {
     let slips = snapshots::implausible_rises(hall, states);
     let Some(first) = slips.first() else {
-        return;
+        return Ok(());
     };
+    if let Some(beyond) = slips.iter().find(|r| r.mean_rise_k > IMPOSSIBLE_RISE_K) {
+        return Err(CliError::Input(format!(
+            "{} and {}: snapshot `{}`: the servers' {} W over the CRACs' {} m3/s of air \
+             (rated_flow_m3_s x fan_speed) would make the return air {} K warmer than the \
+             supply on average, past any temperature a model of the hall can give ({} C); \
+             expected a running fan_speed, a rated_flow_m3_s in m3/s and powers in W",
+            hall_path.display(),
+            snapshots_path.display(),
+            beyond.snapshot,
+            significant(beyond.power_w),
+            significant(beyond.supply_m3_s),
+            significant(beyond.mean_rise_k),
+            IMPOSSIBLE_RISE_K,
+        )));
+    }
     let more = more_such(slips.len(), "snapshots");
     let hint = if first.mean_rise_k > snapshots::MAX_MEAN_RISE_K {
         format!(
@@ -229,7 +248,13 @@ pub(crate) fn warn_implausible_rises<'a>(
         significant(first.supply_m3_s),
         significant(first.mean_rise_k),
     );
+    Ok(())
 }
+
+/// The mean return-air rise (K) no model run can give: the top of
+/// [`kalibre_dc::PLAUSIBLE_SENSOR_C`], which every hall model's outputs are checked
+/// against.
+const IMPOSSIBLE_RISE_K: f64 = *kalibre_dc::PLAUSIBLE_SENSOR_C.end();
 
 /// Warns when a what-if (`what`) takes a snapshot's mean return-air rise past
 /// [`snapshots::MAX_MEAN_RISE_K`]: the predictions and headroom are then the model's
@@ -238,11 +263,21 @@ pub(crate) fn warn_what_if_beyond_halls<'a>(
     what: &str,
     hall: &Hall,
     states: impl IntoIterator<Item = &'a OperatingState>,
-) {
+) -> Result<(), CliError> {
     let beyond: Vec<_> = snapshots::implausible_rises(hall, states)
         .into_iter()
         .filter(|r| r.mean_rise_k > snapshots::MAX_MEAN_RISE_K)
         .collect();
+    if let Some(past) = beyond.iter().find(|r| r.mean_rise_k > IMPOSSIBLE_RISE_K) {
+        return Err(CliError::Input(format!(
+            "what if {what}: snapshot `{}` would run its return air {} K above its supply \
+             on average, past any temperature a model of the hall can give ({} C); expected \
+             a what-if that leaves the hall's air below that",
+            past.snapshot,
+            significant(past.mean_rise_k),
+            IMPOSSIBLE_RISE_K,
+        )));
+    }
     if let Some(first) = beyond.first() {
         eprintln!(
             "kalibre: warning: what if {what}: snapshot `{}` would run its return air {} K \
@@ -254,6 +289,7 @@ pub(crate) fn warn_what_if_beyond_halls<'a>(
             snapshots::MAX_MEAN_RISE_K
         );
     }
+    Ok(())
 }
 
 /// `v` to three significant figures ([`super::significant`]).

@@ -368,7 +368,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     super::plausible::warn_setpoints(&snaps_path, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_alpha_units(&hall_path, &hall);
-    super::plausible::warn_implausible_rises(&hall_path, &snaps_path, &hall, states);
+    super::plausible::warn_implausible_rises(&hall_path, &snaps_path, &hall, states)?;
     if let Some(dir) = &args.vtk {
         check_vtk_names(&snaps)?;
         let files: Vec<(String, PathBuf)> = snaps
@@ -385,7 +385,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     if let Some(what) = &what_if {
         say!("what if: {what} (in every snapshot)");
         let states = snaps.iter().map(|s| &s.state);
-        super::plausible::warn_what_if_beyond_halls(what, &hall, states);
+        super::plausible::warn_what_if_beyond_halls(what, &hall, states)?;
     }
     let file = args.params.as_deref().map(read_params_file).transpose()?;
     args.openfoam

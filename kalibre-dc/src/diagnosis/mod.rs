@@ -3,13 +3,17 @@
 //! the calibrated model itself, see [`EffectSolver`]), each effect kind
 //! supplies its candidate placements, and `kalibre_core::diagnose` ranks them.
 
+mod odd_snapshots;
 mod refit;
 mod settings;
 mod solver;
+mod worst_sensors;
 
+pub use odd_snapshots::{odd_snapshots, OddSnapshot};
 pub use refit::{Refit, RefitStep};
 pub use settings::HallDiagnosisSettings;
 pub use solver::EffectSolver;
+pub use worst_sensors::{worst_sensors, worst_sensors_json, WORST_SENSORS_SHOWN};
 
 use ndarray::Array2;
 use rayon::prelude::*;

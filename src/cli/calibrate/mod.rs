@@ -288,7 +288,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
         args.snapshots_path(),
         &hall,
         states,
-    );
+    )?;
     if args.model == ModelArg::Builtin {
         super::simulate::check_model_cells(
             &hall,

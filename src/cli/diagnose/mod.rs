@@ -20,15 +20,14 @@ use kalibre_dc::HallModel;
 
 mod journal;
 mod next_hall;
-mod odd_snapshots;
 mod own;
 mod print;
 
 use next_hall::{check_writable_file, write_next_hall};
 use print::{
-    print_close_alternatives, print_unexplained, print_where_it_fails, worst_sensors_json,
+    print_close_alternatives, print_odd_snapshots, print_unexplained, print_where_it_fails,
 };
-pub(super) use print::{sensor_line, warming_racks, worst_sensors};
+pub(super) use print::{sensor_line, warming_racks};
 
 use super::calibrated_model::{
     check_same_conditions, check_same_measurements, grid_or_recorded, CalibratedModel,
@@ -248,7 +247,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     super::plausible::warn_setpoints(&snaps_path, &hall, snaps.iter().map(|s| &s.state));
     let states = snaps.iter().map(|s| &s.state);
     super::plausible::warn_alpha_units(&hall_path, &hall);
-    super::plausible::warn_implausible_rises(&hall_path, &snaps_path, &hall, states);
+    super::plausible::warn_implausible_rises(&hall_path, &snaps_path, &hall, states)?;
     let report_path = args.calibration.join("report.json");
     journal::check_regular_files(&args.calibration)?;
     let text = std::fs::read_to_string(&report_path)
@@ -417,9 +416,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         _ => None,
     };
     if args.json {
-        let mut doc = d.to_json();
-        doc["worst_sensors"] = worst_sensors_json(&hall, &report, heat.as_deref());
-        doc["odd_snapshots"] = serde_json::json!(odd_snapshots::odd_snapshots(&report.residuals));
+        let doc = d.document(&hall, &report.residuals, heat.as_deref());
         println!(
             "{}",
             serde_json::to_string_pretty(&doc).map_err(|e| CliError::Run(format!("JSON: {e}")))?
@@ -431,7 +428,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         return Ok(());
     }
     print_where_it_fails(&hall, &report, heat.as_deref());
-    odd_snapshots::print_odd_snapshots(&odd_snapshots::odd_snapshots(&report.residuals));
+    print_odd_snapshots(&kalibre_dc::diagnosis::odd_snapshots(&report.residuals));
     println!(
         "\nmissing effects, best first: the significant ones, then the others, each in order \
          of `BIC` (the change of the Bayesian information criterion the effect brings: lower \

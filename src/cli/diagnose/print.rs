@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use kalibre_core::calibrate::Report;
 use kalibre_core::diagnose::{Diagnosis, HypothesisResult, CLOSE_ALTERNATIVE_BIC};
+use kalibre_dc::diagnosis::{worst_sensors, OddSnapshot, WORST_SENSORS_SHOWN};
 use kalibre_dc::hall::Hall;
 use kalibre_dc::report::WARMING_RACK_MIN_SHARE;
 use kalibre_dc::sim::{sensor_warming, RackHeat};
@@ -107,23 +108,6 @@ pub(crate) fn print_unexplained(d: &kalibre_core::diagnose::Diagnosis, robust_nu
     }
 }
 
-/// Mean residual (model minus measurement, C) per sensor over the snapshots, largest
-/// magnitude first.
-pub(crate) fn worst_sensors(report: &Report) -> Vec<(&str, f64)> {
-    let mut by_sensor: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
-    for r in &report.residuals {
-        let s = by_sensor.entry(r.sensor.as_str()).or_default();
-        s.0 += r.predicted_c - r.measured_c;
-        s.1 += 1;
-    }
-    let mut worst: Vec<(&str, f64)> = by_sensor
-        .iter()
-        .map(|(k, (s, n))| (*k, s / *n as f64))
-        .collect();
-    worst.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-    worst
-}
-
 /// One worst sensor in words: where it is and how far off the model reads.
 pub(crate) fn sensor_line(hall: &Hall, sensor: &str, mean_c: f64) -> String {
     let s = hall.sensors.iter().find(|s| s.id == sensor);
@@ -177,49 +161,24 @@ pub(crate) fn warming_racks(rows: &[RackHeat], sensor: &str, mean_c: f64) -> Str
     )
 }
 
-/// How many of the worst sensors the diagnosis describes.
-const WORST_SENSORS_SHOWN: usize = 5;
-
-/// `worst_sensors` of `diagnose --json`: the sensors the calibrated model misses most,
-/// each with where it is, the mean residual, and (built-in model) which racks warm it in
-/// the model's flow (`warming`, `null` when no exhaust reaches it; absent with a model
-/// whose flow kalibre does not have).
-pub(crate) fn worst_sensors_json(
-    hall: &Hall,
-    report: &Report,
-    heat: Option<&[RackHeat]>,
-) -> serde_json::Value {
-    worst_sensors(report)
-        .iter()
-        .take(WORST_SENSORS_SHOWN)
-        .map(|(sensor, mean_c)| {
-            let s = hall.sensors.iter().find(|s| s.id == *sensor);
-            let mut entry = serde_json::json!({
-                "sensor": sensor,
-                "aisle": s.map(|s| s.aisle.as_str()),
-                "position_m": s.map(|s| s.position_m),
-                "mean_residual_c": mean_c,
-            });
-            if let Some(rows) = heat {
-                entry["warming"] = sensor_warming(rows, sensor, WARMING_RACK_MIN_SHARE).map_or(
-                    serde_json::Value::Null,
-                    |w| {
-                        let racks: Vec<_> = w
-                            .racks
-                            .iter()
-                            .map(|r| {
-                                serde_json::json!({
-                                    "rack": r.rack, "warming_k": r.warming_k, "share": r.share
-                                })
-                            })
-                            .collect();
-                        serde_json::json!({"snapshot": w.snapshot, "warming_k": w.warming_k, "racks": racks})
-                    },
-                );
-            }
-            entry
-        })
-        .collect()
+/// The note on each odd snapshot, for the text listing.
+pub(crate) fn print_odd_snapshots(odd: &[OddSnapshot]) {
+    for o in odd {
+        let side = if o.shift_c > 0.0 { "warm" } else { "cold" };
+        println!(
+            "\nsnapshot {}: the model reads {:.2} C too {side} at {} of its {} sensors, beyond \
+             each sensor's usual residual in the other snapshots. No effect of the hall shifts \
+             one snapshot alone: its conditions were likely not steady (a setpoint or load \
+             change the sensors had not caught up with), its setpoint, fan or power rows are \
+             wrong, or the model errs at its conditions alone. Check it, or leave it out of \
+             the snapshots and calibrate again; the ranking below takes it as it is, and its \
+             shift is spread over the sensors listed as unexplained",
+            o.snapshot,
+            o.shift_c.abs(),
+            o.sensors_off,
+            o.sensors
+        );
+    }
 }
 
 /// The worst sensors and the residual by aisle and snapshot, in words.
@@ -238,7 +197,10 @@ pub(crate) fn print_where_it_fails(hall: &Hall, report: &Report, heat: Option<&[
         g.0 += r.predicted_c - r.measured_c;
         g.1 += 1;
     }
-    for (sensor, mean) in worst_sensors(report).iter().take(WORST_SENSORS_SHOWN) {
+    for (sensor, mean) in worst_sensors(&report.residuals)
+        .iter()
+        .take(WORST_SENSORS_SHOWN)
+    {
         println!("  {}", sensor_line(hall, sensor, *mean));
         if let Some(rows) = heat {
             println!("  {:<12} {}", "", warming_racks(rows, sensor, *mean));

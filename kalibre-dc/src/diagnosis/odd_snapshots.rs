@@ -5,6 +5,7 @@
 //! its residual shows up spread over many sensors, each a little off.
 
 use kalibre_core::calibrate::Residual;
+use serde::Serialize;
 
 /// The least shift named (C): a snapshot's conditions differ from the others', and the
 /// model's own error with them, by a few tenths of a degree.
@@ -19,8 +20,8 @@ const MIN_STANDARD_ERRORS: f64 = 6.0;
 const MIN_SENSORS: usize = 5;
 
 /// A snapshot whose readings the model misses by one shift.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub(crate) struct OddSnapshot {
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OddSnapshot {
     /// Snapshot label.
     pub snapshot: String,
     /// Model minus measurement, beyond each sensor's usual residual, on average (C).
@@ -43,12 +44,11 @@ fn median(values: &mut [f64]) -> f64 {
 
 /// The snapshots of a calibration's `residuals` that the model misses by one shift: each
 /// sensor's residual less its median over the snapshots (the model's error there, which
-/// recurs) averages at least [`MIN_SHIFT_C`] and [`MIN_STANDARD_ERRORS`] standard errors
-/// in the snapshot, with at least [`MIN_SHARE_OFF`] of its sensors off the same way by
-/// half of it or more.
+/// recurs) averages at least 1 C and 6 standard errors in the snapshot, with at least
+/// 80 % of its sensors (and 5 or more) off the same way by half of it or more.
 /// Needs three snapshots (of two, either could be the odd one), and names fewer than half
 /// of them.
-pub(crate) fn odd_snapshots(residuals: &[Residual]) -> Vec<OddSnapshot> {
+pub fn odd_snapshots(residuals: &[Residual]) -> Vec<OddSnapshot> {
     let mut snapshots: Vec<&str> = Vec::new();
     for r in residuals {
         if !snapshots.contains(&r.snapshot.as_str()) {
@@ -123,26 +123,6 @@ pub(crate) fn odd_snapshots(residuals: &[Residual]) -> Vec<OddSnapshot> {
         return Vec::new();
     }
     odd
-}
-
-/// The note on each odd snapshot, for the text listing.
-pub(crate) fn print_odd_snapshots(odd: &[OddSnapshot]) {
-    for o in odd {
-        let side = if o.shift_c > 0.0 { "warm" } else { "cold" };
-        println!(
-            "\nsnapshot {}: the model reads {:.2} C too {side} at {} of its {} sensors, beyond \
-             each sensor's usual residual in the other snapshots. No effect of the hall shifts \
-             one snapshot alone: its conditions were likely not steady (a setpoint or load \
-             change the sensors had not caught up with), its setpoint, fan or power rows are \
-             wrong, or the model errs at its conditions alone. Check it, or leave it out of \
-             the snapshots and calibrate again; the ranking below takes it as it is, and its \
-             shift is spread over the sensors listed as unexplained",
-            o.snapshot,
-            o.shift_c.abs(),
-            o.sensors_off,
-            o.sensors
-        );
-    }
 }
 
 #[cfg(test)]
