@@ -257,6 +257,21 @@ fn what_if_changes_beyond_the_air_are_refused() {
     assert!(!dir.join("pred.csv").exists());
 }
 
+#[test]
+fn a_hall_with_nothing_to_calibrate_is_refused_naming_the_field() {
+    let dir = tmp("nothing-to-calibrate");
+    // The development hall has no effects: with alpha fixed nothing is left.
+    let o = run(on_dataset("calibrate", "of-dev-clean")
+        .args(["--alpha", "fixed", "--out"])
+        .arg(dir.join("cal")));
+    assert_input_error(
+        &o,
+        "of-dev-clean/hall.json: /calibrate/alpha: alpha is `fixed`",
+    );
+    assert!(stderr(&o).contains("per_type"), "{}", stderr(&o));
+    assert!(!dir.join("cal").join("runs.jsonl").exists());
+}
+
 /// `kalibre simulate` on the development hall with `text` as the `--params` file
 /// `params`, predictions to `dir/pred.csv`.
 fn simulate_with_params(dir: &Path, params: &Path, text: &str) -> std::process::Output {
@@ -414,7 +429,8 @@ fn flags_that_cannot_apply_are_refused_before_any_output() {
         &o,
         "--grid-m sets the grid of the built-in simulator or OpenFOAM",
     );
-    // Air at billions of degrees (fans all but stopped) is no prediction.
+    // Air at billions of degrees (fans all but stopped) is no prediction: refused before
+    // any solve, by the what-if that asks for it.
     let o = run(kalibre()
         .args(["simulate", "--fan-speed-scale", "1e-9", "--hall"])
         .arg(&hall)
@@ -423,8 +439,10 @@ fn flags_that_cannot_apply_are_refused_before_any_output() {
         .arg("--out")
         .arg(dir.join("pred.csv")));
     let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(
-        !o.status.success() && err.contains("is implausible"),
+        err.contains("what if fan speeds x1e-9: snapshot `t0`")
+            && err.contains("past any temperature a model of the hall can give"),
         "{err}"
     );
     assert!(!dir.join("pred.csv").exists());

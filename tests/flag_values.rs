@@ -63,14 +63,11 @@ fn simulate_refuses_grids_and_limits_that_mean_nothing() {
         assert_readable(&o);
     }
     // Fans nearly stopped: air past anything the model can predict is the what-if's
-    // fault, not a failed model (exit 1). The what-if warning comes first.
+    // fault, not a failed model (exit 1), and is refused before any solve.
     let o = simulate(&dir, &["--fan-speed-scale", "1e-5"]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    let err = stderr(&o);
-    let last = err.lines().last().unwrap_or_default();
-    assert!(
-        last.starts_with("kalibre: error: what if fan speeds x1e-5: snapshot `t0`: model output 0 (`c-A1-hi`) is implausible"),
-        "{err}"
+    assert_input_error(
+        &o,
+        "what if fan speeds x1e-5: snapshot `t0` would run its return air 1.21e6 K above its supply",
     );
     assert_readable(&o);
     assert!(!dir.join("pred.csv").exists());

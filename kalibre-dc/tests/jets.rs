@@ -117,3 +117,55 @@ fn the_model_form_uncertainty_keeps_a_clear_offset() {
         .fold(0.0, f64::max);
     assert!(moved.is_finite() && moved > 0.1, "largest change {moved} C");
 }
+
+/// A `front` CRAC against the x = 0 wall of a long room: where it stands along the wall,
+/// its air leaves through the face opposite the wall, never through an end face (which
+/// faces more of the room); the supply enters the cells just beyond its +x face only.
+#[test]
+fn a_front_crac_blows_away_from_its_wall_wherever_it_stands_along_it() {
+    use kalibre_dc::hall::Hall;
+    use kalibre_dc::snapshots::OperatingState;
+    for y_m in [0.6, 5.0, 9.4] {
+        let text = format!(
+            r#"{{"schema": "kalibre.hall/1", "name": "long", "room": {{"size_m": [4.0, 12.0, 3.0]}},
+            "server_types": [{{"id": "t", "alpha_cfm_per_w": {{"initial": 0.12, "min": 0.01, "max": 3.0}}}}],
+            "cracs": [{{"id": "k", "position_m": [0.0, {y_m}, 0.0], "size_m": [0.8, 2.0, 2.0],
+                        "rated_flow_m3_s": 2.0, "supply": "front"}}],
+            "racks": [{{"id": "R", "position_m": [2.4, 3.0, 0.0], "size_m": [0.6, 1.0, 2.0], "inlet": "-x",
+                        "units": 42, "servers": [{{"id": "S", "type": "t", "u": 1, "height_u": 42}}]}}],
+            "sensors": [{{"id": "s", "position_m": [2.0, 6.0, 1.0], "aisle": "cold"}}]}}"#
+        );
+        let hall = Hall::from_json_str(&text, "long.json").unwrap();
+        let sim = Simulator::new(&hall, Default::default()).unwrap();
+        let state = OperatingState {
+            label: "t0".into(),
+            setpoint_c: vec![18.0],
+            fan_speed: vec![0.5],
+            power_w: vec![3000.0],
+        };
+        let sol = sim.solve(&state, &[0.12], &[]).unwrap();
+        let grid = sim.grid();
+        let cell = grid.d[0];
+        let (mut front, mut elsewhere) = (0.0, 0.0);
+        for (c, &q) in sol.source_m3_s.iter().enumerate() {
+            let [x, y, z] = grid.cell_centre(c);
+            // Supply cells: beside the CRAC, below its top, not the rack's exhaust.
+            let by_crac = x < 0.8 + cell && y > y_m - cell && y < y_m + 2.0 + cell && z < 2.0;
+            if q > 0.0 && by_crac {
+                if x > 0.8 && y > y_m && y < y_m + 2.0 {
+                    front += q;
+                } else {
+                    elsewhere += q;
+                }
+            }
+        }
+        assert!(
+            (front - 1.0).abs() < 1e-9,
+            "y {y_m}: {front} m3/s through +x"
+        );
+        assert_eq!(
+            elsewhere, 0.0,
+            "y {y_m}: {elsewhere} m3/s through an end face"
+        );
+    }
+}

@@ -89,14 +89,24 @@ impl<'a> Fields<'a> {
         }
     }
 
-    /// An optional non-negative integer.
+    /// An optional non-negative integer, also as a number with no fractional part (`0.0`:
+    /// JSON has one number type, and some exporters write every number as a float).
     pub fn opt_usize(&mut self, field: &str) -> Result<Option<usize>> {
         match self.take(field) {
             None => Ok(None),
-            Some(v) => match v.as_u64() {
-                Some(x) => Ok(Some(x as usize)),
-                None => Err(self.error(field, format!("expected a non-negative integer, got {v}"))),
-            },
+            Some(v) => {
+                let whole = v.as_u64().or_else(|| {
+                    v.as_f64()
+                        .filter(|x| x.fract() == 0.0 && (0.0..=u32::MAX as f64).contains(x))
+                        .map(|x| x as u64)
+                });
+                match whole {
+                    Some(x) => Ok(Some(x as usize)),
+                    None => {
+                        Err(self.error(field, format!("expected a non-negative integer, got {v}")))
+                    }
+                }
+            }
         }
     }
 

@@ -310,6 +310,39 @@ mod tests {
         }
     }
 
+    /// JSON has one number type: a count written as a float with no fractional part is
+    /// the same count; one with a fraction, or below zero, is refused where it is.
+    #[test]
+    fn counts_written_as_whole_floats_are_the_same_counts() {
+        let text = include_str!("../../../data/openfoam/of-dev-clean/hall.json");
+        let mut json: serde_json::Value = serde_json::from_str(text).unwrap();
+        let expected = Hall::from_json_str(text, "h.json").unwrap();
+        let units = json["racks"][0]["units"].as_u64().unwrap() as f64;
+        let server = &mut json["racks"][0]["servers"][0];
+        let (u, height_u) = (
+            server["u"].as_u64().unwrap(),
+            server["height_u"].as_u64().unwrap(),
+        );
+        server["u"] = serde_json::json!(u as f64);
+        server["height_u"] = serde_json::json!(height_u as f64);
+        json["racks"][0]["units"] = serde_json::json!(units);
+        let floats = json.to_string();
+        assert!(
+            floats.contains(&format!("\"units\":{units:.1}")),
+            "{floats}"
+        );
+        assert_eq!(Hall::from_json_str(&floats, "h.json").unwrap(), expected);
+        let (field, message) = dev_hall_error(|h| h["racks"][0]["units"] = serde_json::json!(42.5));
+        assert_eq!(field, "/racks/0/units");
+        assert!(
+            message.contains("42.5") && message.contains("a whole number"),
+            "{message}"
+        );
+        let (field, _) =
+            dev_hall_error(|h| h["racks"][1]["servers"][0]["height_u"] = serde_json::json!(-2));
+        assert_eq!(field, "/racks/1/servers/0/height_u");
+    }
+
     /// serde reads a struct from an array by field order; the reader refuses that guess
     /// wherever it would be made, naming the fields it expects.
     #[test]

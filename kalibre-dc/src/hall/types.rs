@@ -201,6 +201,7 @@ pub struct Rack {
     /// The side that draws air.
     pub inlet: Side,
     /// Number of rack units dividing its height evenly.
+    #[serde(deserialize_with = "whole_u32")]
     pub units: u32,
     /// Servers, each occupying `u .. u + height_u - 1`.
     pub servers: Vec<Server>,
@@ -219,8 +220,10 @@ pub struct Server {
     #[serde(rename = "type")]
     pub server_type: String,
     /// Lowest unit, from 1.
+    #[serde(deserialize_with = "whole_u32")]
     pub u: u32,
     /// Units occupied.
+    #[serde(deserialize_with = "whole_u32")]
     pub height_u: u32,
     /// Free-form data.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -321,4 +324,32 @@ pub struct EffectSpec {
     /// The kind's own fields.
     #[serde(flatten)]
     pub fields: serde_json::Map<String, serde_json::Value>,
+}
+
+/// A count in `hall.json`: an integer, or a number with no fractional part (`42.0`,
+/// `4.2e1`). JSON has one number type, and exporters that write every number as a float
+/// (Python, pandas columns) mean the same count; `42.5` or `-1` is refused.
+fn whole_u32<'de, D: serde::Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
+    use serde::de::{Error, Unexpected, Visitor};
+    struct Whole;
+    impl Visitor<'_> for Whole {
+        type Value = u32;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            write!(f, "a whole number in [0, {}]", u32::MAX)
+        }
+        fn visit_u64<E: Error>(self, v: u64) -> Result<u32, E> {
+            u32::try_from(v).map_err(|_| E::invalid_value(Unexpected::Unsigned(v), &self))
+        }
+        fn visit_i64<E: Error>(self, v: i64) -> Result<u32, E> {
+            u32::try_from(v).map_err(|_| E::invalid_value(Unexpected::Signed(v), &self))
+        }
+        fn visit_f64<E: Error>(self, v: f64) -> Result<u32, E> {
+            if v.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(&v) {
+                Ok(v as u32)
+            } else {
+                Err(E::invalid_value(Unexpected::Float(v), &self))
+            }
+        }
+    }
+    d.deserialize_any(Whole)
 }

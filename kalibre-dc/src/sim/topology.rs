@@ -175,7 +175,7 @@ impl Topology {
 
         let mut crac_front = Vec::with_capacity(hall.cracs.len());
         let mut crac_top = Vec::with_capacity(hall.cracs.len());
-        for cr in &hall.cracs {
+        for (i, cr) in hall.cracs.iter().enumerate() {
             let b = Aabb::from_position_size(cr.position_m, cr.size_m);
             crac_front.push(match cr.supply {
                 SupplyKind::Floor => Vec::new(),
@@ -184,8 +184,12 @@ impl Topology {
                     face_stencil(&grid, &solid, &b, side, [b.min[2], b.max[2]]).ok_or_else(
                         || {
                             Error::Geometry(format!(
-                                "CRAC `{}`: its front face has no open cell",
-                                cr.id
+                                "/cracs/{i}: CRAC `{}` supplies through its front, the {} face \
+                                 (opposite the wall it stands against), and no air cell lies \
+                                 in front of it; expected room in front of a `front` CRAC \
+                                 (or `supply` `floor`)",
+                                cr.id,
+                                side_name(side)
                             ))
                         },
                     )?
@@ -196,7 +200,10 @@ impl Topology {
             } else {
                 top_stencil(&grid, &solid, &b).ok_or_else(|| {
                     Error::Geometry(format!(
-                        "CRAC `{}` reaches the ceiling and the hall has no returns: no return path",
+                        "/cracs/{i}: CRAC `{}` reaches the ceiling and the hall has no \
+                         `returns`, so its air has no way back (without returns it returns \
+                         into each CRAC's top); expected a CRAC lower than the room, or \
+                         `returns`",
                         cr.id
                     ))
                 })?
@@ -404,7 +411,10 @@ fn layer_cells(grid: &Grid, b: &Aabb, k: usize) -> Vec<usize> {
     grid.cells_in_box(&bb)
 }
 
-/// The side of a CRAC box facing the most open room (its front).
+/// The side of a CRAC box that blows into the room (its front): the face opposite the
+/// wall it stands against, so that where it stands along that wall does not turn it;
+/// in a corner, or standing free, of the sides whose backs are nearest a wall, the one
+/// facing the most open room.
 fn front_side(hall: &Hall, b: &Aabb) -> Side {
     let room = hall.room.size_m;
     let room_space = |s: Side| match s {
@@ -413,15 +423,29 @@ fn front_side(hall: &Hall, b: &Aabb) -> Side {
         Side::PlusY => room[1] - b.max[1],
         Side::MinusY => b.min[1],
     };
-    [Side::PlusX, Side::MinusX, Side::PlusY, Side::MinusY]
+    let sides = [Side::PlusX, Side::MinusX, Side::PlusY, Side::MinusY];
+    let nearest_wall = sides
+        .iter()
+        .map(|&s| room_space(s.opposite()))
+        .fold(f64::INFINITY, f64::min);
+    sides
         .into_iter()
-        .fold(Side::PlusX, |best, s| {
-            if room_space(s) > room_space(best) + GEOM_EPS {
-                s
-            } else {
-                best
-            }
+        .filter(|&s| room_space(s.opposite()) <= nearest_wall + GEOM_EPS)
+        .fold(None, |best: Option<Side>, s| match best {
+            Some(b) if room_space(s) <= room_space(b) + GEOM_EPS => Some(b),
+            _ => Some(s),
         })
+        .unwrap_or(Side::PlusX)
+}
+
+/// A side's name as `hall.json` writes it.
+fn side_name(side: Side) -> &'static str {
+    match side {
+        Side::PlusX => "+x",
+        Side::MinusX => "-x",
+        Side::PlusY => "+y",
+        Side::MinusY => "-y",
+    }
 }
 
 /// The first open cells outside face `side` of box `b`, over the box's tangential extent

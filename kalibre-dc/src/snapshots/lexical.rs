@@ -47,6 +47,59 @@ pub(super) fn next_record(
     Ok(more.then(|| lines.line_at(bytes, record.position().map_or(0, csv::Position::byte))))
 }
 
+/// The message for [`text_after_closing_quote`]'s finding.
+pub(super) const TEXT_AFTER_QUOTE: &str = "text follows a closing `\"`; expected the quoted \
+     value to end the field (a `\"` inside a quoted value is written `\"\"`)";
+
+/// The field (0-based) of the record starting at byte `start` of `bytes` in which text
+/// follows a closing quote (`"3"000`, `"t0"x`), or `None`. The csv crate reads such a
+/// field as the quoted part and the rest run together, a guess at what was meant; RFC
+/// 4180 allows only a delimiter or the line's end after the closing quote.
+pub(super) fn text_after_closing_quote(bytes: &[u8], start: u64) -> Option<usize> {
+    let mut i = usize::try_from(start)
+        .unwrap_or(usize::MAX)
+        .min(bytes.len());
+    // The offset may include the terminators of skipped blank lines.
+    while i < bytes.len() && matches!(bytes[i], b'\r' | b'\n') {
+        i += 1;
+    }
+    let mut field = 0;
+    let mut at_field_start = true;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'"' if at_field_start => {
+                // A quoted field: to its closing quote, `""` standing for one quote.
+                i += 1;
+                loop {
+                    match bytes.get(i) {
+                        None => return None, // unclosed: the reader reports it
+                        Some(b'"') if bytes.get(i + 1) == Some(&b'"') => i += 2,
+                        Some(b'"') => break,
+                        Some(_) => i += 1,
+                    }
+                }
+                i += 1;
+                match bytes.get(i) {
+                    None | Some(b',' | b'\r' | b'\n') => {}
+                    Some(_) => return Some(field),
+                }
+                at_field_start = false;
+            }
+            b',' => {
+                field += 1;
+                at_field_start = true;
+                i += 1;
+            }
+            b'\r' | b'\n' => return None,
+            _ => {
+                at_field_start = false;
+                i += 1;
+            }
+        }
+    }
+    None
+}
+
 /// A finite decimal number: optional sign, digits with an optional fraction, an optional
 /// exponent. Rejects `nan`, `inf`, hex, empty text and values that overflow to infinity.
 pub(crate) fn parse_decimal(text: &str) -> Option<f64> {
@@ -101,7 +154,7 @@ pub(super) fn show(text: &str) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{parse_decimal, LineCounter};
+    use super::{parse_decimal, text_after_closing_quote, LineCounter};
 
     #[test]
     fn lines_count_blank_lines_crlf_and_quoted_breaks() {
@@ -129,6 +182,27 @@ mod tests {
         ];
         let want: Vec<(String, u64)> = want.iter().map(|(s, l)| (s.to_string(), *l)).collect();
         assert_eq!(got, want);
+    }
+
+    #[test]
+    fn text_after_a_closing_quote_is_found_in_its_field() {
+        let at = |text: &str| text_after_closing_quote(text.as_bytes(), 0);
+        assert_eq!(at("t0,power_w,S,\"3\"000\n"), Some(3));
+        assert_eq!(at("\"t0\"x,power_w,S,3\n"), Some(0));
+        for fine in [
+            "t0,power_w,S,3000\n",
+            "\"t0\",\"power_w\",\"S\",\"3000\"\r\n",
+            "t0,power_w,\"S \"\"big\"\", one\",3000",
+            "t0,power_w,\"S\nwrapped\",3\n",
+            "t0,power_w,S,\"3",
+            "a\"b,c\n",
+        ] {
+            assert_eq!(at(fine), None, "{fine:?}");
+        }
+        // From a record's offset, past blank lines' terminators; only that record.
+        let text = "h\n\r\n\"x\"y,1\n\"z\"w\n";
+        assert_eq!(text_after_closing_quote(text.as_bytes(), 2), Some(0));
+        assert_eq!(text_after_closing_quote(b"a,b\n\"z\"w\n", 0), None);
     }
 
     #[test]

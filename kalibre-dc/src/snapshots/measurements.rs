@@ -101,6 +101,14 @@ pub fn parse_measurements(
                 "a quoted value runs on past its line: is a closing `\"` missing?",
             ));
         }
+        let start = record.position().map_or(0, csv::Position::byte);
+        if let Some(c) = super::lexical::text_after_closing_quote(bytes, start) {
+            return Err(Error::format(
+                file,
+                at(Some(c.min(last))),
+                super::lexical::TEXT_AFTER_QUOTE,
+            ));
+        }
         if columns == 0 {
             if fields != HEADER[..3] && fields != HEADER {
                 return Err(Error::format(
@@ -393,6 +401,10 @@ mod tests {
             (
                 "scenario,output,value\nwinter,t_in,1,5\n",
                 "line 2: expected 3 fields",
+            ),
+            (
+                "scenario,output,value\nwinter,t_in,\"1\"5\n",
+                "line 2, column value: text follows a closing `\"`",
             ),
         ];
         for (text, needle) in cases {

@@ -61,6 +61,13 @@ fn parse(hall: &Hall, bytes: &[u8], file: &str, need_readings: bool) -> Result<V
                 "a quoted value runs on past its line: is a closing `\"` missing?",
             ));
         }
+        let start = record.position().map_or(0, csv::Position::byte);
+        if let Some(c) = super::lexical::text_after_closing_quote(bytes, start) {
+            return Err(row.err(
+                Some(c.min(COLUMNS.len() - 1)),
+                super::lexical::TEXT_AFTER_QUOTE,
+            ));
+        }
         if !header_seen {
             if row.fields != HEADER {
                 return Err(Error::format(

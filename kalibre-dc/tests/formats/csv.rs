@@ -74,6 +74,12 @@ pub fn csv_cases() -> Vec<CsvCase> {
             phrase: "no data rows",
         },
         csv_case(
+            "text after a closing quote",
+            "line 4, column value",
+            "text follows a closing `\"`",
+            |r| replace_row(r, 2, "t0,power_w,R1-01,\"3\"10"),
+        ),
+        csv_case(
             "negative power",
             "line 4, column value",
             "power_w of `R1-01` is -5; expected a power in [0, 1e7] W",

@@ -114,7 +114,7 @@ pub fn hall_cases() -> Vec<HallCase> {
         hall_case(
             "negative unit",
             "/racks/0/servers/0/u",
-            "expected u32",
+            "integer `-1`, expected a whole number",
             |v| set(v, "/racks/0/servers/0/u", json!(-1)),
         ),
         hall_case(

@@ -164,6 +164,25 @@ fn calibrated_hall(hall: &Hall, settings: &HallCalibrationSettings) -> Hall {
     hall
 }
 
+/// Refuses a hall with no parameter to calibrate (alpha `fixed` and no effect with
+/// parameters) before anything runs, naming the file and the field to change.
+fn refuse_nothing_to_calibrate(hall_path: &Path, calibrated: &Hall) -> CliResult {
+    let effects = kalibre_dc::effects::EffectRegistry::builtin().build_all(calibrated)?;
+    if kalibre_dc::ParamLayout::new(calibrated, &effects)?
+        .space()
+        .is_empty()
+    {
+        return Err(CliError::Input(format!(
+            "{}: /calibrate/alpha: alpha is `fixed` and no effect has parameters, so there is \
+             nothing to calibrate; expected `per_type` or `per_server` (or `kalibre calibrate \
+             --alpha per-type`), or an effect with parameters (`kalibre simulate` runs the \
+             hall as it is)",
+            hall_path.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Says when `--out` holds the report of a calibration against other measurements:
 /// this one replaces it when it ends, while the journal's runs (which do not depend on
 /// the measurements) are reused. A report of these measurements (a resumed or repeated
@@ -277,6 +296,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     let hall = Hall::load(args.hall_path())?;
     kalibre_dc::effects::EffectRegistry::builtin()
         .check_hall(&hall, &args.hall_path().display().to_string())?;
+    refuse_nothing_to_calibrate(args.hall_path(), &calibrated_hall(&hall, &settings))?;
     let snaps = snapshots::load_snapshots(&hall, args.snapshots_path())?;
     super::plausible::warn_readings(args.snapshots_path(), &hall, &snaps);
     super::plausible::note_missing_readings(args.snapshots_path(), &hall, &snaps);
