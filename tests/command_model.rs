@@ -354,20 +354,32 @@ fn failed_runs_are_counted_in_the_summary_with_what_to_do() {
 /// Ctrl-C (SIGINT) or a kill (SIGTERM) of `kalibre calibrate` ends the model runs in
 /// progress with it, down to the processes a run's script started: each run has its own
 /// process group, which the terminal's signal does not reach, and the kernel's
-/// parent-death signal reaches only the script (a solver it started ran on).
+/// parent-death signal reaches only the script (a solver it started ran on). A run that
+/// ignores SIGTERM gets SIGKILL after its `kill_grace_s`, before kalibre ends, so that it
+/// does not run on beyond the stop.
 #[cfg(target_os = "linux")]
 #[test]
 fn ending_kalibre_ends_the_runs_in_progress() {
-    for signal in [libc::SIGINT, libc::SIGTERM] {
-        let dir = tmp(&format!("command-interrupted-{signal}"));
+    for (signal, ignores_term) in [
+        (libc::SIGINT, false),
+        (libc::SIGTERM, false),
+        (libc::SIGINT, true),
+    ] {
+        let dir = tmp(&format!("command-interrupted-{signal}-{ignores_term}"));
         let hall = dev_hall();
         write_command_model(&dir, &hall, 0.25);
         let pids = dir.join("pids");
-        // Each run: a "solver" in the background, then wait for it.
+        // Each run: a "solver" in the background, then wait for it; SIGTERM ignored by
+        // both when asked (the ignoring is inherited).
+        let trap = if ignores_term { "trap '' TERM; " } else { "" };
         run_under_sh(
             &dir,
-            &format!("sleep 60 & echo $! >> {}; wait", pids.display()),
+            &format!("{trap}sleep 60 & echo $! >> {}; wait", pids.display()),
         );
+        if ignores_term {
+            let toml = std::fs::read_to_string(dir.join("model.toml")).unwrap();
+            std::fs::write(dir.join("model.toml"), format!("kill_grace_s = 1\n{toml}")).unwrap();
+        }
         let child = on_dataset("calibrate", "of-dev-clean")
             .args([
                 "--quiet",
@@ -422,7 +434,7 @@ fn ending_kalibre_ends_the_runs_in_progress() {
         let left: Vec<i32> = running().into_iter().filter(|p| alive(*p)).collect();
         assert!(
             left.is_empty(),
-            "signal {signal}: solvers still running: {left:?}"
+            "signal {signal}, SIGTERM ignored {ignores_term}: solvers still running: {left:?}"
         );
     }
 }

@@ -179,6 +179,28 @@ fn a_diagnosis_of_a_model_of_your_own_refuses_what_does_not_fit() {
     // Hall flags are refused by name.
     let o = run(diagnose(&config, &measurements, &cal).args(["--write-hall", "h.json"]));
     assert_input_error(&o, "--write-hall is about a hall");
+    // A calibration still at work in the directory (it holds the lock): wait for it;
+    // diagnose has no --out to go elsewhere.
+    {
+        let lock = std::fs::File::options()
+            .write(true)
+            .open(cal.join(".kalibre.lock"))
+            .unwrap();
+        lock.try_lock().unwrap();
+        let o = run(&mut diagnose(&config, &measurements, &cal));
+        assert_input_error(
+            &o,
+            &format!(
+                "--calibration {}: another kalibre command is working in this directory",
+                cal.display()
+            ),
+        );
+        assert!(
+            stderr(&o).trim_end().ends_with("wait for it to finish"),
+            "{}",
+            stderr(&o)
+        );
+    }
     // No calibration yet: what to run first.
     let empty = dir.join("not-calibrated");
     std::fs::create_dir_all(&empty).unwrap();

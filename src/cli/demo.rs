@@ -126,7 +126,7 @@ pub fn run(args: DemoArgs) -> CliResult {
     )?;
     let synth = with_threads(args.threads, || synth::generate(&opts))??;
     // Taken once the effect is known to build: bad input leaves no directory behind.
-    let _lock = super::out_dir::lock(&args.out, "demo")?;
+    let _lock = super::out_dir::lock(&args.out, "--out", "demo")?;
     clear_previous_story(&args.out)?;
     synth::write_dir(&args.out, &synth)?;
     let hall = &synth.hall;

@@ -145,6 +145,19 @@ pub(crate) fn is_stdout(path: &std::path::Path) -> bool {
     }
 }
 
+/// `path` as one shell word, for a command the user is told to run: as it is when every
+/// character is safe in a POSIX shell, else in single quotes (a `'` as `'\''`), so that a
+/// path with spaces pastes as one argument.
+pub(crate) fn shell_word(path: &std::path::Path) -> String {
+    let text = path.display().to_string();
+    let safe = |c: char| c.is_ascii_alphanumeric() || "_@%+=:,./-".contains(c);
+    if !text.is_empty() && text.chars().all(safe) {
+        text
+    } else {
+        format!("'{}'", text.replace('\'', "'\\''"))
+    }
+}
+
 /// `v` to `digits` significant figures, without an exponent (a flow of 0.00356 m3/s
 /// reads as such, not as 0.0035550000000000004) unless it would take many digits.
 pub(crate) fn significant(v: f64, digits: usize) -> String {
@@ -165,6 +178,18 @@ pub(crate) fn significant(v: f64, digits: usize) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn shell_words_quote_only_what_needs_it() {
+        use std::path::Path;
+        assert_eq!(
+            super::shell_word(Path::new("cal/run-1.toml")),
+            "cal/run-1.toml"
+        );
+        assert_eq!(super::shell_word(Path::new("my cal")), "'my cal'");
+        assert_eq!(super::shell_word(Path::new("it's")), "'it'\\''s'");
+        assert_eq!(super::shell_word(Path::new("")), "''");
+    }
+
     #[test]
     fn significant_figures_carry_no_sign_on_zero() {
         assert_eq!(super::significant(-0.0, 3), "0");

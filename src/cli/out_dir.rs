@@ -78,8 +78,9 @@ pub fn check_files(out: &Path, names: &[&str]) -> CliResult {
 }
 
 /// Makes `out` (and its parents) and takes its lock, refusing when another command
-/// holds it.
-pub fn lock(out: &Path, command: &str) -> CliResult<OutLock> {
+/// holds it; `flag` is the option that named `out` (`--out`, or `--calibration` for a
+/// diagnosis, which waits for the calibration rather than going elsewhere).
+pub fn lock(out: &Path, flag: &str, command: &str) -> CliResult<OutLock> {
     check_is_dir(out)?;
     // Opening a FIFO for writing would wait for a reader.
     check_files(out, &[LOCK_FILE])?;
@@ -94,9 +95,14 @@ pub fn lock(out: &Path, command: &str) -> CliResult<OutLock> {
     match file.try_lock() {
         Ok(()) => Ok(OutLock { _file: file }),
         Err(TryLockError::WouldBlock) => Err(CliError::Input(format!(
-            "--out {}: another kalibre command is working in this directory (it holds \
-             {LOCK_FILE}); wait for it to finish, or give {command} another --out",
-            out.display()
+            "{flag} {}: another kalibre command is working in this directory (it holds \
+             {LOCK_FILE}); wait for it to finish{}",
+            out.display(),
+            if flag == "--out" {
+                format!(", or give {command} another --out")
+            } else {
+                String::new()
+            }
         ))),
         Err(TryLockError::Error(e)) => Err(io_err(&path, e)),
     }
@@ -168,11 +174,11 @@ mod tests {
     #[test]
     fn a_second_lock_is_refused_until_the_first_is_dropped() {
         let d = dir("lock");
-        let first = lock(&d, "calibrate").unwrap();
-        let err = lock(&d, "calibrate").unwrap_err().to_string();
+        let first = lock(&d, "--out", "calibrate").unwrap();
+        let err = lock(&d, "--out", "calibrate").unwrap_err().to_string();
         assert!(err.contains("another kalibre command"), "{err}");
         drop(first);
-        lock(&d, "calibrate").unwrap();
+        lock(&d, "--out", "calibrate").unwrap();
     }
 
     #[test]

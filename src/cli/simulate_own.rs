@@ -70,7 +70,7 @@ pub(super) fn run(args: &SimulateArgs) -> CliResult {
                      model of your own: `kalibre simulate --hall HALL --snapshots SNAPSHOTS \
                      --params {}` runs it",
                     file.display(),
-                    file.display()
+                    super::shell_word(file)
                 )));
             }
             let recorded = json.get("model").and_then(|m| m.get("fingerprint"));

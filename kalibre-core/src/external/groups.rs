@@ -4,7 +4,7 @@
 //! parent-death signal reaches only a run's first process, not the solver a script
 //! starts. [`end_runs_with_kalibre`] installs handlers that signal every group here.
 
-use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
 use std::sync::OnceLock;
 
 /// Runs tracked at once; beyond this a run is not tracked (its first process still gets
@@ -13,12 +13,23 @@ const SLOTS: usize = 256;
 
 static GROUPS: [AtomicI32; SLOTS] = [const { AtomicI32::new(0) }; SLOTS];
 
+/// The longest grace (ms) any tracked run was given between SIGTERM and SIGKILL
+/// (`kill_grace_s`): how long kalibre's own end waits for its runs to go.
+static STOP_GRACE_MS: AtomicU64 = AtomicU64::new(0);
+
+/// The most kalibre's end waits for runs that ignore SIGTERM before it kills them (ms),
+/// whatever their grace: an interrupted program should end soon.
+const MAX_STOP_WAIT_MS: u64 = 30_000;
+
 /// A tracked group; dropping it stops the tracking. Dropped before the group's leader
 /// is reaped, while its id cannot yet be reused.
 pub(crate) struct Tracked(Option<usize>);
 
-/// Tracks the process group `pgid` until the returned guard is dropped.
-pub(crate) fn track(pgid: libc::pid_t) -> Tracked {
+/// Tracks the process group `pgid` until the returned guard is dropped; `kill_grace` is
+/// how long the run may take to go after SIGTERM before it gets SIGKILL.
+pub(crate) fn track(pgid: libc::pid_t, kill_grace: std::time::Duration) -> Tracked {
+    let grace_ms = u64::try_from(kill_grace.as_millis()).unwrap_or(u64::MAX);
+    STOP_GRACE_MS.fetch_max(grace_ms, Ordering::AcqRel);
     Tracked(GROUPS.iter().position(|g| {
         g.compare_exchange(0, pgid, Ordering::AcqRel, Ordering::Relaxed)
             .is_ok()
@@ -48,6 +59,38 @@ pub fn signal_runs(signal: libc::c_int) -> usize {
         }
     }
     n
+}
+
+/// Whether any tracked run's process group still has a process (a zombie leader counts
+/// until its thread reaps it). Async-signal-safe.
+fn any_run_alive() -> bool {
+    GROUPS.iter().any(|g| {
+        let pgid = g.load(Ordering::Acquire);
+        // SAFETY: signal 0 only checks that the group exists.
+        pgid > 0 && unsafe { libc::kill(-pgid, 0) } == 0
+    })
+}
+
+/// After SIGTERM: waits for the runs to go, up to their grace, and sends SIGKILL to
+/// every group still there, so that a run ignoring SIGTERM does not outlive kalibre,
+/// hold its cores, and be taken for an abandoned run by the next command.
+/// Async-signal-safe (atomics, `kill(2)`, `nanosleep(2)`).
+fn kill_lingering_runs() {
+    const STEP_MS: u64 = 20;
+    let wait_ms = STOP_GRACE_MS.load(Ordering::Acquire).min(MAX_STOP_WAIT_MS);
+    let mut waited_ms = 0;
+    while waited_ms < wait_ms && any_run_alive() {
+        let step = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: (STEP_MS * 1_000_000) as libc::c_long,
+        };
+        // SAFETY: nanosleep only reads `step`; an interruption just shortens the wait.
+        unsafe {
+            libc::nanosleep(&step, std::ptr::null_mut());
+        }
+        waited_ms += STEP_MS;
+    }
+    signal_runs(libc::SIGKILL);
 }
 
 /// What [`end_runs_with_kalibre`]'s handler says, unless the program set its own
@@ -91,6 +134,9 @@ extern "C" fn on_end_signal(signal: libc::c_int) {
     // worker takes their end for an outside kill.
     STOPPING.store(true, Ordering::Release);
     let ended = signal_runs(libc::SIGTERM) > 0;
+    if ended {
+        kill_lingering_runs();
+    }
     // An atomic load once set: async-signal-safe.
     let message = STOP_MESSAGE.get().copied().unwrap_or(DEFAULT_STOP_MESSAGE);
     let said = if ended {
@@ -111,7 +157,8 @@ extern "C" fn on_end_signal(signal: libc::c_int) {
 }
 
 /// Installs handlers for SIGINT, SIGTERM and SIGHUP that send SIGTERM to every model
-/// run in progress, then end the process as the signal would have. For programs (the
+/// run in progress, SIGKILL to those still there after their grace (`kill_grace_s`, at
+/// most 30 s), then end the process as the signal would have. For programs (the
 /// `kalibre` CLI) that start model runs; a library leaves signals to its program.
 pub fn end_runs_with_kalibre() {
     for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {

@@ -138,7 +138,7 @@ pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
     let mut child = cmd.spawn()?;
     let pid = child.id() as libc::pid_t;
     // Untracked (below) before the leader is reaped, while its id cannot be reused.
-    let tracked = super::groups::track(pid);
+    let tracked = super::groups::track(pid, spec.kill_grace);
     let (tx, rx) = mpsc::channel();
     let waiter = std::thread::Builder::new()
         .name(format!("kalibre-wait-{pid}"))

@@ -97,7 +97,7 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     let observations = observations(&cfg, measurements)?;
     let scaled = observations.scales().is_some();
     let style = Style::Generic { scaled };
-    let _lock = super::super::out_dir::lock(&args.out, "calibrate")?;
+    let _lock = super::super::out_dir::lock(&args.out, "--out", "calibrate")?;
     super::super::out_dir::check_files(&args.out, &OUT_FILES)?;
     super::super::same_file::refuse_inputs_in_out(
         &args.out,
@@ -212,9 +212,9 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
             "  {effects} {} {are} held absent; whether the data want {them}: kalibre \
              diagnose --model command --config {} --measurements {} --calibration {}",
             names.join(", "),
-            config.display(),
-            measurements.display(),
-            args.out.display()
+            super::super::shell_word(config),
+            super::super::shell_word(measurements),
+            super::super::shell_word(&args.out)
         );
     }
     println!("wrote {}, {}", report_path.display(), journal.display());
@@ -525,7 +525,7 @@ fn part_in_words(part: &str) -> String {
         "args" => "the arguments".into(),
         "env" => "the environment".into(),
         "output" => "the output (file, parser or names)".into(),
-        "params" => "the parameters' names".into(),
+        "params" => "the parameters' names or their order".into(),
         // `template SOURCE`, or a fingerprint file by its path: as named.
         other => other.to_string(),
     }

@@ -324,7 +324,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
     }
     check_finer_grids(&hall, settings.sim.cell_m, &settings.grid_check)?;
     // Held until the report is written: a second calibration here would repeat the runs.
-    let _lock = super::out_dir::lock(&args.out, "calibrate")?;
+    let _lock = super::out_dir::lock(&args.out, "--out", "calibrate")?;
     super::out_dir::check_files(
         &args.out,
         &[&OUT_FILES[..], &[super::hall_changes::RUNS_HALL]].concat(),

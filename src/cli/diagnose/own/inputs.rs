@@ -26,8 +26,8 @@ pub(super) fn read_report(
         return Err(CliError::Input(format!(
             "{file}: no calibration there yet: calibrate first, with kalibre calibrate \
              --model command --config {} --measurements FILE --out {}",
-            config.display(),
-            dir.display()
+            crate::cli::shell_word(config),
+            crate::cli::shell_word(dir)
         )));
     }
     let text = std::fs::read_to_string(report_path)

@@ -97,7 +97,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
         noise_sigma: noise,
         ..settings
     };
-    let _lock = super::super::out_dir::lock(&args.calibration, "diagnose")?;
+    let _lock = super::super::out_dir::lock(&args.calibration, "--calibration", "diagnose")?;
     super::super::out_dir::note_interrupted_runs(cfg.command.remove_interrupted_runs());
     let journal = args.calibration.join("runs.jsonl");
     super::super::calibrate::set_stop_message(&journal, false);
