@@ -368,6 +368,18 @@ fn bad_or_repeated_names_are_refused_by_key() {
             "duplicate",
         ),
         (
+            "name = \"k\"",
+            "name = \"k rod\"",
+            "params[0].name",
+            "cannot be written as a template placeholder",
+        ),
+        (
+            "name = \"h\"",
+            "name = \"h:1\"",
+            "params[1].name",
+            "expected e.g. `h_1`",
+        ),
+        (
             "names = [\"t_in\", \"t_out\"]",
             "names = [\"t_in\", \"t\\u0000out\"]",
             "output.names[1]",

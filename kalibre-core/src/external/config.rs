@@ -625,7 +625,23 @@ fn param_name(cx: &Ctx<'_>, p: &str, name: &str, space: &ParamSpace) -> Result<(
         .iter()
         .enumerate()
         .map(|(j, e)| (format!("params[{j}].name"), e.name.as_str()));
-    cx.name(&format!("{p}.name"), name, earlier)
+    cx.name(&format!("{p}.name"), name, earlier)?;
+    // A template writes it `{{name}}`, which stops at a brace, splits at `:` (a format)
+    // and holds no white space: such a name could never be placed.
+    if name.contains(|c: char| c.is_whitespace() || matches!(c, '{' | '}' | ':')) {
+        return Err(cx.err(
+            format!("{p}.name"),
+            format!(
+                "`{name}` cannot be written as a template placeholder `{{{{name}}}}`: a \
+                 parameter's name holds no spaces, braces or `:`; expected e.g. `{}`",
+                name.trim().replace(
+                    |c: char| c.is_whitespace() || matches!(c, '{' | '}' | ':'),
+                    "_"
+                )
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// `params[i].scale`: `linear` (the default) or `log`.
