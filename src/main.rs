@@ -98,6 +98,9 @@ fn main() {
         }
     }));
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| cli::run(args)));
+    // Stopped by a signal while its runs were being ended: the handler ends the process
+    // as the signal would, with its message, not this command's outcome.
+    kalibre_core::external::await_stop();
     // Writes to stderr are tried, never unwrapped: stderr may be the full device too.
     match outcome {
         Ok(Ok(())) => {}

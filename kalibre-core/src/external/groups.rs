@@ -129,6 +129,16 @@ pub fn stopping() -> bool {
     STOPPING.load(Ordering::Acquire)
 }
 
+/// Once kalibre's stop has begun ([`stopping`]), waits for its handler to end the
+/// process, so that a command which returns in the meantime (its runs just ended by the
+/// stop) does not exit first with an error of its own. Returns at once otherwise. For the
+/// end of a program's `main`.
+pub fn await_stop() {
+    while stopping() {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 extern "C" fn on_end_signal(signal: libc::c_int) {
     // An atomic store: async-signal-safe. Before the runs are signalled, so that no
     // worker takes their end for an outside kill.

@@ -35,7 +35,9 @@ pub use command::{
     TemplateFile,
 };
 pub use config::CommandModelConfig;
-pub use groups::{end_runs_with_kalibre, set_stop_message, signal_runs, stopping, StopMessage};
+pub use groups::{
+    await_stop, end_runs_with_kalibre, set_stop_message, signal_runs, stopping, StopMessage,
+};
 pub use parse::OutputParser;
 pub use parts::changed_parts;
 pub use process::{log_tail, run_process, ProcessEnd, ProcessOutcome, ProcessSpec};

@@ -101,6 +101,10 @@ fn wait_exit_no_reap(pid: libc::pid_t) -> io::Result<()> {
 /// Runs a program to its end or its timeout. An error means it could not be started
 /// (program not found, logs not writable) or not waited for.
 pub fn run_process(spec: &ProcessSpec<'_>) -> io::Result<ProcessOutcome> {
+    // kalibre's stop waits for the runs in progress to go; none starts meanwhile.
+    if super::groups::stopping() {
+        return Err(io::Error::other("kalibre is stopping"));
+    }
     let stdout = File::create(spec.dir.join(STDOUT_LOG))?;
     let stderr = File::create(spec.dir.join(STDERR_LOG))?;
     let mut cmd = Command::new(spec.program);

@@ -61,7 +61,14 @@ impl AsRef<Path> for RunDir {
 
 impl Drop for RunDir {
     fn drop(&mut self) {
-        if let Some((marker, _lock)) = self.marker.take() {
+        if let Some((marker, lock)) = self.marker.take() {
+            if super::groups::stopping() {
+                // Ended by kalibre's stop, which waits for its runs to go: left marked, as
+                // an interrupted run's, for the next command's sweep (the lock goes with
+                // the process), not kept as a failed run's.
+                std::mem::forget(lock);
+                return;
+            }
             // Removed while still locked, so no sweep can take it for an interrupted run's.
             let _ = std::fs::remove_file(marker);
         }
