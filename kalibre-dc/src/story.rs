@@ -27,7 +27,7 @@ pub use crate::next_hall::{with_effect_from_report, with_effect_refitted};
 use crate::report::{ThermalPlane, INLET_HEIGHT_M};
 use crate::sim::{intake_error, RackHeat};
 use crate::snapshots::HallSnapshot;
-use crate::{Error, HallModel, Result};
+use crate::{Error, Result};
 
 /// The schema tag of `story.json`.
 pub const STORY_SCHEMA: &str = "kalibre.story/1";
@@ -278,7 +278,7 @@ pub enum StoryEvent<'a> {
         /// The calibration it diagnoses (its residuals show where the model fails).
         calibration: &'a Report,
         /// Every rack's part of every sensor's warming in the calibrated model's flow at
-        /// the first snapshot ([`HallModel::rack_heat`]).
+        /// the first snapshot ([`crate::HallModel::rack_heat`]).
         heat: &'a [RackHeat],
     },
     /// The diagnosis after the last calibration failed (the story goes on).
@@ -403,11 +403,7 @@ pub fn run_story(
         // Which racks warm each sensor in the calibrated model's flow (the first
         // snapshot, as `kalibre diagnose` says): where a missing effect would act.
         let heat = match snaps.first() {
-            Some(first) => {
-                HallModel::new(&current, settings.calibration.sim.clone())?
-                    .rack_heat(&first.state, &best)?
-                    .1
-            }
+            Some(first) => cal.model.rack_heat(&first.state, &best)?.1,
             None => Vec::new(),
         };
         if let Some(dir) = out_dir {

@@ -628,16 +628,13 @@ fn param_name(cx: &Ctx<'_>, p: &str, name: &str, space: &ParamSpace) -> Result<(
     cx.name(&format!("{p}.name"), name, earlier)?;
     // A template writes it `{{name}}`, which stops at a brace, splits at `:` (a format)
     // and holds no white space: such a name could never be placed.
-    if name.contains(|c: char| c.is_whitespace() || matches!(c, '{' | '}' | ':')) {
+    if name.contains(super::template::breaks_placeholder) {
+        let fitting = (name.trim()).replace(super::template::breaks_placeholder, "_");
         return Err(cx.err(
             format!("{p}.name"),
             format!(
                 "`{name}` cannot be written as a template placeholder `{{{{name}}}}`: a \
-                 parameter's name holds no spaces, braces or `:`; expected e.g. `{}`",
-                name.trim().replace(
-                    |c: char| c.is_whitespace() || matches!(c, '{' | '}' | ':'),
-                    "_"
-                )
+                 parameter's name holds no spaces, braces or `:`; expected e.g. `{fitting}`"
             ),
         ));
     }

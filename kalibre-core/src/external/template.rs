@@ -143,6 +143,20 @@ enum Part {
     },
 }
 
+/// What separates a placeholder's name from its format (`{{k:.3}}`).
+const FORMAT_SEPARATOR: char = ':';
+
+/// Whether `c` cannot stand in a placeholder's name: white space and braces end it.
+fn ends_placeholder_name(c: char) -> bool {
+    c.is_whitespace() || c == '{' || c == '}'
+}
+
+/// Whether `c` keeps a name from being written as a placeholder `{{name}}`: it ends the
+/// name, or the format separator splits it there.
+pub(crate) fn breaks_placeholder(c: char) -> bool {
+    ends_placeholder_name(c) || c == FORMAT_SEPARATOR
+}
+
 /// A parsed template.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Template {
@@ -183,14 +197,14 @@ impl Template {
             if raw.len() >= 2 && raw.starts_with('"') && raw.ends_with('"') {
                 literal.push_str(&raw[1..raw.len() - 1]);
             } else {
-                let (var, spec) = match raw.split_once(':') {
+                let (var, spec) = match raw.split_once(FORMAT_SEPARATOR) {
                     Some((v, s)) => (v.trim(), Some(s.trim())),
                     None => (raw, None),
                 };
                 if var.is_empty() {
                     return Err(bad("empty name"));
                 }
-                if var.contains(|c: char| c.is_whitespace() || c == '{' || c == '}') {
+                if var.contains(ends_placeholder_name) {
                     return Err(bad("a name cannot contain spaces or braces"));
                 }
                 let format = match spec {

@@ -95,11 +95,8 @@ impl<'a> Fields<'a> {
         match self.take(field) {
             None => Ok(None),
             Some(v) => {
-                let whole = v.as_u64().or_else(|| {
-                    v.as_f64()
-                        .filter(|x| x.fract() == 0.0 && (0.0..=u32::MAX as f64).contains(x))
-                        .map(|x| x as u64)
-                });
+                let whole = (v.as_u64())
+                    .or_else(|| v.as_f64().and_then(crate::hall::whole_count).map(u64::from));
                 match whole {
                     Some(x) => Ok(Some(x as usize)),
                     None => {

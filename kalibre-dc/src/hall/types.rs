@@ -177,6 +177,16 @@ impl Side {
         }
     }
 
+    /// Name used in `hall.json` (`+x`, `-x`, `+y`, `-y`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Side::PlusX => "+x",
+            Side::MinusX => "-x",
+            Side::PlusY => "+y",
+            Side::MinusY => "-y",
+        }
+    }
+
     /// Axis index (0 = x, 1 = y) and sign (+1.0 or -1.0) of the outward normal.
     pub fn axis_sign(self) -> (usize, f64) {
         match self {
@@ -326,6 +336,12 @@ pub struct EffectSpec {
     pub fields: serde_json::Map<String, serde_json::Value>,
 }
 
+/// `v` as a count when it is a whole number in `u32`'s range (`42.0`, `-0.0`), else
+/// `None`: how `hall.json` reads a count written as a float.
+pub(crate) fn whole_count(v: f64) -> Option<u32> {
+    (v.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(&v)).then_some(v as u32)
+}
+
 /// A count in `hall.json`: an integer, or a number with no fractional part (`42.0`,
 /// `4.2e1`). JSON has one number type, and exporters that write every number as a float
 /// (Python, pandas columns) mean the same count; `42.5` or `-1` is refused.
@@ -344,11 +360,7 @@ fn whole_u32<'de, D: serde::Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
             u32::try_from(v).map_err(|_| E::invalid_value(Unexpected::Signed(v), &self))
         }
         fn visit_f64<E: Error>(self, v: f64) -> Result<u32, E> {
-            if v.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(&v) {
-                Ok(v as u32)
-            } else {
-                Err(E::invalid_value(Unexpected::Float(v), &self))
-            }
+            whole_count(v).ok_or_else(|| E::invalid_value(Unexpected::Float(v), &self))
         }
     }
     d.deserialize_any(Whole)

@@ -189,7 +189,7 @@ impl Topology {
                                  in front of it; expected room in front of a `front` CRAC \
                                  (or `supply` `floor`)",
                                 cr.id,
-                                side_name(side)
+                                side.as_str()
                             ))
                         },
                     )?
@@ -436,16 +436,6 @@ fn front_side(hall: &Hall, b: &Aabb) -> Side {
             _ => Some(s),
         })
         .unwrap_or(Side::PlusX)
-}
-
-/// A side's name as `hall.json` writes it.
-fn side_name(side: Side) -> &'static str {
-    match side {
-        Side::PlusX => "+x",
-        Side::MinusX => "-x",
-        Side::PlusY => "+y",
-        Side::MinusY => "-y",
-    }
 }
 
 /// The first open cells outside face `side` of box `b`, over the box's tangential extent
