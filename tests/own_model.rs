@@ -140,6 +140,22 @@ fn a_scenario_that_always_fails_is_named_with_its_reason() {
         "{err}"
     );
     assert!(!err.contains("surrogate, fitted"), "{err}");
+    // Where to look: a kept run directory of that scenario, with the program's own log,
+    // and the journal.
+    let kept = err
+        .split("its directory is kept: ")
+        .nth(1)
+        .and_then(|rest| rest.split(')').next())
+        .unwrap_or_else(|| panic!("no kept directory named: {err}"));
+    let log = std::fs::read_to_string(Path::new(kept).join("stderr.log")).unwrap();
+    assert!(log.contains("m_hot must be positive"), "{kept}: {log}");
+    assert!(
+        err.contains(&format!(
+            "in the run journal, {}",
+            out.join("runs.jsonl").display()
+        )),
+        "{err}"
+    );
     let journal = std::fs::read_to_string(out.join("runs.jsonl")).unwrap();
     assert!(
         journal.lines().any(|l| l.contains("\"failed\"")),
@@ -317,4 +333,42 @@ fn a_prior_turned_off_binds_nothing() {
     let (off, off_html) = summary("0", "off");
     assert!(!off.contains("prior binds"), "{off}");
     assert!(!off_html.contains("prior binds"));
+}
+
+/// A parameter that no template, argument or `env` value writes is one the program
+/// cannot see (unless it reads `kalibre-run.json`): calibrating it would end wherever the
+/// search left it, so it is warned of by name. A fixed one moves nothing and is not.
+#[test]
+fn a_parameter_the_program_cannot_see_is_warned_of() {
+    let (dir, _, measurements) = setup("own-model-unwritten");
+    let config = dir.join("unwritten.toml");
+    let extra = "\n[[params]]\nname = \"fouling\"\nlower = 0.0\nupper = 1.0\ninitial = 0.5\n\
+                 \n[[params]]\nname = \"spare\"\nlower = 1.0\nupper = 1.0\ninitial = 1.0\n";
+    let toml = MODEL_TOML.replacen("\n[[scenarios]]", &format!("{extra}\n[[scenarios]]"), 1);
+    std::fs::write(&config, toml).unwrap();
+    let o = run(calibrate(&config, &measurements, &dir.join("out")).args([
+        "--iterations",
+        "1",
+        "--polish",
+        "0",
+    ]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    let warned: Vec<&str> = err.lines().filter(|l| l.contains("warning")).collect();
+    assert_eq!(warned.len(), 1, "{err}");
+    assert!(
+        warned[0].contains("params[3] `fouling` is written by no template")
+            && warned[0].contains("unwritten.toml"),
+        "{err}"
+    );
+    // The file the tests share writes every parameter: no warning.
+    let (_, config, measurements) = setup("own-model-written");
+    let o = run(calibrate(&config, &measurements, &dir.join("out2")).args([
+        "--iterations",
+        "1",
+        "--polish",
+        "0",
+    ]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
 }

@@ -82,6 +82,11 @@ impl<S> Observations<S> {
                 )));
             }
         }
+        if outputs.is_empty() {
+            return Err(Error::Mismatch(
+                "observations need at least one output".into(),
+            ));
+        }
         if snapshots.is_empty() {
             return Err(Error::Mismatch(
                 "observations need at least one snapshot".into(),
@@ -293,6 +298,17 @@ mod tests {
         };
         let e = with_label(String::new()).unwrap_err().to_string();
         assert!(e.contains("snapshot 0 has an empty label"), "{e}");
+        // No outputs at all: said as such, not as a snapshot with no measurement.
+        let none = Observations::new(
+            Vec::new(),
+            vec![Snapshot {
+                label: "a".to_string(),
+                scenario: (),
+                measured: Vec::new(),
+            }],
+        );
+        let e = none.unwrap_err().to_string();
+        assert!(e.contains("at least one output"), "{e}");
         let e = with_label("x".repeat(500)).unwrap_err().to_string();
         assert!(
             e.contains("is 500 characters long; expected at most 200"),

@@ -48,8 +48,10 @@ pub enum Error {
     /// A search failed.
     #[error("search failed: {0}")]
     Search(String),
-    /// No model run of the initial design succeeded, so there is nothing to train on.
-    #[error("no successful model run to learn from: {0}")]
+    /// The surrogate has nothing to train on: no model run of the initial design
+    /// succeeded, or every run at one snapshot failed (no point then ran at every
+    /// snapshot, so no run can be validated against all the measurements).
+    #[error("nothing for the surrogate to learn from: {0}")]
     NoSuccessfulRun(String),
     /// An error from the argmin executor, converted at the boundary.
     #[error("optimiser: {0}")]

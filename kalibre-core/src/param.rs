@@ -348,7 +348,10 @@ impl ParamSpace {
             .collect())
     }
 
-    /// `d physical / d unit` per coordinate (the Jacobian of [`Self::from_unit`] is diagonal).
+    /// `d physical / d unit` per coordinate (the Jacobian of [`Self::from_unit`] is
+    /// diagonal), for the first `unit.len()` parameters: unlike `from_unit` it does not
+    /// check the length (the loop calls it on points `from_unit` accepted), so give it
+    /// one value per parameter.
     pub fn dphys_dunit(&self, unit: &[f64]) -> Vec<f64> {
         self.params
             .iter()

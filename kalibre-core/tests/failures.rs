@@ -8,8 +8,8 @@ use std::fs;
 
 use common::*;
 use kalibre_core::{
-    Calibrator, Model, ModelError, Objective, RunRecord, RunStatus, RunStore, SearchOutcome,
-    Searcher,
+    Calibrator, Model, ModelError, Objective, Observations, RunRecord, RunStatus, RunStore,
+    SearchOutcome, Searcher, Snapshot,
 };
 
 /// Fails (`Err`) for `a > 3` and returns a NaN output for `b < 0.8`: the design's lower
@@ -298,4 +298,78 @@ fn a_model_with_the_wrong_output_count_stops_at_its_first_run() {
     let journal = fs::read_to_string(&path).unwrap();
     assert_eq!(journal.lines().count(), 1, "{journal}");
     assert!(journal.contains(r#""status":"failed""#), "{journal}");
+}
+
+/// A model whose outputs changed under the same fingerprint finds every journaled run
+/// stale: the journal's refusal says to change the fingerprint or the journal, not to
+/// delete one line.
+#[test]
+fn outputs_changed_under_one_fingerprint_are_blamed_on_the_fingerprint() {
+    let dir = temp_dir("same-fingerprint");
+    let path = dir.join("runs.jsonl");
+    let full = Altered {
+        poly: Poly::new(),
+        fingerprint: "poly-same",
+        alter: |poly, scenario, params| poly.evaluate(scenario, params),
+    };
+    Calibrator::new(&full, QuadSurface::default(), &observations(), &space())
+        .with_max_iterations(1)
+        .with_store(RunStore::open(&path, "poly-same").unwrap())
+        .run()
+        .unwrap();
+    let short = Altered {
+        poly: Poly::new(),
+        fingerprint: "poly-same",
+        alter: |poly, scenario, params| {
+            let mut out = poly.evaluate(scenario, params)?;
+            out.values.pop();
+            Ok(out)
+        },
+    };
+    // The observations lose the output too, so only the journal's runs disagree.
+    let full_obs = observations();
+    let three = Observations::new(
+        full_obs.outputs()[..3].to_vec(),
+        full_obs
+            .snapshots()
+            .iter()
+            .map(|s| Snapshot {
+                measured: s.measured[..3].to_vec(),
+                ..s.clone()
+            })
+            .collect(),
+    )
+    .unwrap();
+    let err = Calibrator::new(&short, QuadSurface::default(), &three, &space())
+        .with_max_iterations(1)
+        .with_store(RunStore::open(&path, "poly-same").unwrap())
+        .run()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("line 1 ") && err.contains("give the model a new fingerprint"),
+        "{err}"
+    );
+    assert!(!err.contains("delete the line"), "{err}");
+}
+
+/// A searcher's point outside the unit box is clamped onto it, coordinate by coordinate
+/// (`kalibre_core::search`'s docs): the model runs at the box's face, never outside its
+/// bounds; a point of the wrong length is an error.
+#[test]
+fn a_searcher_point_outside_the_box_is_clamped_onto_it() {
+    let (model, obs, space) = (Poly::new(), observations(), space());
+    let r = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_searcher(Proposes(|_| vec![1.7, -0.3]))
+        .with_max_iterations(1)
+        .run()
+        .unwrap();
+    assert_eq!(r.history[0].params.values(), vec![4.0, 0.5]);
+    let err = Calibrator::new(&model, QuadSurface::default(), &obs, &space)
+        .with_searcher(Proposes(|_| vec![0.5]))
+        .with_max_iterations(1)
+        .run()
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("invalid point [0.5]"), "{err}");
 }

@@ -413,6 +413,37 @@ fn bypass_candidates_leave_the_tiles_a_share_beside_the_halls_own_openings() {
     assert!(factory.candidates(&both).is_empty());
 }
 
+/// A bypass is an opening of the raised floor's plenum: a hall whose CRACs all blow
+/// through their fronts has none, so the entry is refused and the diagnosis proposes
+/// none, while one floor CRAC is enough for both.
+#[test]
+fn a_hall_without_a_plenum_has_no_bypass() {
+    use kalibre_dc::hall::SupplyKind;
+    let registry = EffectRegistry::builtin();
+    let factory = registry.get("bypass").expect("bypass kind");
+    let mut front = demo_hall();
+    front.tiles.clear();
+    front
+        .cracs
+        .iter_mut()
+        .for_each(|c| c.supply = SupplyKind::Front);
+    let rack = front.racks[0].id.clone();
+    let e = effect_error(json!({"kind": "bypass", "behind_rack": rack}), &front);
+    assert!(
+        e.contains("an opening of the raised floor's plenum") && e.contains("`front`"),
+        "{e}"
+    );
+    assert!(factory.candidates(&front).is_empty());
+    let mut mixed = demo_hall();
+    mixed.cracs[0].supply = SupplyKind::Front;
+    assert!(from_spec(
+        &spec(json!({"kind": "bypass", "behind_rack": rack})),
+        &mixed
+    )
+    .is_ok());
+    assert!(!factory.candidates(&mixed).is_empty());
+}
+
 #[test]
 fn a_floor_opening_partly_under_a_rack_is_refused_like_one_wholly_under_it() {
     let hall = demo_hall();

@@ -25,6 +25,32 @@ pub(crate) fn load_config(path: &Path, no_scenarios: &str) -> CliResult<CommandM
     Ok(cfg)
 }
 
+/// Warns of each parameter the program cannot see: one that no template, argument or
+/// `env` value writes reaches it only through `kalibre-run.json`, and a calibration of a
+/// parameter the program ignores ends wherever the search left it. A fixed parameter
+/// that is no candidate effect moves nothing anyway, so it is not named.
+pub(crate) fn warn_unwritten_params(path: &Path, cfg: &CommandModelConfig) {
+    let candidate = |name: &str| {
+        cfg.candidates
+            .iter()
+            .any(|c| c.params.iter().any(|p| p.name == name))
+    };
+    for name in cfg.command.unwritten_params() {
+        let Some(i) = cfg.space.index_of(name) else {
+            continue;
+        };
+        if cfg.space.params()[i].is_fixed() && !candidate(name) {
+            continue;
+        }
+        eprintln!(
+            "kalibre: warning: {}: params[{i}] `{name}` is written by no template, argument \
+             or env value (no {{{{{name}}}}} anywhere), so the program sees it only in each \
+             run's kalibre-run.json; if it does not read that file, `{name}` changes nothing",
+            path.display()
+        );
+    }
+}
+
 /// The OpenFOAM flags refused: OpenFOAM solves a hall, which a model of your own is not.
 pub(crate) fn refuse_openfoam_flags(openfoam: &OpenFoamArgs) -> CliResult {
     openfoam.refuse_unless_because(

@@ -170,7 +170,7 @@ where
             .flatten()
             .find_map(|r| r.result.as_ref().err().cloned());
         let labels: Vec<&str> = obs.snapshots().iter().map(|s| s.label.as_str()).collect();
-        let dead_snapshots = runner::snapshots_failed_throughout(&design_results, &labels);
+        let dead_snapshots = runner::snapshots_failed_throughout(&design_results, &labels, store);
         for (i, results) in design_results.into_iter().enumerate() {
             let eval = state.absorb(
                 &self.validator,
@@ -302,7 +302,8 @@ where
             contract::check_surrogate(&self.surrogate, obs, &start_params, iteration).map_err(
                 |e| match &dead_snapshots {
                     Some(dead) => Error::NoSuccessfulRun(format!(
-                        "{dead}, so the surrogate has nothing to learn there"
+                        "{dead}: leave that snapshot out of the observations, or fix what \
+                         fails there"
                     )),
                     None => e,
                 },

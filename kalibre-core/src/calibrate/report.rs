@@ -339,7 +339,9 @@ pub struct RunCounts {
     pub total: usize,
     /// Runs computed by the model in this session.
     pub new: usize,
-    /// Runs replayed from the journal.
+    /// Runs read back from the run store instead of run: an earlier calibration's
+    /// journaled runs, and points this calibration asked for again (a fixed parameter,
+    /// a repeated proposal), which the store already holds even when it is in memory.
     pub cached: usize,
     /// Runs that failed (new or cached).
     pub failed: usize,

@@ -105,15 +105,21 @@ impl<M: Model> Runner<'_, M> {
             // A record this loop wrote passed these checks; one that fails them was
             // edited or written by another tool, and must not reach the surrogate.
             if let Some(Err(e)) = result.as_ref().ok().map(|o| self.checked(o.clone())) {
+                // A count that does not fit is rarely one line's: the model's outputs
+                // changed under an unchanged fingerprint, so every line is stale.
+                let cure = if matches!(e, ModelError::WrongOutputCount { .. }) {
+                    "the model's outputs changed since it ran, but not its fingerprint \
+                     (`Model::fingerprint`), so every run there is another model's: give the \
+                     model a new fingerprint, or start a new journal"
+                } else {
+                    "delete the line to run the model there again"
+                };
                 return Err(Error::Journal {
                     path: self
                         .store
                         .path()
                         .map_or_else(|| "(in memory)".to_string(), |p| p.display().to_string()),
-                    reason: format!(
-                        "line {line} (snapshot `{label}`, status ok): {e}; delete the line \
-                         to run the model there again"
-                    ),
+                    reason: format!("line {line} (snapshot `{label}`, status ok): {e}; {cure}"),
                 });
             }
             self.emit(Event::RunFinished {
@@ -162,14 +168,14 @@ impl<M: Model> Runner<'_, M> {
             error: result.as_ref().err(),
             wall_s,
         });
-        // A count that does not fit the observations is the model's make, not its
-        // parameters': every run would fail alike, so the first one stops the calibration
-        // (journaled, like the runs in flight beside it).
+        // A count that does not fit the observations is almost always the model's make,
+        // not its parameters', so the first one stops the calibration (journaled, like
+        // the runs in flight beside it) rather than failing run after run.
         if let Err(ModelError::WrongOutputCount { expected, got }) = &result {
             return Err(Error::Mismatch(format!(
                 "snapshot `{label}`: the model returned {got} outputs where the observations \
-                 have {expected}; every run would fail alike, so the calibration stops at \
-                 the first (the model and the observations must list the same outputs)"
+                 have {expected}, so the calibration stops at the first such run (the model \
+                 and the observations must list the same outputs, at every parameter value)"
             )));
         }
         Ok(RunResult {
@@ -198,12 +204,14 @@ pub(crate) fn divide(values: &mut [f64], scales: &[f64]) {
 }
 
 /// The snapshots at which every point of `results` (one row per point, one run per
-/// snapshot) failed, each with its first failure: said when no point then runs at every
-/// snapshot, so that the error names where and why (all fans off in one snapshot), not
-/// only that nothing ran. `None` when every snapshot ran somewhere.
+/// snapshot) failed, each with its first failure and its kept directory: said when no
+/// point then runs at every snapshot, so that the error names where and why (all fans off
+/// in one snapshot) and where to look, not only that nothing ran. `None` when every
+/// snapshot ran somewhere.
 pub(crate) fn snapshots_failed_throughout(
     results: &[Vec<RunResult>],
     labels: &[&str],
+    store: &RunStore,
 ) -> Option<String> {
     let dead: Vec<String> = labels
         .iter()
@@ -215,13 +223,23 @@ pub(crate) fn snapshots_failed_throughout(
                 let gist = first
                     .log_gist()
                     .map_or_else(String::new, |g| format!("; its log: {g}"));
+                let kept = first
+                    .run_dir()
+                    .map_or_else(String::new, |d| format!("; its directory is kept: {d}"));
                 format!(
-                    "snapshot `{label}` failed at every design point (the first: {first}{gist})"
+                    "snapshot `{label}` failed at every design point (the first: \
+                     {first}{gist}{kept})"
                 )
             })
         })
         .collect();
-    (!dead.is_empty()).then(|| dead.join("; "))
+    let journal = store.path().map_or_else(String::new, |p| {
+        format!(
+            " (each run's reason is in the run journal, {})",
+            p.display()
+        )
+    });
+    (!dead.is_empty()).then(|| format!("{}{journal}", dead.join("; ")))
 }
 
 /// The pool of `max_parallel_runs` threads for model runs (`None`: rayon's global pool).

@@ -341,8 +341,19 @@ pub(super) fn check(
             )));
         }
         for p in &e.params {
-            let held = (space.params().get(p.index))
-                .filter(|q| q.name == p.name && q.is_fixed() && params[p.index] == p.absent);
+            if p.index >= space.dim() {
+                return Err(Error::Mismatch(format!(
+                    "candidate `{}`: parameter `{}` has index {}, but the space has {} \
+                     parameters",
+                    e.name,
+                    p.name,
+                    p.index,
+                    space.dim()
+                )));
+            }
+            let held = (space.params().get(p.index)).filter(|q| {
+                q.name == p.name && q.is_fixed() && params.get(p.index) == Some(&p.absent)
+            });
             if held.is_none() {
                 return Err(Error::Mismatch(format!(
                     "candidate `{}`: parameter `{}` must be the space's parameter {} held \

@@ -76,6 +76,24 @@ impl<S: TemplateScenario> ExternalCommand<S> {
         Ok(())
     }
 
+    /// The parameters that no template, argument or environment value writes: the
+    /// program can see them only by reading `kalibre-run.json`, so when it does not,
+    /// calibrating them moves nothing.
+    pub fn unwritten_params(&self) -> Vec<&str> {
+        let written: std::collections::BTreeSet<&str> = self
+            .args
+            .iter()
+            .chain(self.env.iter().map(|(_, t)| t))
+            .chain(self.templates.iter().map(|t| &t.template))
+            .flat_map(|t| t.placeholders())
+            .collect();
+        self.param_names
+            .iter()
+            .map(String::as_str)
+            .filter(|p| !written.contains(p))
+            .collect()
+    }
+
     /// Runs the model with every attempt the retry policy allows, and reports each.
     pub fn run(&self, scenario: &S, params: &[f64]) -> RunReport {
         let refuse = |reason: String| RunReport {

@@ -68,9 +68,11 @@ const AFFINE_RMS: f64 = 1e-6;
 ///
 /// The first fit of `Calibrator` trains on noisy copies of the design runs
 /// (`Settings::augment_copies`) that keep the runs' outputs: to a Gaussian process they
-/// are flat plateaus around each run, and they cost the fit (cubic in the samples). It
-/// copes: the recommended loop on the test model reached 7e-9 to 1.9e-8 MAE with the 16
-/// copies, 1.6e-8 to 7.8e-7 with `augment_copies: 1`, which only saves the fit's time.
+/// are flat plateaus around each run, and they cost the fit (cubic in the samples). The
+/// polish can hide what they cost (the recommended loop on the test model reached 7e-9
+/// to 1.9e-8 MAE with the 16 copies, 1.6e-8 to 7.8e-7 with one), but without it they
+/// cost the search: a library user's oscillator ended 4-10 times further from the data
+/// with them. Start from `Settings::recommended_for_gaussian_process`, which has one.
 ///
 /// ```
 /// use kalibre_core::{GaussianProcess, ParamSpace, Sample, Scale, Surrogate, TrainingSet};

@@ -1,6 +1,9 @@
 //! Step 2 of the loop: search the parameters on the surrogate against the measurements.
 //!
 //! Searchers minimise an [`Objective`] over the unit box `[0, 1]^d` and never leave it.
+//! (The calibration loop clamps a point returned outside the box onto it, coordinate by
+//! coordinate, so rounding past a face is harmless; a point of the wrong length or not
+//! finite is an error.)
 //! They are argmin solvers ([`DifferentialEvolution`], [`Adam`]) driven by argmin's
 //! `Executor`; [`Hybrid`] runs differential evolution, then Adam from its best point,
 //! as the paper does.

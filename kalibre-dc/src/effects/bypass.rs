@@ -1,6 +1,7 @@
 //! `bypass`: part of the supply enters the room where no server draws it (a cable
 //! cut-out in a hot aisle, a misplaced tile), at supply temperature; the regular tiles
-//! (or CRAC fronts) deliver the rest.
+//! (and any CRAC fronts) deliver the rest. The opening is the plenum's, so a hall with no
+//! `floor` CRAC refuses it, and the diagnosis has no such candidate there.
 //!
 //! | field | required | meaning |
 //! |---|---|---|
@@ -19,9 +20,9 @@ use serde_json::Value;
 
 use super::fields::{param_fields, spec, unknown_id, Fields};
 use super::{check_values, Effect, EffectFactory};
-use crate::hall::{Aabb, EffectSpec, Hall, GEOMETRY_TOL_M};
+use crate::hall::{Aabb, EffectSpec, Hall, SupplyKind, GEOMETRY_TOL_M};
 use crate::sim::{SimMods, SupplyOpening};
-use crate::Result;
+use crate::{Error, Result};
 
 const KIND: &str = "bypass";
 const BOUNDS: [f64; 2] = [0.0, 0.5];
@@ -108,6 +109,16 @@ impl EffectFactory for BypassFactory {
         let pos = f.opt_array::<2>("position_m")?;
         let size = f.opt_array::<2>("size_m")?;
         let behind = f.opt_str("behind_rack")?;
+        // The opening lets plenum air up through the floor; a hall whose CRACs all blow
+        // through their fronts has no plenum, so no supply could come up there.
+        if hall.cracs.iter().all(|c| c.supply != SupplyKind::Floor) {
+            return Err(Error::Effect {
+                kind: KIND.into(),
+                message: "a bypass is an opening of the raised floor's plenum, and no CRAC \
+                          of this hall supplies one (every `supply` is `front`)"
+                    .into(),
+            });
+        }
         let depth = f.opt_f64("depth_m")?;
         let room = hall.room.size_m;
         let (placement, region) =

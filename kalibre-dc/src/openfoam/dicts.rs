@@ -139,7 +139,12 @@ pub fn control_dict(g: &CaseGeometry, st: &OpenFoamSettings) -> String {
         let _ = writeln!(s, "            {}", v3(*p));
     }
     s += "        );\n    }\n";
-    for p in g.tiles.iter().chain(&g.openings).chain(&g.returns) {
+    for p in g.tiles.iter().chain(&g.openings).chain(&g.returns).chain(
+        g.crac_supplies
+            .iter()
+            .chain(&g.crac_returns)
+            .map(|c| &c.patch),
+    ) {
         let _ = write!(
             s,
             "    flux_{0}\n    {{\n        type surfaceFieldValue;\n        libs (\"libfieldFunctionObjects.so\");\n        \
@@ -332,6 +337,23 @@ fn field(
             patch(p, PatchRole::Return)
         );
     }
+    for (c, role) in g
+        .crac_supplies
+        .iter()
+        .map(|c| (c, PatchRole::CracSupply(c.crac)))
+        .chain(
+            g.crac_returns
+                .iter()
+                .map(|c| (c, PatchRole::CracReturn(c.crac))),
+        )
+    {
+        let _ = write!(
+            s,
+            "    {}\n    {{\n{}    }}\n",
+            c.patch.name,
+            patch(&c.patch, role)
+        );
+    }
     s += "}\n";
     s
 }
@@ -350,6 +372,12 @@ enum PatchRole {
     /// left with, like a server's exhaust without the heat.
     GapFront(usize),
     Return,
+    /// A `front` CRAC's face (by CRAC index): an inflow like a tile, at its own flow and
+    /// supply temperature.
+    CracSupply(usize),
+    /// A CRAC's top with no grilles (by CRAC index): the CRAC's fan draws its own flow
+    /// out there, like a server's intake.
+    CracReturn(usize),
 }
 
 fn lines(items: &[&str]) -> String {
@@ -398,6 +426,16 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
                 &format!("volumetricFlowRate $q_rec{r};"),
                 "value uniform (0 0 0);",
             ]),
+            PatchRole::CracSupply(c) => lines(&[
+                "type flowRateInletVelocity;",
+                &format!("volumetricFlowRate $q_sup{c};"),
+                "value uniform (0 0 0);",
+            ]),
+            PatchRole::CracReturn(c) => lines(&[
+                "type flowRateOutletVelocity;",
+                &format!("volumetricFlowRate $q_crt{c};"),
+                "value uniform (0 0 0);",
+            ]),
             // A CRAC's fan only draws: a face where the flow would turn inward is held
             // at rest. With inflow allowed (generator 1), the rolling cell of a
             // contained hot aisle drew 25 C air back in at 8 m/s (docs/models.md).
@@ -433,7 +471,10 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
             PatchRole::Opening(b) => {
                 lines(&["type fixedValue;", &format!("value uniform $t_byp{b};")])
             }
-            PatchRole::GapRear(_) => lines(&["type zeroGradient;"]),
+            PatchRole::GapRear(_) | PatchRole::CracReturn(_) => lines(&["type zeroGradient;"]),
+            PatchRole::CracSupply(c) => {
+                lines(&["type fixedValue;", &format!("value uniform $t_sup{c};")])
+            }
             PatchRole::GapFront(r) => lines(&[
                 "type outletMappedUniformInlet;",
                 &format!("outletPatch {};", g.gaps[r].rear.name),
@@ -458,7 +499,9 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
         "0",
         &zero_flux,
         &|_, role| match role {
-            // Returns all sit at the ceiling, so one fixed p_rgh is one fixed p.
+            // Returns all sit at the ceiling, so one fixed p_rgh is one fixed p. With no
+            // grilles every boundary fixes its flux (the CRAC tops draw their own flows,
+            // which the inflows balance), and `pRefCell` sets the pressure's level.
             PatchRole::Return => lines(&["type fixedValue;", "value uniform 0;"]),
             _ => zero_flux.clone(),
         },
@@ -476,11 +519,14 @@ pub fn fields(g: &CaseGeometry, st: &OpenFoamSettings) -> Vec<(&'static str, Str
     );
     let inflow = |name: &'static str| {
         move |_: &FacePatch, role: PatchRole| match role {
-            PatchRole::Intake(_) | PatchRole::GapRear(_) => lines(&["type zeroGradient;"]),
+            PatchRole::Intake(_) | PatchRole::GapRear(_) | PatchRole::CracReturn(_) => {
+                lines(&["type zeroGradient;"])
+            }
             PatchRole::Exhaust(_)
             | PatchRole::Tile(_)
             | PatchRole::Opening(_)
-            | PatchRole::GapFront(_) => {
+            | PatchRole::GapFront(_)
+            | PatchRole::CracSupply(_) => {
                 lines(&["type fixedValue;", &format!("value uniform ${name}_in;")])
             }
             PatchRole::Return => lines(&[

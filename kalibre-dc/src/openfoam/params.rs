@@ -30,6 +30,12 @@ pub struct RunInputs {
     pub opening_flow_m3_s: Vec<f64>,
     /// Supply temperature per bypass opening (C).
     pub opening_t_c: Vec<f64>,
+    /// Each `front` CRAC's supply through its face: (CRAC index, flow m3/s, temperature
+    /// C), hall order; what openings take of its flow is not in it.
+    pub front_supply: Vec<(usize, f64, f64)>,
+    /// With no return grilles, each CRAC's flow drawn in at its top: (CRAC index, m3/s),
+    /// hall order; empty otherwise.
+    pub crac_return_flow: Vec<(usize, f64)>,
     /// Flow through each recirculation gap (m3/s), in the geometry's order.
     pub gap_flow_m3_s: Vec<f64>,
     /// Forchheimer coefficient of each containment panel plane's porous zone (1/m2,
@@ -43,8 +49,9 @@ pub struct RunInputs {
 
 impl RunInputs {
     /// The inputs of `state` at per-server `alpha` (cfm/W), per-CRAC supply offset (C),
-    /// per-opening share of the floor supply (the tiles deliver the rest, split as
-    /// before) and per-gap (rack index, fraction of the rack's server flow).
+    /// per-opening share of the supply (of every CRAC's flow, as the built-in simulator
+    /// takes it; the tiles and `front` CRACs deliver the rest) and per-gap (rack index,
+    /// fraction of the rack's server flow).
     pub fn new(
         hall: &Hall,
         state: &OperatingState,
@@ -71,12 +78,23 @@ impl RunInputs {
         }
         let mut floor_q = 0.0;
         let mut floor_qt = 0.0;
+        let (mut all_q, mut all_qt) = (0.0, 0.0);
+        let mut front_supply = Vec::new();
+        let mut crac_return_flow = Vec::new();
         for (c, crac) in hall.cracs.iter().enumerate() {
-            if crac.supply == SupplyKind::Floor {
-                let q = crac.rated_flow_m3_s * state.fan_speed[c];
-                floor_q += q;
-                floor_qt +=
-                    q * (state.setpoint_c[c] + supply_offset_c.get(c).copied().unwrap_or(0.0));
+            let q = crac.rated_flow_m3_s * state.fan_speed[c];
+            let t = state.setpoint_c[c] + supply_offset_c.get(c).copied().unwrap_or(0.0);
+            all_q += q;
+            all_qt += q * t;
+            match crac.supply {
+                SupplyKind::Floor => {
+                    floor_q += q;
+                    floor_qt += q * t;
+                }
+                SupplyKind::Front => front_supply.push((c, (1.0 - open_share) * q, t)),
+            }
+            if hall.returns.is_empty() {
+                crac_return_flow.push((c, q));
             }
         }
         let weights: Vec<f64> = hall.tiles.iter().map(|t| t.open_area_m2()).collect();
@@ -90,8 +108,17 @@ impl RunInputs {
         }
         let supply_t = if floor_q > 0.0 {
             floor_qt / floor_q
+        } else if all_q > 0.0 {
+            all_qt / all_q
         } else {
             state.setpoint_c[0]
+        };
+        // Openings mix every CRAC's air (the plenum's alone when every CRAC is a floor
+        // one, as before `front` CRACs could be solved).
+        let (opening_q, opening_t) = if all_q > floor_q {
+            (all_q, all_qt / all_q)
+        } else {
+            (floor_q, supply_t)
         };
         let server_flow: Vec<f64> = alpha
             .iter()
@@ -115,8 +142,10 @@ impl RunInputs {
                 .map(|w| (1.0 - open_share) * floor_q * w / w_sum)
                 .collect(),
             tile_t_c: vec![supply_t; hall.tiles.len()],
-            opening_flow_m3_s: opening_share.iter().map(|s| s * floor_q).collect(),
-            opening_t_c: vec![supply_t; opening_share.len()],
+            opening_flow_m3_s: opening_share.iter().map(|s| s * opening_q).collect(),
+            opening_t_c: vec![opening_t; opening_share.len()],
+            front_supply,
+            crac_return_flow,
             gap_flow_m3_s: gap_flow,
             panel_forchheimer_per_m2: Vec::new(),
             t_init_c: supply_t,
@@ -172,6 +201,13 @@ impl RunInputs {
         }
         for (r, q) in self.gap_flow_m3_s.iter().enumerate() {
             let _ = writeln!(s, "q_rec{r} {q:.9e};");
+        }
+        for (c, q, t) in &self.front_supply {
+            let _ = writeln!(s, "q_sup{c} {q:.9e};\nt_sup{c} {t:.9e};");
+        }
+        // Printed as the inflows are, so that the fixed fluxes balance to rounding.
+        for (c, q) in &self.crac_return_flow {
+            let _ = writeln!(s, "q_crt{c} {q:.9e};");
         }
         for (k, f) in self.panel_forchheimer_per_m2.iter().enumerate() {
             let _ = writeln!(s, "f_panel{k} {f:.9e};");
@@ -245,6 +281,58 @@ mod tests {
                 .unwrap_err();
             assert!(err.contains("open fraction must be in [0, 1]"), "{err}");
         }
+    }
+
+    /// Mass balance with a `front` CRAC and no grilles: what the tiles, the front and
+    /// the openings let in is what the CRAC tops draw, each CRAC its own flow; the
+    /// openings take their share of every CRAC's flow, as the built-in simulator does.
+    #[test]
+    fn a_front_crac_and_crac_tops_balance_the_supply() {
+        let (mut hall, mut state) = dev();
+        hall.cracs.push(hall.cracs[0].clone());
+        hall.cracs[1].id = "crac-2".into();
+        hall.cracs[1].supply = SupplyKind::Front;
+        hall.cracs[1].rated_flow_m3_s = 2.0;
+        state.fan_speed.push(0.5);
+        state.setpoint_c.push(state.setpoint_c[0] + 4.0);
+        hall.returns.clear();
+        let alpha = vec![0.15; state.power_w.len()];
+        let st = OpenFoamSettings::default();
+        let r = RunInputs::new(&hall, &state, &alpha, &[0.0, 1.0], &[0.1], &[], &st).unwrap();
+        let floor_q = hall.cracs[0].rated_flow_m3_s * state.fan_speed[0];
+        let total = floor_q + 1.0;
+        let inflow: f64 = r
+            .tile_flow_m3_s
+            .iter()
+            .chain(&r.opening_flow_m3_s)
+            .sum::<f64>()
+            + r.front_supply.iter().map(|(_, q, _)| q).sum::<f64>();
+        let outflow: f64 = r.crac_return_flow.iter().map(|(_, q)| q).sum();
+        assert!((inflow - total).abs() < 1e-12 && (outflow - total).abs() < 1e-12);
+        assert_eq!(r.crac_return_flow, vec![(0, floor_q), (1, 1.0)]);
+        let (c, q, t) = r.front_supply[0];
+        assert_eq!(c, 1);
+        assert!((q - 0.9).abs() < 1e-12);
+        assert!(
+            (t - (state.setpoint_c[0] + 5.0)).abs() < 1e-12,
+            "offset added: {t}"
+        );
+        assert!((r.opening_flow_m3_s[0] - 0.1 * total).abs() < 1e-12);
+        let mixed = (floor_q * state.setpoint_c[0] + t) / total;
+        assert!((r.opening_t_c[0] - mixed).abs() < 1e-9);
+        let text = r.render();
+        assert!(
+            text.contains("q_sup1 ") && text.contains("t_sup1 "),
+            "{text}"
+        );
+        assert!(
+            text.contains("q_crt0 ") && text.contains("q_crt1 "),
+            "{text}"
+        );
+        // With grilles and floor CRACs only, the file is as before: no CRAC faces.
+        let (hall, state) = dev();
+        let plain = RunInputs::new(&hall, &state, &alpha, &[], &[], &[], &st).unwrap();
+        assert!(!plain.render().contains("_sup") && !plain.render().contains("q_crt"));
     }
 
     #[test]

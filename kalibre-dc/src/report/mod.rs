@@ -243,8 +243,14 @@ pub fn calibration_html(
             prior.servers_below, prior.servers_above, prior.range_c[0], prior.range_c[1]
         );
     }
-    if let Some(text) = passed_over_text(report) {
-        let _ = write!(h, "<p class=\"note\">Note: {text}.</p>");
+    for text in [
+        passed_over_text(report),
+        weighted_best_text(report, |m| format!("{m:.3} C")),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        let _ = write!(h, "<p class=\"note\">Note: {}.</p>", esc(&text));
     }
     let residual = mean_residual_per_sensor(hall, report);
     let scale = residual
@@ -412,6 +418,52 @@ pub fn passed_over_text(report: &Report) -> Option<String> {
     ))
 }
 
+/// Why the best run's MAE is above a run's the calibration made, when the polish judged
+/// runs by a weighted misfit (grid weighting, the Student-t likelihood) and the prior did
+/// not account for it (see [`passed_over_text`]); none otherwise. Without it a best MAE
+/// above the initial one reads as a calibration that made things worse. `mae` writes an
+/// MAE in the calibration's units.
+pub fn weighted_best_text(report: &Report, mae: impl Fn(f64) -> String) -> Option<String> {
+    let weighted =
+        report.residuals.iter().any(|r| r.weight.is_some()) || report.settings.robust_nu.is_some();
+    if !weighted || report.best.passed_over.is_some() {
+        return None;
+    }
+    let initial = report.initial.mae_c.map(|m| (0, m));
+    let runs = report
+        .history
+        .iter()
+        .filter_map(|h| h.mae_c.map(|m| (h.iteration, m)));
+    let (iteration, lowest) = initial
+        .into_iter()
+        .chain(runs)
+        .filter(|(_, m)| m.is_finite())
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    // Below the printed precision the two read the same.
+    (lowest < report.best.mae_c - 5e-4).then(|| {
+        let at = if iteration == 0 {
+            "the initial parameters".to_string()
+        } else {
+            format!("iteration {iteration}")
+        };
+        let how = match (
+            grid_weighting_text(report).is_some(),
+            report.settings.robust_nu,
+        ) {
+            (true, Some(_)) => "the grid weighting and the Student-t likelihood",
+            (true, None) => "the grid weighting",
+            _ => "the Student-t likelihood",
+        };
+        format!(
+            "a run with a lower MAE ({}, {at}) fits worse by the polish's measure: the \
+             best run is the optimum under {how}, where some readings count less (see \
+             \"grid weighting\" and \"likelihood\"), so its MAE, with every reading \
+             counted alike, can be higher",
+            mae(lowest)
+        )
+    })
+}
+
 /// How the calibration weighed residuals, in words.
 pub fn likelihood_text(report: &Report) -> String {
     match report.settings.robust_nu {
@@ -456,7 +508,41 @@ pub fn percent(pct: f64, signed: bool) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::percent;
+    use super::{percent, weighted_best_text};
+    use kalibre_core::calibrate::{PassedOver, Report};
+
+    /// A recalibration's report (trimmed) whose grid-weighted best, 1.238 C, is above
+    /// the initial 1.226 C and iteration 13's 1.132 C.
+    fn weighted_best() -> Report {
+        serde_json::from_str(include_str!("fixtures/weighted-best.json")).unwrap()
+    }
+
+    #[test]
+    fn a_weighted_best_above_a_lower_mae_is_explained() {
+        let r = weighted_best();
+        let text = weighted_best_text(&r, |m| format!("{m:.3} C")).expect("a note");
+        assert!(
+            text.starts_with("a run with a lower MAE (1.132 C, iteration 13)")
+                && text.contains("under the grid weighting,"),
+            "{text}"
+        );
+        // Unweighted, the best is the lowest: nothing to explain.
+        let mut plain = r.clone();
+        plain.residuals.iter_mut().for_each(|x| x.weight = None);
+        assert_eq!(weighted_best_text(&plain, |m| format!("{m}")), None);
+        // The prior's own note says why instead.
+        let mut prior = r.clone();
+        prior.best.passed_over = Some(PassedOver {
+            iteration: 13,
+            score: 1.13,
+            prior: 2.0,
+        });
+        assert_eq!(weighted_best_text(&prior, |m| format!("{m}")), None);
+        // A best that is the lowest needs no note, weighted or not.
+        let mut lowest = r;
+        lowest.best.mae_c = 1.1317;
+        assert_eq!(weighted_best_text(&lowest, |m| format!("{m}")), None);
+    }
 
     #[test]
     fn small_percentages_keep_two_significant_digits() {

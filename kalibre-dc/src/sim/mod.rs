@@ -58,6 +58,17 @@ pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, 
 pub use snapping::{grid_placing_all, off_grid_edges, SnappedEdge};
 pub use solution::Solution;
 pub use supply::tile_flows_m3_s;
+/// The face a `front` CRAC blows through: the OpenFOAM case puts its supply there too.
+pub(crate) use topology::front_side;
+
+/// The side of `crac` that a `front` supply blows through (docs/formats.md): the face
+/// opposite the wall it stands against.
+pub fn crac_front_side(hall: &crate::hall::Hall, crac: &crate::hall::Crac) -> crate::hall::Side {
+    front_side(
+        hall,
+        &crate::hall::Aabb::from_position_size(crac.position_m, crac.size_m),
+    )
+}
 pub use topology::{cells_beyond_cap, MAX_CELLS};
 pub use vtk::{vtk_file_name, write_vtk};
 

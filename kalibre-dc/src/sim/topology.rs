@@ -415,7 +415,7 @@ fn layer_cells(grid: &Grid, b: &Aabb, k: usize) -> Vec<usize> {
 /// wall it stands against, so that where it stands along that wall does not turn it;
 /// in a corner, or standing free, of the sides whose backs are nearest a wall, the one
 /// facing the most open room.
-fn front_side(hall: &Hall, b: &Aabb) -> Side {
+pub(crate) fn front_side(hall: &Hall, b: &Aabb) -> Side {
     let room = hall.room.size_m;
     let room_space = |s: Side| match s {
         Side::PlusX => room[0] - b.max[0],

@@ -86,6 +86,7 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
         ": a model of your own is calibrated against measurements of its scenarios, each a \
          `label` and its `variables` (docs/models.md)",
     )?;
+    own_model::warn_unwritten_params(config, &cfg);
     if !cfg.candidates.is_empty() && cfg.space.params().iter().all(|p| p.is_fixed()) {
         return Err(CliError::Input(format!(
             "{}: every [[params]] is a candidate effect (`absent`) or fixed (equal bounds): \
@@ -114,12 +115,11 @@ pub(super) fn run(args: &CalibrateArgs, measurements: &Path) -> CliResult {
     let space = &cfg.space;
     let mut core = settings.core.clone();
     core.regularizer_weight = 0.0;
-    // The Gaussian process weighs every run alike (its docs say why): no focus weights.
-    core.focus = None;
-    // The noisy copies of the design runs help a graph learn its form; to a Gaussian
-    // process they are flat plateaus around each run that cost its fit (cubic in the
-    // samples) and teach it nothing.
-    core.augment_copies = 1;
+    // The Gaussian process's own loop (`Settings::recommended_for_gaussian_process`
+    // says why): no focus weights, no noisy copies of the design runs.
+    let gp = kalibre_core::Settings::recommended_for_gaussian_process();
+    core.focus = gp.focus;
+    core.augment_copies = gp.augment_copies;
     if space.dim() > settings.polish_max_params {
         core.polish_iterations = 0;
     }

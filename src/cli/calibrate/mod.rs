@@ -317,6 +317,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
             args.grid_m.is_some(),
         )?;
         super::plausible::warn_off_grid(args.hall_path(), &hall, settings.sim.cell_m);
+        super::plausible::warn_front_supply(args.hall_path(), &hall);
     }
     if args.model == ModelArg::Openfoam {
         let grid_m = args.grid_m.unwrap_or(OpenFoamSettings::default().grid_m);

@@ -346,7 +346,13 @@ pub(super) fn print_summary(
             failed_at_bounds.map_or(String::new(), |c| format!("; {c}"))
         );
     }
-    if let Some(text) = kalibre_dc::report::passed_over_text(report) {
+    for text in [
+        kalibre_dc::report::passed_over_text(report),
+        kalibre_dc::report::weighted_best_text(report, |m| style.error(Some(m))),
+    ]
+    .into_iter()
+    .flatten()
+    {
         println!("  note: {text}");
     }
     if report.settings.robust_nu.is_some() && report.settings.polish_iterations == 0 {

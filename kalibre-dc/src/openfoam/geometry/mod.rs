@@ -6,11 +6,12 @@
 //! Patch names are built from indices (`srv7-in`, `tile2`, `byp0`, `ret0`) because hall ids may
 //! hold characters OpenFOAM does not accept in a word; the order is the hall's.
 
-use crate::hall::{Aabb, Hall, Side, SupplyKind};
+use crate::hall::{Aabb, Hall, SupplyKind};
 
 use super::OpenFoamError;
 
 mod panels;
+mod patches;
 
 use panels::grid_index;
 pub use panels::{PanelPlane, PanelZone, PANEL_LAYER_CELLS};
@@ -91,6 +92,16 @@ pub struct GapPatches {
     pub front: FacePatch,
 }
 
+/// A face of a CRAC that air passes: its front (a `front` CRAC's supply) or its top
+/// (its return when the hall has no grilles).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CracPatch {
+    /// Index of the CRAC in `hall.cracs`.
+    pub crac: usize,
+    /// The face.
+    pub patch: FacePatch,
+}
+
 /// The hall on the grid.
 #[derive(Debug, Clone)]
 pub struct CaseGeometry {
@@ -113,6 +124,12 @@ pub struct CaseGeometry {
     pub gaps: Vec<GapPatches>,
     /// Per return grille, hall order.
     pub returns: Vec<FacePatch>,
+    /// The fronts of the `front` CRACs, where their supply enters (`sup<c>`, `c` the
+    /// CRAC's index in the hall), hall order.
+    pub crac_supplies: Vec<CracPatch>,
+    /// With no return grilles, every CRAC's top, where it draws its own flow back in
+    /// (`crt<c>`), hall order; empty otherwise.
+    pub crac_returns: Vec<CracPatch>,
     /// Containment panel planes, per containment and side.
     pub panels: Vec<PanelPlane>,
     /// The panels' porous cell zones (disjoint).
@@ -147,16 +164,24 @@ impl CaseGeometry {
             openings,
             gaps,
             returns,
+            crac_supplies,
+            crac_returns,
             panels,
             panel_zones,
             probes,
             fluid_cells,
             solid: _,
         } = self;
-        format!(
+        let mut text = format!(
             "{h:?} {n:?} {size_m:?} {solids:?} {servers:?} {tiles:?} {openings:?} {gaps:?} \
              {returns:?} {panels:?} {panel_zones:?} {probes:?} {fluid_cells:?}"
-        )
+        );
+        // Only when there are any: a hall of floor CRACs and grilles keeps the key (and
+        // the meshed case) it had before CRAC faces could be patches.
+        if !crac_supplies.is_empty() || !crac_returns.is_empty() {
+            text += &format!(" {crac_supplies:?} {crac_returns:?}");
+        }
+        text
     }
 
     /// Places `hall` on a grid of cell size `h` (m). Every box edge must lie on a grid line.
@@ -182,11 +207,6 @@ impl CaseGeometry {
                 reason: format!("{h} is not a positive cell size"),
             });
         }
-        if hall.returns.is_empty() {
-            return Err(OpenFoamError::Unsupported(
-                "a hall without ceiling returns: the OpenFOAM case needs a pressure outlet".into(),
-            ));
-        }
         let snap = |x: f64, field: &str| grid_index(x, h, field);
         let size = hall.room.size_m;
         let mut n = [0usize; 3];
@@ -210,14 +230,9 @@ impl CaseGeometry {
         };
         let mut solids = Vec::new();
         for (i, c) in hall.cracs.iter().enumerate() {
-            if c.supply == SupplyKind::Front {
-                return Err(OpenFoamError::Unsupported(format!(
-                    "CRAC `{}`: supply `front` (only `floor` supply through tiles)",
-                    c.id
-                )));
-            }
             solids.push(boxr(c.position_m, c.size_m, &format!("/cracs/{i}"))?);
         }
+        let crac_ranges: Vec<CellRange> = solids.clone();
         let rack_ranges: Vec<CellRange> = hall
             .racks
             .iter()
@@ -247,6 +262,8 @@ impl CaseGeometry {
             openings: Vec::new(),
             gaps: Vec::new(),
             returns: Vec::new(),
+            crac_supplies: Vec::new(),
+            crac_returns: Vec::new(),
             panels: Vec::new(),
             panel_zones: Vec::new(),
             probes: Vec::new(),
@@ -421,6 +438,22 @@ impl CaseGeometry {
             )?;
             g.returns.push(p);
         }
+        for (c, crac) in hall.cracs.iter().enumerate() {
+            let field = format!("/cracs/{c}");
+            if crac.supply == SupplyKind::Front {
+                // The face the built-in simulator blows through, over the CRAC's height.
+                let side = crate::sim::front_side(
+                    hall,
+                    &Aabb::from_position_size(crac.position_m, crac.size_m),
+                );
+                let patch = g.side_patch(&crac_ranges[c], side, format!("sup{c}"), &field)?;
+                g.crac_supplies.push(CracPatch { crac: c, patch });
+            }
+            if hall.returns.is_empty() {
+                let patch = g.top_patch(&crac_ranges[c], format!("crt{c}"), &field)?;
+                g.crac_returns.push(CracPatch { crac: c, patch });
+            }
+        }
         for (i, s) in hall.sensors.iter().enumerate() {
             let p = s.position_m;
             let mut c = [0usize; 3];
@@ -439,105 +472,6 @@ impl CaseGeometry {
             g.probes.push(p);
         }
         Ok(g)
-    }
-
-    fn is_solid(&self, c: [usize; 3]) -> bool {
-        self.solid[c[0] + self.n[0] * (c[1] + self.n[1] * c[2])]
-    }
-
-    /// Boundary faces of a rack's side over a server's span; every face must open onto
-    /// fluid (a rack pressed against another rack or a wall has no intake there).
-    fn side_patch(
-        &self,
-        span: &CellRange,
-        side: Side,
-        name: String,
-        field: &str,
-    ) -> Result<FacePatch, OpenFoamError> {
-        let (axis, sign) = side.axis_sign();
-        let plane = if sign > 0.0 {
-            span.hi[axis]
-        } else {
-            span.lo[axis]
-        };
-        let outside = if sign > 0.0 {
-            Some(plane)
-        } else {
-            plane.checked_sub(1)
-        };
-        let outside = outside.filter(|&o| o < self.n[axis]).ok_or_else(|| {
-            geo(
-                field,
-                format!("side {side:?} lies on a room wall: no air can pass"),
-            )
-        })?;
-        let mut cells = *span;
-        cells.lo[axis] = outside;
-        cells.hi[axis] = outside + 1;
-        for k in cells.lo[2]..cells.hi[2] {
-            for j in cells.lo[1]..cells.hi[1] {
-                for i in cells.lo[0]..cells.hi[0] {
-                    if self.is_solid([i, j, k]) {
-                        return Err(geo(
-                            field,
-                            format!(
-                                "side {side:?} is blocked by a solid at cell ({i}, {j}, {k}) \
-                                 (racks back to back or against a CRAC)"
-                            ),
-                        ));
-                    }
-                }
-            }
-        }
-        Ok(FacePatch {
-            name,
-            axis,
-            plane,
-            faces: cells.count(),
-            cells,
-        })
-    }
-
-    /// A floor (`plane` 0) or ceiling (`plane` nz) rectangle.
-    fn plane_patch(
-        &self,
-        pos: [f64; 2],
-        size: [f64; 2],
-        plane: usize,
-        name: String,
-        field: &str,
-        snap: &dyn Fn(f64, &str) -> Result<usize, OpenFoamError>,
-    ) -> Result<FacePatch, OpenFoamError> {
-        let mut lo = [0; 3];
-        let mut hi = [0; 3];
-        for a in 0..2 {
-            lo[a] = snap(pos[a], &format!("{field}/position_m/{a}"))?;
-            hi[a] = snap(pos[a] + size[a], &format!("{field}/size_m/{a}"))?;
-            if hi[a] <= lo[a] || hi[a] > self.n[a] {
-                return Err(geo(field, "empty or outside the room on the grid"));
-            }
-        }
-        let k = if plane == 0 { 0 } else { self.n[2] - 1 };
-        lo[2] = k;
-        hi[2] = k + 1;
-        let cells = CellRange { lo, hi };
-        for j in lo[1]..hi[1] {
-            for i in lo[0]..hi[0] {
-                if self.is_solid([i, j, k]) {
-                    return Err(geo(
-                        field,
-                        format!("covered by a solid at cell ({i}, {j}, {k})"),
-                    ));
-                }
-            }
-        }
-        Ok(FacePatch {
-            name,
-            axis: 2,
-            plane,
-            faces: cells.count(),
-            cells,
-        })
     }
 
     /// A box (m) that holds exactly the face centres of `p`.
@@ -578,6 +512,8 @@ impl CaseGeometry {
             .chain(&self.openings)
             .chain(self.gaps.iter().flat_map(|g| [&g.rear, &g.front]))
             .chain(&self.returns)
+            .chain(self.crac_supplies.iter().map(|c| &c.patch))
+            .chain(self.crac_returns.iter().map(|c| &c.patch))
     }
 }
 

@@ -231,3 +231,54 @@ fn containment_off_the_grid_is_refused_with_the_field() {
         "{err}"
     );
 }
+
+/// A `front` CRAC's supply enters through the face the built-in simulator blows
+/// through, over its whole height; with no grilles every CRAC draws its air in at its
+/// top, and a hall of floor CRACs and grilles has neither.
+#[test]
+fn a_front_crac_blows_through_its_face_and_without_grilles_cracs_draw_at_their_tops() {
+    let floor = CaseGeometry::new(&dev_hall(), 0.2).unwrap();
+    assert!(floor.crac_supplies.is_empty() && floor.crac_returns.is_empty());
+    let mut hall = dev_hall();
+    hall.cracs[0].supply = SupplyKind::Front;
+    hall.tiles.clear();
+    let g = CaseGeometry::new(&hall, 0.2).unwrap();
+    // The CRAC stands against the x = 0 wall, 0.8 m deep, 1.6 m wide, 2 m high: its
+    // +x face at x 0.8 m, 8 x 10 faces.
+    let sup = &g.crac_supplies[0];
+    assert_eq!(
+        (
+            sup.crac,
+            sup.patch.name.as_str(),
+            sup.patch.axis,
+            sup.patch.plane
+        ),
+        (0, "sup0", 0, 4)
+    );
+    assert_eq!(sup.patch.faces, 80);
+    assert!(g.crac_returns.is_empty(), "the grilles return the air");
+    hall.returns.clear();
+    let g = CaseGeometry::new(&hall, 0.2).unwrap();
+    let top = &g.crac_returns[0];
+    assert_eq!(
+        (
+            top.patch.name.as_str(),
+            top.patch.axis,
+            top.patch.plane,
+            top.patch.faces
+        ),
+        ("crt0", 2, 10, 4 * 8)
+    );
+    let names: Vec<&str> = g.patches().map(|p| p.name.as_str()).collect();
+    assert!(
+        names.contains(&"sup0") && names.contains(&"crt0"),
+        "{names:?}"
+    );
+    // A CRAC up to the ceiling has no top to draw through.
+    hall.cracs[0].size_m[2] = 3.0;
+    let e = CaseGeometry::new(&hall, 0.2).unwrap_err().to_string();
+    assert!(
+        e.contains("/cracs/0") && e.contains("reaches the ceiling"),
+        "{e}"
+    );
+}

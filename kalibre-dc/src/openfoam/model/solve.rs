@@ -93,6 +93,13 @@ impl OpenFoamModel {
             .iter()
             .chain(&self.geometry.openings)
             .chain(&self.geometry.returns)
+            .chain(
+                self.geometry
+                    .crac_supplies
+                    .iter()
+                    .chain(&self.geometry.crac_returns)
+                    .map(|c| &c.patch),
+            )
         {
             let f = dir.join(format!(
                 "postProcessing/flux_{}/0/surfaceFieldValue.dat",

@@ -59,6 +59,7 @@ pub(super) fn run(args: &DiagnoseArgs) -> CliResult {
             config.display()
         )));
     }
+    own_model::warn_unwritten_params(config, &cfg);
     if let Some(path) = &args.write_config {
         let (report, journal) = (
             args.calibration.join("report.json"),
