@@ -4,16 +4,20 @@
 //! Four halls of 40 servers in two rows of four racks with two `front` CRACs (24 kW),
 //! either at the aisle ends blowing down the cold aisle or on the wall behind a row
 //! blowing at its back, each with ceiling grilles over the hot aisles and without (the
-//! CRACs then draw at their tops); and, for scale, the development hall (floor supply)
-//! with and without its grilles. One snapshot each, at the halls' initial alphas, on the
+//! CRACs then draw at their tops); four held out of the choice of how the built-in model
+//! releases a front CRAC's supply (the aisle ends at half the fan speed, and one row
+//! facing its CRAC across the cold aisle, each with grilles and without); and, for scale,
+//! the development hall (floor supply) with and without its grilles. One snapshot each, at the halls' initial alphas, on the
 //! 0.2 m grid: the MAE of the built-in model's readings against OpenFOAM's, by aisle,
 //! and the hottest server intake of each (docs/models.md, "Front-supply CRACs and halls
 //! without grilles").
 //!
-//! `cargo run --release --example front_supply_study -- [--work DIR] [--np N] [--out FILE]`
-//! (run from the workspace root; OpenFOAM on the PATH; 6 solves of about 15 s with
-//! `--np 2`, cached in `--work`, default `out/front_supply_study/`; `--out` default
-//! `docs/results/front_supply_study.json`).
+//! `cargo run --release --example front_supply_study -- [--work DIR] [--np N] [--out FILE]
+//! [--openfoam-from FILE]` (run from the workspace root; OpenFOAM on the PATH; 10 solves of
+//! about 15 s with `--np 2`, meshed in `--work`, default `out/front_supply_study/`;
+//! `--out` default `docs/results/front_supply_study.json`). `--openfoam-from` takes
+//! OpenFOAM's readings from an earlier run's JSON instead of solving again, to score a
+//! change to the built-in model against them.
 
 use std::path::PathBuf;
 
@@ -28,19 +32,25 @@ use serde_json::{json, Value};
 /// The development data the two floor-supply halls are.
 const DEV: &str = "data/openfoam/of-dev-clean";
 
-/// Where the two `front` CRACs stand.
+/// Where the `front` CRACs stand.
 #[derive(Clone, Copy, PartialEq)]
 enum Layout {
-    /// At both ends of the cold aisle, blowing down it.
+    /// Two, at both ends of the cold aisle, blowing down it.
     AisleEnds,
-    /// On the wall behind row B, blowing at its back.
+    /// Two, on the wall behind row B, blowing at its back.
     BehindRow,
+    /// One row of six racks facing one CRAC on the wall across its cold aisle (held out
+    /// of the choice of the jet release: not among the halls it was first measured on).
+    SingleRow,
 }
 
 /// A front-supply hall: rows A (y 1.2-2.4, drawing from +y) and B (y 3.6-4.8, from -y)
 /// of four 40U racks with five 8U servers each, three sensors per rack (cold aisle at
 /// 0.5 and 1.7 m, its hot aisle at 1.5 m), grilles over both hot aisles when `grilles`.
 fn front_hall(layout: Layout, grilles: bool) -> Value {
+    if layout == Layout::SingleRow {
+        return single_row_hall(grilles);
+    }
     let (room_y, cracs) = match layout {
         Layout::AisleEnds => (
             6.0,
@@ -51,7 +61,7 @@ fn front_hall(layout: Layout, grilles: bool) -> Value {
                  "rated_flow_m3_s": 1.5, "supply": "front"}
             ]),
         ),
-        Layout::BehindRow => (
+        _ => (
             7.2,
             json!([
                 {"id": "crac-n1", "position_m": [1.6, 6.4, 0.0], "size_m": [1.6, 0.8, 2.0],
@@ -67,46 +77,22 @@ fn front_hall(layout: Layout, grilles: bool) -> Value {
         for i in 0..4 {
             let x = 2.4 + 0.6 * i as f64;
             let id = format!("{row}{}", i + 1);
-            let servers: Vec<Value> = (0..5)
-                .map(|k| {
-                    json!({"id": format!("{id}-{}", k + 1),
-                           "type": if (i + k) % 2 == 0 { "web" } else { "db" },
-                           "u": 1 + 8 * k, "height_u": 8})
-                })
-                .collect();
-            racks.push(
-                json!({"id": id, "position_m": [x, y, 0.0], "size_m": [0.6, 1.2, 2.0],
-                              "inlet": inlet, "units": 40, "servers": servers}),
-            );
+            racks.push(rack(&id, x, y, inlet, |k| {
+                if (i + k) % 2 == 0 {
+                    "web"
+                } else {
+                    "db"
+                }
+            }));
             let (cold_y, hot_y) = if inlet == "+y" {
                 (y + 1.3, y - 0.3)
             } else {
                 (y - 0.1, y + 1.5)
             };
-            let at = |y: f64, z: f64| json!([x + 0.3, y, z]);
-            sensors.push(
-                json!({"id": format!("c-{id}-lo"), "position_m": at(cold_y, 0.5), "aisle": "cold"}),
-            );
-            sensors.push(
-                json!({"id": format!("c-{id}-hi"), "position_m": at(cold_y, 1.7), "aisle": "cold"}),
-            );
-            sensors.push(
-                json!({"id": format!("h-{id}"), "position_m": at(hot_y, 1.5), "aisle": "hot"}),
-            );
+            sensors.extend(rack_sensors(&id, x, cold_y, hot_y));
         }
     }
-    let mut hall = json!({
-        "schema": "kalibre.hall/1",
-        "name": "front-supply study",
-        "room": {"size_m": [7.2, room_y, 3.0]},
-        "server_types": [
-            {"id": "web", "alpha_cfm_per_w": {"initial": 0.12, "min": 0.03, "max": 0.4}},
-            {"id": "db", "alpha_cfm_per_w": {"initial": 0.15, "min": 0.03, "max": 0.4}}
-        ],
-        "cracs": cracs,
-        "racks": racks,
-        "sensors": sensors,
-    });
+    let mut hall = study_hall(7.2, room_y, cracs, racks, sensors);
     if grilles {
         let far_y = if layout == Layout::AisleEnds {
             room_y - 1.0
@@ -121,12 +107,76 @@ fn front_hall(layout: Layout, grilles: bool) -> Value {
     hall
 }
 
-/// One snapshot: setpoints 18 C, fans at 0.8, servers at 450, 550 or 650 W in turn.
-fn front_state(hall: &Hall) -> OperatingState {
+/// A 40U rack of five 8U servers of `server_type(k)`.
+fn rack(
+    id: &str,
+    x: f64,
+    y: f64,
+    inlet: &str,
+    server_type: impl Fn(usize) -> &'static str,
+) -> Value {
+    let servers: Vec<Value> = (0..5)
+        .map(|k| {
+            json!({"id": format!("{id}-{}", k + 1), "type": server_type(k),
+                   "u": 1 + 8 * k, "height_u": 8})
+        })
+        .collect();
+    json!({"id": id, "position_m": [x, y, 0.0], "size_m": [0.6, 1.2, 2.0],
+           "inlet": inlet, "units": 40, "servers": servers})
+}
+
+/// A rack's three sensors: its cold aisle at 0.5 and 1.7 m, its hot aisle at 1.5 m.
+fn rack_sensors(id: &str, x: f64, cold_y: f64, hot_y: f64) -> [Value; 3] {
+    let at = |y: f64, z: f64| json!([x + 0.3, y, z]);
+    [
+        json!({"id": format!("c-{id}-lo"), "position_m": at(cold_y, 0.5), "aisle": "cold"}),
+        json!({"id": format!("c-{id}-hi"), "position_m": at(cold_y, 1.7), "aisle": "cold"}),
+        json!({"id": format!("h-{id}"), "position_m": at(hot_y, 1.5), "aisle": "hot"}),
+    ]
+}
+
+/// The study's hall document, 3 m high, with its two server types.
+fn study_hall(x_m: f64, y_m: f64, cracs: Value, racks: Vec<Value>, sensors: Vec<Value>) -> Value {
+    json!({
+        "schema": "kalibre.hall/1",
+        "name": "front-supply study",
+        "room": {"size_m": [x_m, y_m, 3.0]},
+        "server_types": [
+            {"id": "web", "alpha_cfm_per_w": {"initial": 0.12, "min": 0.03, "max": 0.4}},
+            {"id": "db", "alpha_cfm_per_w": {"initial": 0.15, "min": 0.03, "max": 0.4}}
+        ],
+        "cracs": cracs,
+        "racks": racks,
+        "sensors": sensors,
+    })
+}
+
+/// Six racks (y 3.0-4.2) drawing from -y, facing one CRAC on the y = 0 wall across their
+/// cold aisle; a grille over the hot aisle behind them when `grilles`.
+fn single_row_hall(grilles: bool) -> Value {
+    let cracs = json!([{"id": "crac-s", "position_m": [2.4, 0.0, 0.0], "size_m": [2.4, 0.8, 2.0],
+                        "rated_flow_m3_s": 1.6, "supply": "front"}]);
+    let mut racks = Vec::new();
+    let mut sensors = Vec::new();
+    for i in 0..6 {
+        let x = 1.8 + 0.6 * i as f64;
+        let id = format!("A{}", i + 1);
+        racks.push(rack(&id, x, 3.0, "-y", |_| "web"));
+        sensors.extend(rack_sensors(&id, x, 2.9, 4.5));
+    }
+    let mut hall = study_hall(7.2, 6.0, cracs, racks, sensors);
+    if grilles {
+        hall["returns"] = json!([{"position_m": [1.8, 4.6], "size_m": [3.6, 0.6]}]);
+    }
+    hall
+}
+
+/// One snapshot: setpoints 18 C, fans at `fan`, servers at 450, 550 or 650 W in turn.
+fn front_state(hall: &Hall, fan: f64) -> OperatingState {
     OperatingState {
         label: "t0".into(),
         setpoint_c: vec![18.0; hall.cracs.len()],
-        fan_speed: vec![0.8; hall.cracs.len()],
+        fan_speed: vec![fan; hall.cracs.len()],
         power_w: (0..hall.server_count())
             .map(|i| [450.0, 550.0, 650.0][i % 3])
             .collect(),
@@ -137,6 +187,7 @@ struct Options {
     work: PathBuf,
     out: PathBuf,
     np: u32,
+    openfoam_from: Option<PathBuf>,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -144,6 +195,7 @@ fn parse_args() -> Result<Options, String> {
         work: PathBuf::from("out/front_supply_study"),
         out: PathBuf::from("docs/results/front_supply_study.json"),
         np: 1,
+        openfoam_from: None,
     };
     let mut args = std::env::args().skip(1);
     while let Some(flag) = args.next() {
@@ -151,6 +203,7 @@ fn parse_args() -> Result<Options, String> {
         match flag.as_str() {
             "--work" => o.work = PathBuf::from(value),
             "--out" => o.out = PathBuf::from(value),
+            "--openfoam-from" => o.openfoam_from = Some(PathBuf::from(value)),
             "--np" => {
                 o.np = value
                     .parse()
@@ -158,7 +211,8 @@ fn parse_args() -> Result<Options, String> {
             }
             _ => {
                 return Err(format!(
-                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N)"
+                    "unknown argument `{flag}` (use --work DIR, --out FILE, --np N, \
+                     --openfoam-from FILE)"
                 ))
             }
         }
@@ -179,43 +233,80 @@ fn run(o: &Options) -> Result<(), String> {
         .with_cache_root(work.join("openfoam-cases"))
         .check()
         .map_err(|e| e.to_string())?;
+    let stored: Option<Value> = match &o.openfoam_from {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            Some(serde_json::from_str(&text).map_err(|e| format!("{}: {e}", p.display()))?)
+        }
+        None => None,
+    };
     let dev_text = std::fs::read_to_string(format!("{DEV}/hall.json"))
         .map_err(|e| format!("{DEV}/hall.json: {e}"))?;
     let dev: Value = serde_json::from_str(&dev_text).map_err(|e| e.to_string())?;
     let mut dev_bare = dev.clone();
     dev_bare.as_object_mut().map(|d| d.remove("returns"));
+    // (name, hall, fan speed; none: the development data's first snapshot).
     let halls = [
         (
             "CRACs at the aisle ends, grilles",
             front_hall(Layout::AisleEnds, true),
+            Some(0.8),
         ),
         (
             "CRACs at the aisle ends, no grilles",
             front_hall(Layout::AisleEnds, false),
+            Some(0.8),
         ),
         (
             "CRACs behind a row, grilles",
             front_hall(Layout::BehindRow, true),
+            Some(0.8),
         ),
         (
             "CRACs behind a row, no grilles",
             front_hall(Layout::BehindRow, false),
+            Some(0.8),
         ),
-        ("development hall (floor supply), grilles", dev),
-        ("development hall (floor supply), no grilles", dev_bare),
+        (
+            "held out: aisle ends, fans 0.5, grilles",
+            front_hall(Layout::AisleEnds, true),
+            Some(0.5),
+        ),
+        (
+            "held out: aisle ends, fans 0.5, no grilles",
+            front_hall(Layout::AisleEnds, false),
+            Some(0.5),
+        ),
+        (
+            "held out: one row facing its CRAC, grilles",
+            front_hall(Layout::SingleRow, true),
+            Some(0.8),
+        ),
+        (
+            "held out: one row facing its CRAC, no grilles",
+            front_hall(Layout::SingleRow, false),
+            Some(0.8),
+        ),
+        ("development hall (floor supply), grilles", dev, None),
+        (
+            "development hall (floor supply), no grilles",
+            dev_bare,
+            None,
+        ),
     ];
     println!("| hall | MAE | cold aisle (bias) | hot aisle (bias) | hottest intake, built-in / OpenFOAM |");
     println!("|---|---|---|---|---|");
     let mut results = Vec::new();
-    for (name, doc) in halls {
+    for (name, doc, fan) in halls {
         let text = serde_json::to_string_pretty(&doc).map_err(|e| e.to_string())?;
         let hall = Hall::from_json_str(&text, name).map_err(|e| e.to_string())?;
-        let state = if name.starts_with("development") {
-            let snaps = load_snapshots(&hall, &PathBuf::from(DEV).join("snapshots.csv"))
-                .map_err(|e| e.to_string())?;
-            snaps[0].state.clone()
-        } else {
-            front_state(&hall)
+        let state = match fan {
+            Some(fan) => front_state(&hall, fan),
+            None => {
+                let snaps = load_snapshots(&hall, &PathBuf::from(DEV).join("snapshots.csv"))
+                    .map_err(|e| e.to_string())?;
+                snaps[0].state.clone()
+            }
         };
         let builtin = HallModel::new(&hall, SimConfig::default()).map_err(|e| e.to_string())?;
         let params = builtin.layout().space().initial();
@@ -228,19 +319,47 @@ fn run(o: &Options) -> Result<(), String> {
             .iter()
             .map(|s| s.intake_c)
             .fold(f64::NEG_INFINITY, f64::max);
-        eprintln!("  {name}: OpenFOAM");
-        let openfoam = OpenFoamModel::new(&hall, settings.clone()).map_err(|e| e.to_string())?;
-        let run = openfoam
-            .evaluate(&state, &params)
-            .map_err(|e| format!("{name}: OpenFOAM: {e}"))?;
-        let hottest_theirs = run
-            .extras
-            .get(SERVER_INTAKE_KEY)
-            .ok_or(format!("{name}: OpenFOAM gave no server intakes"))?
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        let theirs = run.values;
+        let (theirs, hottest_theirs) = match &stored {
+            Some(doc) => {
+                let h = doc["halls"]
+                    .as_array()
+                    .and_then(|hs| hs.iter().find(|h| h["hall"] == name))
+                    .ok_or(format!("{name}: not in --openfoam-from"))?;
+                let values: Vec<f64> = h["openfoam_c"]
+                    .as_array()
+                    .ok_or(format!("{name}: no openfoam_c in --openfoam-from"))?
+                    .iter()
+                    .filter_map(Value::as_f64)
+                    .collect();
+                let hottest = h["hottest_intake_openfoam_c"]
+                    .as_f64()
+                    .ok_or(format!("{name}: no hottest intake in --openfoam-from"))?;
+                (values, hottest)
+            }
+            None => {
+                eprintln!("  {name}: OpenFOAM");
+                let openfoam =
+                    OpenFoamModel::new(&hall, settings.clone()).map_err(|e| e.to_string())?;
+                let run = openfoam
+                    .evaluate(&state, &params)
+                    .map_err(|e| format!("{name}: OpenFOAM: {e}"))?;
+                let hottest = run
+                    .extras
+                    .get(SERVER_INTAKE_KEY)
+                    .ok_or(format!("{name}: OpenFOAM gave no server intakes"))?
+                    .iter()
+                    .copied()
+                    .fold(f64::NEG_INFINITY, f64::max);
+                (run.values, hottest)
+            }
+        };
+        if theirs.len() != ours.len() {
+            return Err(format!(
+                "{name}: {} OpenFOAM readings for {} sensors",
+                theirs.len(),
+                ours.len()
+            ));
+        }
         let by = |aisle: Option<Aisle>| -> (f64, f64) {
             let d: Vec<f64> = hall
                 .sensors

@@ -119,8 +119,7 @@ fn cells_that_do_not_divide_the_room_are_named_as_solved() {
 
 /// A hall whose CRAC blows through its front with no ceiling grilles is one the
 /// built-in simulator reads far off (its air has no momentum): said once, with the
-/// measured figures and the model that solves it; blowing along the row ends under
-/// grilles, as the development hall's CRAC would, is not warned of.
+/// measured figures and the model that solves it; with grilles it is not warned of.
 #[test]
 fn front_supply_the_built_in_model_reads_far_off_is_warned_of() {
     let dir = tmp("grid-geometry-front");
@@ -144,7 +143,7 @@ fn front_supply_the_built_in_model_reads_far_off_is_warned_of() {
     assert_eq!(warned.len(), 1, "{err}");
     assert!(
         warned[0].contains("/cracs/0 (`crac-1`) supplies through its front")
-            && warned[0].contains("short-circuits into the CRAC tops")
+            && warned[0].contains("returns into the CRAC tops")
             && warned[0].contains("`--model openfoam` solves this hall"),
         "{err}"
     );

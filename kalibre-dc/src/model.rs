@@ -3,9 +3,10 @@
 use kalibre_core::{check_outputs, Model, ModelError, Outputs};
 
 use crate::effects::{mods_at_upper_bounds, Effect, EffectRegistry};
-use crate::hall::Hall;
+use crate::hall::{Hall, SupplyKind};
 use crate::sim::{
-    rack_heat, server_air, RackHeat, SensorInfluence, ServerAir, SimConfig, Simulator, Solution,
+    rack_heat, server_air, FrontSupply, RackHeat, SensorInfluence, ServerAir, SimConfig, Simulator,
+    Solution,
 };
 use crate::snapshots::OperatingState;
 use crate::{Error, ParamLayout, Result};
@@ -37,8 +38,9 @@ pub struct HallModel {
     effects: Vec<Box<dyn Effect>>,
     layout: ParamLayout,
     fingerprint: String,
-    /// The fingerprint earlier versions gave this model ([`legacy_fingerprint`]).
-    legacy_fingerprint: String,
+    /// The fingerprint earlier versions gave this model ([`legacy_fingerprint`]); none
+    /// for a hall with `front` CRACs, whose supply they released otherwise.
+    legacy_fingerprint: Option<String>,
     sensor_names: Vec<String>,
 }
 
@@ -67,14 +69,22 @@ impl HallModel {
         let layout = ParamLayout::new(hall, &effects)?;
         let config_json =
             serde_json::to_string(&config).map_err(|e| Error::Mismatch(format!("config: {e}")))?;
-        let fingerprint = format!(
-            "{SIM_FINGERPRINT}:{:016x}",
-            fnv1a(&[
-                hall.model_json(hall.calibrate.alpha, &effects).as_bytes(),
-                config_json.as_bytes(),
-            ])
-        );
-        let legacy_fingerprint = legacy_fingerprint(hall, &config_json, &effects)?;
+        let model_json = hall.model_json(hall.calibrate.alpha, &effects);
+        let mut parts = vec![model_json.as_bytes(), config_json.as_bytes()];
+        // A `front` CRAC's supply enters along its jet since session 58, where it
+        // entered at its face before: runs made before are another model's, so such a
+        // hall's fingerprint says so and has no legacy one. Other halls keep theirs.
+        let front_jet = hall.cracs.iter().any(|c| c.supply == SupplyKind::Front)
+            && config.front_supply == FrontSupply::Jet;
+        if front_jet {
+            parts.push(FRONT_SUPPLY_JET.as_bytes());
+        }
+        let fingerprint = format!("{SIM_FINGERPRINT}:{:016x}", fnv1a(&parts));
+        let legacy_fingerprint = if front_jet {
+            None
+        } else {
+            Some(legacy_fingerprint(hall, &config_json, &effects)?)
+        };
         let sim = Simulator::new(hall, config)?;
         check_effect_placements(&sim, &effects)?;
         let sensor_names = hall.sensors.iter().map(|s| s.id.clone()).collect();
@@ -167,7 +177,7 @@ impl Model for HallModel {
     }
 
     fn legacy_fingerprints(&self) -> Vec<String> {
-        vec![self.legacy_fingerprint.clone()]
+        self.legacy_fingerprint.iter().cloned().collect()
     }
 
     fn evaluate(
@@ -243,6 +253,9 @@ pub fn check_sensor_c(
 
 /// The version of the built-in model's fingerprint: its prefix.
 const SIM_FINGERPRINT: &str = "kalibre-dc-sim/3";
+
+/// Hashed into the fingerprint of a hall with `front` CRACs: how their supply enters.
+const FRONT_SUPPLY_JET: &str = "front-supply: along the jet";
 
 /// The fingerprint versions before bounds and initial values were left out gave the
 /// model of `hall` with `config` (as JSON) and `effects`: the hall's physics JSON, bounds

@@ -7,7 +7,7 @@
 mod sim_halls;
 
 use kalibre_dc::hall::{CalibrateSpec, Crac, Hall, ReturnGrille, Room, SupplyKind};
-use kalibre_dc::sim::{Advection, SimConfig, Simulator, Solution};
+use kalibre_dc::sim::{Advection, FrontSupply, SimConfig, Simulator, Solution};
 use kalibre_dc::snapshots::OperatingState;
 use sim_halls::{demo_hall, hall_a, uniform_state, varied_state};
 
@@ -153,11 +153,14 @@ fn oblique_step_is_sharper_with_tvd_than_upwind() {
     };
     let run = |scheme: Advection| {
         // Pure advection: the smearing is the scheme's own.
+        // The streams enter at the CRACs' faces (not along their jets, which would
+        // release them all the way across): the step starts at the wall.
         let cfg = SimConfig::default()
             .with_cell_m(0.1)
             .with_diffusivity_m2_s(0.0)
             .with_advection(scheme)
-            .with_advection_outer(100, 1e-6);
+            .with_advection_outer(100, 1e-6)
+            .with_front_supply(FrontSupply::Face);
         let sim = Simulator::new(&hall, cfg).expect("topology");
         let sol = sim.solve(&state, &[], &[]).expect("solve");
         let area = mixing_area(sim.grid(), &sol, 15.0, 25.0);

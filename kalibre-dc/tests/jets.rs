@@ -120,7 +120,8 @@ fn the_model_form_uncertainty_keeps_a_clear_offset() {
 
 /// A `front` CRAC against the x = 0 wall of a long room: where it stands along the wall,
 /// its air leaves through the face opposite the wall, never through an end face (which
-/// faces more of the room); the supply enters the cells just beyond its +x face only.
+/// faces more of the room), and enters along its jet: in front of its +x face, from the
+/// face to the wall across the room, in equal parts along the way.
 #[test]
 fn a_front_crac_blows_away_from_its_wall_wherever_it_stands_along_it() {
     use kalibre_dc::hall::Hall;
@@ -146,26 +147,39 @@ fn a_front_crac_blows_away_from_its_wall_wherever_it_stands_along_it() {
         let sol = sim.solve(&state, &[0.12], &[]).unwrap();
         let grid = sim.grid();
         let cell = grid.d[0];
-        let (mut front, mut elsewhere) = (0.0, 0.0);
+        let (mut ahead, mut elsewhere) = (0.0, 0.0);
+        let mut along_x = vec![0.0; grid.n[0]];
         for (c, &q) in sol.source_m3_s.iter().enumerate() {
             let [x, y, z] = grid.cell_centre(c);
-            // Supply cells: beside the CRAC, below its top, not the rack's exhaust.
-            let by_crac = x < 0.8 + cell && y > y_m - cell && y < y_m + 2.0 + cell && z < 2.0;
-            if q > 0.0 && by_crac {
-                if x > 0.8 && y > y_m && y < y_m + 2.0 {
-                    front += q;
-                } else {
-                    elsewhere += q;
-                }
+            // Supply cells: below the CRAC's top, not the rack's exhaust (y 3-4).
+            if q <= 0.0 || z > 2.0 || (y > 3.0 - cell && y < 4.0 + cell && x > 2.4) {
+                continue;
+            }
+            if x > 0.8 && y > y_m && y < y_m + 2.0 {
+                ahead += q;
+                along_x[grid.ijk(c)[0]] += q;
+            } else {
+                elsewhere += q;
             }
         }
         assert!(
-            (front - 1.0).abs() < 1e-9,
-            "y {y_m}: {front} m3/s through +x"
+            (ahead - 1.0).abs() < 1e-9,
+            "y {y_m}: {ahead} m3/s in front of +x"
         );
         assert_eq!(
             elsewhere, 0.0,
             "y {y_m}: {elsewhere} m3/s through an end face"
+        );
+        // The rack (y 3-4) is beside every placement's jet, so each path runs to the
+        // wall at x = 4 m: from the first cell beyond the face, every cell column gets
+        // the same share.
+        let first = (0.8 / cell).round() as usize;
+        let shares = &along_x[first..];
+        assert!(
+            shares
+                .iter()
+                .all(|q| (q - 1.0 / shares.len() as f64).abs() < 1e-9),
+            "y {y_m}: {along_x:?}"
         );
     }
 }

@@ -132,3 +132,35 @@ fn a_fixed_alpha_is_in_the_fingerprint() {
     assert_ne!(model(&other).fingerprint(), fingerprint);
     assert_ne!(model(&hall()).fingerprint(), fingerprint);
 }
+
+/// A hall with `front` CRACs changed model when their supply came to enter along the
+/// jet: its fingerprint is not the one of the face release, and it has no legacy one
+/// (runs journaled before are another model's). A hall of floor CRACs keeps its own.
+#[test]
+fn front_supply_along_the_jet_is_another_model() {
+    use kalibre_dc::sim::FrontSupply;
+    let mut front = plain();
+    front.tiles.clear();
+    front.cracs[0].supply = kalibre_dc::hall::SupplyKind::Front;
+    let jet = model(&front);
+    let face = HallModel::new(
+        &front,
+        SimConfig::default().with_front_supply(FrontSupply::Face),
+    )
+    .unwrap();
+    assert_ne!(jet.fingerprint(), face.fingerprint());
+    assert!(jet.legacy_fingerprints().is_empty());
+    // A floor hall: the option is not written, so its fingerprints are as before.
+    let floor = model(&plain());
+    let floor_face = HallModel::new(
+        &plain(),
+        SimConfig::default().with_front_supply(FrontSupply::Face),
+    )
+    .unwrap();
+    assert_eq!(floor.legacy_fingerprints().len(), 1);
+    assert_ne!(
+        floor.fingerprint(),
+        floor_face.fingerprint(),
+        "the option is in the config"
+    );
+}

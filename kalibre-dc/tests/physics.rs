@@ -76,6 +76,45 @@ fn mass_balances_per_cell_to_solver_tolerance() {
     assert!(sol.pressure_stats.rel_residual <= 1e-9);
 }
 
+/// The demo hall with its CRACs blowing through their fronts (their supply released
+/// along the jet), with its ceiling grilles and without (the CRAC tops return the air):
+/// the heat the servers put in leaves with the air, the supply comes back whole, and
+/// every cell balances its mass.
+#[test]
+fn front_supply_along_the_jet_balances_energy_and_mass() {
+    let mut front = demo_hall();
+    front.tiles.clear();
+    for c in &mut front.cracs {
+        c.supply = kalibre_dc::hall::SupplyKind::Front;
+    }
+    let mut bare = front.clone();
+    bare.returns.clear();
+    for hall in [front, bare] {
+        let state = varied_state(&hall, 18.0, 0.9, 400.0);
+        let (sim, sol) = solve(&hall, SimConfig::default(), &state, 0.12);
+        let rho_cp = 1.2 * 1005.0;
+        let removed = rho_cp * sol.supply_flow_m3_s * (sol.return_c - sol.supply_c);
+        let rel = (removed - sol.power_w) / sol.power_w;
+        let grilles = !hall.returns.is_empty();
+        assert!(
+            rel.abs() < 0.01,
+            "grilles {grilles}: off by {:.4} %",
+            100.0 * rel
+        );
+        assert!(sol.energy_balance_error().abs() < 1e-4, "grilles {grilles}");
+        assert!((sol.return_flow_m3_s - sol.supply_flow_m3_s).abs() < 1e-6 * sol.supply_flow_m3_s);
+        let worst = (sol.mass_imbalance_m3_s(sim.grid()).iter().zip(sim.solid()))
+            .filter(|(_, s)| !**s)
+            .map(|(v, _)| v.abs())
+            .fold(0.0, f64::max);
+        let src_norm = sol.source_m3_s.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(
+            worst <= 1e-9 * src_norm * 1.0001,
+            "grilles {grilles}: {worst:e}"
+        );
+    }
+}
+
 #[test]
 fn mirrored_hall_gives_mirrored_readings() {
     let hall = demo_hall();

@@ -20,6 +20,7 @@ use crate::{Error, Result};
 /// | `advection` | `upwind` | advection scheme of the temperature equation | `upwind`, `van_leer`, `minmod` |
 /// | `advection_max_outer` | 10 | deferred-correction passes after the upwind solve (TVD schemes only) | [1, 100] |
 /// | `advection_tol_c` | 1e-3 | stop the passes when no cell temperature moves more than this (C) | (0, 1] |
+/// | `front_supply` | `jet` | where a `front` CRAC's supply enters: along its jet to the first solid or wall, or at its face only (before session 58; kept for studies and tests that want a point-like inflow) | `jet`, `face` |
 /// | `containment_panel_m` | 0.2 | thickness (m) of a containment panel, so that its resistance (and leakage) does not depend on the grid; `null`: one cell thick, whose resistance halves with the cell size (kalibre before 0.2 m panels; the maximum 0.2 -> 0.1 m change on the demo was 3.4 C with it, 0.34 C without) | (0, 5] |
 ///
 /// Fields after `preconditioner` are optional in files (missing: the default) and are
@@ -69,6 +70,28 @@ pub struct SimConfig {
         skip_serializing_if = "is_default_panel_m"
     )]
     pub containment_panel_m: Option<f64>,
+    /// Where a `front` CRAC's supply enters (missing: along the jet).
+    #[serde(default, skip_serializing_if = "FrontSupply::is_jet")]
+    pub front_supply: FrontSupply,
+}
+
+/// Where the supply of a `front` CRAC enters the room.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrontSupply {
+    /// Along the jet: each cell beyond the face marched on to the first solid or the
+    /// room's wall, its share spread evenly along the way (docs/models.md, "Front-supply
+    /// CRACs and halls without grilles").
+    #[default]
+    Jet,
+    /// In the cells just beyond the face only.
+    Face,
+}
+
+impl FrontSupply {
+    fn is_jet(&self) -> bool {
+        *self == FrontSupply::Jet
+    }
 }
 
 const DEFAULT_MAX_OUTER: usize = 10;
@@ -154,6 +177,7 @@ impl Default for SimConfig {
             advection_max_outer: DEFAULT_MAX_OUTER,
             advection_tol_c: DEFAULT_TOL_C,
             containment_panel_m: default_panel_m(),
+            front_supply: FrontSupply::Jet,
         }
     }
 }
@@ -199,6 +223,12 @@ impl SimConfig {
     /// Sets the advection scheme of the temperature equation.
     pub fn with_advection(mut self, advection: Advection) -> Self {
         self.advection = advection;
+        self
+    }
+
+    /// Sets where a `front` CRAC's supply enters.
+    pub fn with_front_supply(mut self, front_supply: FrontSupply) -> Self {
+        self.front_supply = front_supply;
         self
     }
 

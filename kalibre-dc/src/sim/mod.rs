@@ -43,7 +43,7 @@ mod topology;
 mod vtk;
 
 pub use advection::AdvectionStats;
-pub use config::{Advection, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
+pub use config::{Advection, FrontSupply, Preconditioner, SimConfig, DEFAULT_CONTAINMENT_PANEL_M};
 pub use grid::Grid;
 pub use heat_sources::{
     rack_heat, sensor_warming, write_rack_heat, RackHeat, SensorWarming, MIN_WARMING_K,
@@ -61,14 +61,6 @@ pub use supply::tile_flows_m3_s;
 /// The face a `front` CRAC blows through: the OpenFOAM case puts its supply there too.
 pub(crate) use topology::front_side;
 
-/// The side of `crac` that a `front` supply blows through (docs/formats.md): the face
-/// opposite the wall it stands against.
-pub fn crac_front_side(hall: &crate::hall::Hall, crac: &crate::hall::Crac) -> crate::hall::Side {
-    front_side(
-        hall,
-        &crate::hall::Aabb::from_position_size(crac.position_m, crac.size_m),
-    )
-}
 pub use topology::{cells_beyond_cap, MAX_CELLS};
 pub use vtk::{vtk_file_name, write_vtk};
 
