@@ -22,6 +22,17 @@ fn solve(
     (sim, sol)
 }
 
+/// The largest mass imbalance of a fluid cell (m3/s) and the sources' norm it is
+/// measured against.
+fn worst_cell_imbalance(sim: &Simulator, sol: &Solution) -> (f64, f64) {
+    let worst = (sol.mass_imbalance_m3_s(sim.grid()).iter().zip(sim.solid()))
+        .filter(|(_, s)| !**s)
+        .map(|(v, _)| v.abs())
+        .fold(0.0, f64::max);
+    let src_norm = sol.source_m3_s.iter().map(|v| v * v).sum::<f64>().sqrt();
+    (worst, src_norm)
+}
+
 fn mean_of(hall: &Hall, sol: &Solution, prefix: &str) -> f64 {
     let v: Vec<f64> = hall
         .sensors
@@ -60,14 +71,7 @@ fn mass_balances_per_cell_to_solver_tolerance() {
     let hall = demo_hall();
     let state = varied_state(&hall, 18.0, 0.9, 400.0);
     let (sim, sol) = solve(&hall, SimConfig::default(), &state, 0.12);
-    let imbalance = sol.mass_imbalance_m3_s(sim.grid());
-    let worst = imbalance
-        .iter()
-        .zip(sim.solid())
-        .filter(|(_, s)| !**s)
-        .map(|(v, _)| v.abs())
-        .fold(0.0, f64::max);
-    let src_norm = sol.source_m3_s.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let (worst, src_norm) = worst_cell_imbalance(&sim, &sol);
     // CG stops at a relative residual of 1e-9: no cell can be off by more than that norm.
     assert!(
         worst <= 1e-9 * src_norm * 1.0001,
@@ -103,11 +107,7 @@ fn front_supply_along_the_jet_balances_energy_and_mass() {
         );
         assert!(sol.energy_balance_error().abs() < 1e-4, "grilles {grilles}");
         assert!((sol.return_flow_m3_s - sol.supply_flow_m3_s).abs() < 1e-6 * sol.supply_flow_m3_s);
-        let worst = (sol.mass_imbalance_m3_s(sim.grid()).iter().zip(sim.solid()))
-            .filter(|(_, s)| !**s)
-            .map(|(v, _)| v.abs())
-            .fold(0.0, f64::max);
-        let src_norm = sol.source_m3_s.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let (worst, src_norm) = worst_cell_imbalance(&sim, &sol);
         assert!(
             worst <= 1e-9 * src_norm * 1.0001,
             "grilles {grilles}: {worst:e}"

@@ -10,6 +10,15 @@ impl CaseGeometry {
         self.solid[c[0] + self.n[0] * (c[1] + self.n[1] * c[2])]
     }
 
+    /// The first solid cell of `cells` (k, then j, then i), if any: a patch's faces must
+    /// all open onto fluid.
+    fn first_solid(&self, cells: &CellRange) -> Option<[usize; 3]> {
+        (cells.lo[2]..cells.hi[2])
+            .flat_map(|k| (cells.lo[1]..cells.hi[1]).map(move |j| (j, k)))
+            .flat_map(|(j, k)| (cells.lo[0]..cells.hi[0]).map(move |i| [i, j, k]))
+            .find(|&c| self.is_solid(c))
+    }
+
     /// Boundary faces of a rack's side over a server's span; every face must open onto
     /// fluid (a rack pressed against another rack or a wall has no intake there).
     pub(super) fn side_patch(
@@ -39,20 +48,14 @@ impl CaseGeometry {
         let mut cells = *span;
         cells.lo[axis] = outside;
         cells.hi[axis] = outside + 1;
-        for k in cells.lo[2]..cells.hi[2] {
-            for j in cells.lo[1]..cells.hi[1] {
-                for i in cells.lo[0]..cells.hi[0] {
-                    if self.is_solid([i, j, k]) {
-                        return Err(geo(
-                            field,
-                            format!(
-                                "side {side:?} is blocked by a solid at cell ({i}, {j}, {k}) \
-                                 (racks back to back or against a CRAC)"
-                            ),
-                        ));
-                    }
-                }
-            }
+        if let Some([i, j, k]) = self.first_solid(&cells) {
+            return Err(geo(
+                field,
+                format!(
+                    "side {side:?} is blocked by a solid at cell ({i}, {j}, {k}) (racks back \
+                     to back or against a CRAC)"
+                ),
+            ));
         }
         Ok(FacePatch {
             name,
@@ -82,15 +85,11 @@ impl CaseGeometry {
         let mut cells = *r;
         cells.lo[2] = plane;
         cells.hi[2] = plane + 1;
-        for j in cells.lo[1]..cells.hi[1] {
-            for i in cells.lo[0]..cells.hi[0] {
-                if self.is_solid([i, j, plane]) {
-                    return Err(geo(
-                        field,
-                        format!("its top is covered by a solid at cell ({i}, {j}, {plane})"),
-                    ));
-                }
-            }
+        if let Some([i, j, k]) = self.first_solid(&cells) {
+            return Err(geo(
+                field,
+                format!("its top is covered by a solid at cell ({i}, {j}, {k})"),
+            ));
         }
         Ok(FacePatch {
             name,
@@ -124,15 +123,11 @@ impl CaseGeometry {
         lo[2] = k;
         hi[2] = k + 1;
         let cells = CellRange { lo, hi };
-        for j in lo[1]..hi[1] {
-            for i in lo[0]..hi[0] {
-                if self.is_solid([i, j, k]) {
-                    return Err(geo(
-                        field,
-                        format!("covered by a solid at cell ({i}, {j}, {k})"),
-                    ));
-                }
-            }
+        if let Some([i, j, k]) = self.first_solid(&cells) {
+            return Err(geo(
+                field,
+                format!("covered by a solid at cell ({i}, {j}, {k})"),
+            ));
         }
         Ok(FacePatch {
             name,
