@@ -85,19 +85,7 @@ impl CaseGeometry {
         let mut cells = *r;
         cells.lo[2] = plane;
         cells.hi[2] = plane + 1;
-        if let Some([i, j, k]) = self.first_solid(&cells) {
-            return Err(geo(
-                field,
-                format!("its top is covered by a solid at cell ({i}, {j}, {k})"),
-            ));
-        }
-        Ok(FacePatch {
-            name,
-            axis: 2,
-            plane,
-            faces: cells.count(),
-            cells,
-        })
+        self.horizontal_patch(cells, plane, name, field, "its top is covered")
     }
 
     /// A floor (`plane` 0) or ceiling (`plane` nz) rectangle.
@@ -122,11 +110,23 @@ impl CaseGeometry {
         let k = if plane == 0 { 0 } else { self.n[2] - 1 };
         lo[2] = k;
         hi[2] = k + 1;
-        let cells = CellRange { lo, hi };
+        self.horizontal_patch(CellRange { lo, hi }, plane, name, field, "covered")
+    }
+
+    /// The horizontal faces at grid line `plane` over the one cell layer `cells`, all of
+    /// which must be fluid (else: `what` by the solid, naming its cell).
+    fn horizontal_patch(
+        &self,
+        cells: CellRange,
+        plane: usize,
+        name: String,
+        field: &str,
+        what: &str,
+    ) -> Result<FacePatch, OpenFoamError> {
         if let Some([i, j, k]) = self.first_solid(&cells) {
             return Err(geo(
                 field,
-                format!("covered by a solid at cell ({i}, {j}, {k})"),
+                format!("{what} by a solid at cell ({i}, {j}, {k})"),
             ));
         }
         Ok(FacePatch {
