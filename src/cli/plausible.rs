@@ -297,6 +297,14 @@ fn significant(v: f64) -> String {
     super::significant(v, 3)
 }
 
+/// What the built-in simulator on a grid of `cell_m` should say of the hall at
+/// `hall_path` before it runs: the cells it solves on, equipment its grid moves
+/// ([`warn_off_grid`]) and front supply it reads far off ([`warn_front_supply`]).
+pub(crate) fn warn_builtin_hall(hall_path: &Path, hall: &Hall, cell_m: f64) {
+    warn_off_grid(hall_path, hall, cell_m);
+    warn_front_supply(hall_path, hall);
+}
+
 /// Says what cells the built-in simulator takes when `cell_m` does not divide a side of
 /// the room: it puts a whole number of cells on each side (`round(side / cell_m)`), so
 /// the cells it solves on differ from the size asked for, and the messages about the
@@ -325,7 +333,7 @@ fn note_cells_per_side(hall_path: &Path, hall: &Hall, cell_m: f64) {
 /// cell off moves the air of its aisle, and the readings by tenths of a degree, without a
 /// word otherwise. Names the first such edge, how far the farthest moves, and a finer
 /// grid that places them all when one of up to 8 times finer does.
-pub(crate) fn warn_off_grid(hall_path: &Path, hall: &Hall, cell_m: f64) {
+fn warn_off_grid(hall_path: &Path, hall: &Hall, cell_m: f64) {
     // Cells wider than the equipment cannot hold it at all: the simulator's own refusal
     // (or its hint) says so, and edge by edge placement is beside the point.
     let smallest_m = (hall.racks.iter().map(|r| [r.size_m[0], r.size_m[1]]))
@@ -373,7 +381,7 @@ pub(crate) fn warn_off_grid(hall_path: &Path, hall: &Hall, cell_m: f64) {
 /// before the servers draw it. The figures are the ones measured against OpenFOAM
 /// (docs/models.md, "Front-supply CRACs and halls without grilles"), which solves such
 /// halls; with grilles the built-in model read them as near as floor supply.
-pub(crate) fn warn_front_supply(hall_path: &Path, hall: &Hall) {
+fn warn_front_supply(hall_path: &Path, hall: &Hall) {
     if !hall.returns.is_empty() {
         return;
     }

@@ -450,8 +450,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     };
     let config = sim_config(grid_m)?;
     check_model_cells(&hall, &hall_path, config.cell_m, args.grid_m.is_some())?;
-    super::plausible::warn_off_grid(&hall_path, &hall, config.cell_m);
-    super::plausible::warn_front_supply(&hall_path, &hall);
+    super::plausible::warn_builtin_hall(&hall_path, &hall, config.cell_m);
     // Before any solve: a factor whose grid is the model's own in this room, or too
     // fine to build, would otherwise fail (or check nothing) after the predictions.
     super::calibrate::check_finer_grids(&hall, config.cell_m, &args.grid_check)?;

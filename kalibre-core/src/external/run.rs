@@ -7,7 +7,7 @@ use super::command::{
     AttemptReport, ExternalCommand, FailureKind, KeepRuns, RunReport, BUILTINS, RUN_RECORD,
 };
 use super::process::{log_tail, run_process, ProcessEnd, ProcessSpec};
-use super::template::{TemplateValue, Variables};
+use super::template::{Template, TemplateValue, Variables};
 use super::{ExternalError, StableHasher, TemplateScenario};
 use crate::{check_outputs, ModelError, Outputs};
 
@@ -53,6 +53,15 @@ impl<S: TemplateScenario> ExternalCommand<S> {
         Ok(vars)
     }
 
+    /// Every text a run renders: the arguments, the environment values and the template
+    /// files.
+    fn every_template(&self) -> impl Iterator<Item = &Template> {
+        self.args
+            .iter()
+            .chain(self.env.iter().map(|(_, t)| t))
+            .chain(self.templates.iter().map(|t| &t.template))
+    }
+
     /// Checks that every placeholder of the templates, arguments and environment resolves
     /// for `scenario` (a number's format only on a number) and that its variables clash
     /// with no parameter or built-in name.
@@ -65,12 +74,7 @@ impl<S: TemplateScenario> ExternalCommand<S> {
         vars.insert("attempt", TemplateValue::Number(1.0));
         // A trial rendering: an unknown name, or a number's format on a text value
         // (`{{scenario:.3}}`), is refused here rather than failing every run.
-        for t in self
-            .args
-            .iter()
-            .chain(self.env.iter().map(|(_, t)| t))
-            .chain(self.templates.iter().map(|t| &t.template))
-        {
+        for t in self.every_template() {
             t.render(&vars)?;
         }
         Ok(())
@@ -81,10 +85,7 @@ impl<S: TemplateScenario> ExternalCommand<S> {
     /// calibrating them moves nothing.
     pub fn unwritten_params(&self) -> Vec<&str> {
         let written: std::collections::BTreeSet<&str> = self
-            .args
-            .iter()
-            .chain(self.env.iter().map(|(_, t)| t))
-            .chain(self.templates.iter().map(|t| &t.template))
+            .every_template()
             .flat_map(|t| t.placeholders())
             .collect();
         self.param_names

@@ -139,12 +139,7 @@ pub fn control_dict(g: &CaseGeometry, st: &OpenFoamSettings) -> String {
         let _ = writeln!(s, "            {}", v3(*p));
     }
     s += "        );\n    }\n";
-    for p in g.tiles.iter().chain(&g.openings).chain(&g.returns).chain(
-        g.crac_supplies
-            .iter()
-            .chain(&g.crac_returns)
-            .map(|c| &c.patch),
-    ) {
+    for p in g.room_openings() {
         let _ = write!(
             s,
             "    flux_{0}\n    {{\n        type surfaceFieldValue;\n        libs (\"libfieldFunctionObjects.so\");\n        \

@@ -424,9 +424,9 @@ pub fn passed_over_text(report: &Report) -> Option<String> {
 /// above the initial one reads as a calibration that made things worse. `mae` writes an
 /// MAE in the calibration's units.
 pub fn weighted_best_text(report: &Report, mae: impl Fn(f64) -> String) -> Option<String> {
-    let weighted =
-        report.residuals.iter().any(|r| r.weight.is_some()) || report.settings.robust_nu.is_some();
-    if !weighted || report.best.passed_over.is_some() {
+    let grid = report.residuals.iter().any(|r| r.weight.is_some());
+    let robust = report.settings.robust_nu.is_some();
+    if !(grid || robust) || report.best.passed_over.is_some() {
         return None;
     }
     let initial = report.initial.mae_c.map(|m| (0, m));
@@ -446,12 +446,9 @@ pub fn weighted_best_text(report: &Report, mae: impl Fn(f64) -> String) -> Optio
         } else {
             format!("iteration {iteration}")
         };
-        let how = match (
-            grid_weighting_text(report).is_some(),
-            report.settings.robust_nu,
-        ) {
-            (true, Some(_)) => "the grid weighting and the Student-t likelihood",
-            (true, None) => "the grid weighting",
+        let how = match (grid, robust) {
+            (true, true) => "the grid weighting and the Student-t likelihood",
+            (true, false) => "the grid weighting",
             _ => "the Student-t likelihood",
         };
         format!(

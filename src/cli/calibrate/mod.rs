@@ -316,8 +316,7 @@ pub fn run(args: CalibrateArgs) -> CliResult {
             settings.sim.cell_m,
             args.grid_m.is_some(),
         )?;
-        super::plausible::warn_off_grid(args.hall_path(), &hall, settings.sim.cell_m);
-        super::plausible::warn_front_supply(args.hall_path(), &hall);
+        super::plausible::warn_builtin_hall(args.hall_path(), &hall, settings.sim.cell_m);
     }
     if args.model == ModelArg::Openfoam {
         let grid_m = args.grid_m.unwrap_or(OpenFoamSettings::default().grid_m);

@@ -304,8 +304,7 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
     let sim = sim_config(grid_m)?;
     if args.model == DiagnoseModel::Builtin {
         check_model_cells(&hall, &hall_path, sim.cell_m, args.grid_m.is_some())?;
-        super::plausible::warn_off_grid(&hall_path, &hall, sim.cell_m);
-        super::plausible::warn_front_supply(&hall_path, &hall);
+        super::plausible::warn_builtin_hall(&hall_path, &hall, sim.cell_m);
     }
     let model = HallModel::new(&hall, sim.clone())
         .map_err(|e| e.in_hall_file(&hall_path.display().to_string()))?;

@@ -503,6 +503,18 @@ impl CaseGeometry {
         (lo, hi)
     }
 
+    /// The patches through which air enters or leaves the room (tiles, openings,
+    /// grilles, CRAC faces and tops), not those it passes through a rack by: what the
+    /// energy balance is taken over.
+    pub fn room_openings(&self) -> impl Iterator<Item = &FacePatch> {
+        self.tiles
+            .iter()
+            .chain(&self.openings)
+            .chain(&self.returns)
+            .chain(self.crac_supplies.iter().map(|c| &c.patch))
+            .chain(self.crac_returns.iter().map(|c| &c.patch))
+    }
+
     /// Every patch other than the walls, in the order they are created.
     pub fn patches(&self) -> impl Iterator<Item = &FacePatch> {
         self.servers

@@ -87,20 +87,7 @@ impl OpenFoamModel {
         let window = probe_window(&text, self.geometry.probes.len(), k * st.average_from, k)
             .map_err(ModelError::failed)?;
         let mut flux_sum = 0.0;
-        for p in self
-            .geometry
-            .tiles
-            .iter()
-            .chain(&self.geometry.openings)
-            .chain(&self.geometry.returns)
-            .chain(
-                self.geometry
-                    .crac_supplies
-                    .iter()
-                    .chain(&self.geometry.crac_returns)
-                    .map(|c| &c.patch),
-            )
-        {
+        for p in self.geometry.room_openings() {
             let f = dir.join(format!(
                 "postProcessing/flux_{}/0/surfaceFieldValue.dat",
                 p.name
