@@ -360,13 +360,15 @@ fn warn_off_grid(hall_path: &Path, hall: &Hall, cell_m: f64) {
         None => "a --grid-m that divides their positions places them as written".into(),
     };
     eprintln!(
-        "kalibre: warning: {}: {} edge{} of racks, CRACs, tiles or containment lie between \
-         the built-in simulator's cells of {} m and are moved to the nearest cell face, by \
+        "kalibre: warning: {}: {} edge{} of racks, CRACs, tiles or containment {} between \
+         the built-in simulator's cells of {} m and {} moved to the nearest cell face, by \
          up to {} m (the first: {}, {} = {} m taken as {} m); {cure}",
         hall_path.display(),
         moved.len(),
         if moved.len() == 1 { "" } else { "s" },
+        if moved.len() == 1 { "lies" } else { "lie" },
         rounded(cell_m),
+        if moved.len() == 1 { "is" } else { "are" },
         rounded(farthest_m),
         first.pointer,
         ["x", "y", "z"][first.axis],

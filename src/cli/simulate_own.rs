@@ -118,7 +118,10 @@ pub(super) fn run(args: &SimulateArgs) -> CliResult {
     }
     kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
     if args.params.is_none() {
-        say!("note: no --params: the model ran at the initial values of model.toml's [[params]]");
+        say!(
+            "note: no --params: the model ran at the initial values of {}'s [[params]]",
+            path.display()
+        );
     }
     let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
     say!(

@@ -65,13 +65,14 @@ pub fn run(args: SynthArgs) -> CliResult {
     let out = synth::generate(&options)?;
     synth::write_dir(&args.out, &out)?;
     println!(
-        "wrote {}: hall `{}` ({} servers, {} CRACs, {} sensors), {} snapshots, truth.json",
+        "wrote {}: hall `{}` ({} servers, {} CRACs, {} sensors), {} snapshot{}, truth.json",
         args.out.display(),
         out.hall.name,
         out.hall.server_count(),
         out.hall.cracs.len(),
         out.hall.sensors.len(),
-        out.snapshots.len()
+        out.snapshots.len(),
+        if out.snapshots.len() == 1 { "" } else { "s" }
     );
     Ok(())
 }

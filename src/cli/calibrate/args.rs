@@ -56,7 +56,9 @@ pub struct CalibrateArgs {
     pub(super) measurements: Option<PathBuf>,
     /// Output directory: report.json, runs.jsonl (the run journal), report.html, and
     /// runs-hall.json (the hall the journal's runs were made on); with --measurements,
-    /// report.json and runs.jsonl. Running again on the same directory resumes from the
+    /// report.json, runs.jsonl and model-parts.json (the digest of each part of the
+    /// model's fingerprint), no report.html; either way .kalibre.lock, locked while
+    /// calibrate works there. Running again on the same directory resumes from the
     /// journal without repeating a model run.
     #[arg(long)]
     pub(super) out: PathBuf,
@@ -92,7 +94,8 @@ pub struct CalibrateArgs {
     #[arg(long, value_enum)]
     pub(super) alpha: Option<AlphaArg>,
     /// Stop once the model's MAE over all sensors and snapshots is at most this (C; with
-    /// --measurements, in the outputs' units).
+    /// --measurements, in the outputs' units, or in sd units when the measurements have
+    /// an `sd` column).
     #[arg(long = "target-mae")]
     pub(super) target_mae: Option<f64>,
     /// Stop before exceeding this many model runs (initial design included).

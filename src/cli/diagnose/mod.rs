@@ -71,8 +71,9 @@ pub struct DiagnoseArgs {
     /// parameter and each candidate it can represent: `crac_supply_offset`, `bypass` and
     /// `rack_recirculation`; finished solves are kept in CALIBRATION/openfoam and reused),
     /// or `command` (a model of your own, `--config` and `--measurements`: its candidate
-    /// effects, each run journaled in CALIBRATION/runs.jsonl). The grid, alpha mode and
-    /// OpenFOAM options default to the ones the calibration recorded.
+    /// effects, each run journaled in CALIBRATION/runs.jsonl). The alpha mode is always
+    /// the one the calibration recorded (there is no --alpha here); the grid and OpenFOAM
+    /// options are the recorded ones unless --grid-m or those options are given.
     #[arg(long, value_enum, default_value_t = DiagnoseModel::Builtin)]
     model: DiagnoseModel,
     #[command(flatten)]
