@@ -235,6 +235,17 @@ fn an_out_that_cannot_take_the_files_is_refused_first() {
         &dir.join("fifo"),
     ));
     assert_input_error(&o, "runs.jsonl: not a regular file");
+    // A calibration with runs but no report yet (stopped, or still running) is named as
+    // such, not as a missing file.
+    let stopped = dir.join("stopped");
+    std::fs::create_dir_all(&stopped).unwrap();
+    std::fs::write(stopped.join("runs.jsonl"), "").unwrap();
+    let o = run(&mut diagnose_cmd(
+        &data("of-dev-clean/hall.json"),
+        &data("of-dev-clean/snapshots.csv"),
+        &stopped,
+    ));
+    assert_input_error(&o, "has runs but no report");
 }
 
 #[test]

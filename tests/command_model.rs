@@ -436,6 +436,17 @@ fn ending_kalibre_ends_the_runs_in_progress() {
             left.is_empty(),
             "signal {signal}, SIGTERM ignored {ignores_term}: solvers still running: {left:?}"
         );
+        // The runs the stop killed, and those it refused to start, are not the model's
+        // failures: journaled as failed, a resume would report and replay them as such.
+        let journal = std::fs::read_to_string(dir.join("cal").join("runs.jsonl"));
+        let failed: Vec<String> = (journal.unwrap_or_default().lines())
+            .filter(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["status"] == "failed")
+            .map(str::to_string)
+            .collect();
+        assert!(
+            failed.is_empty(),
+            "signal {signal}, SIGTERM ignored {ignores_term}: journaled as failed: {failed:?}"
+        );
     }
 }
 

@@ -246,7 +246,7 @@ fn a_hidden_effect_of_size_zero_or_not_a_number_is_refused() {
 }
 
 /// An output file path that cannot take a file (a directory, `.`, a directory that
-/// cannot be made) is an input error before the solves; it used to fail with exit 1
+/// cannot be made or written in) is an input error before the solves; it used to fail with exit 1
 /// after them. A missing directory is made.
 #[test]
 fn an_output_path_that_cannot_take_a_file_is_refused_first() {
@@ -260,6 +260,12 @@ fn an_output_path_that_cannot_take_a_file_is_refused_first() {
         ("--out", Path::new("."), "is a directory"),
         ("--out", under_file.as_path(), "a-file cannot be made"),
         ("--servers", under_file.as_path(), "a-file cannot be made"),
+        // A directory no one may write in, root included (so the test holds as root).
+        (
+            "--out",
+            Path::new("/proc/kalibre-pred.csv"),
+            "no file can be written in its directory",
+        ),
     ] {
         let mut extra = vec!["--out".as_ref(), os(&pred)];
         if flag == "--out" {

@@ -107,6 +107,15 @@ fn a_model_of_your_own_refuses_what_does_not_fit() {
     std::fs::write(&missing, MODEL_TOML.replace("\"python3\"", "\"python33\"")).unwrap();
     let o = run(&mut calibrate(&missing, &measurements, &out));
     assert_input_error(&o, "`python33` is not an executable in PATH");
+    // A runs root no one may write in (root included, so the test holds as root), found
+    // before any run rather than journaled as every design run's failure.
+    if cfg!(target_os = "linux") {
+        let unwritable = dir.join("unwritable-root.toml");
+        let toml = MODEL_TOML.replace("runs_root = \"runs\"", "runs_root = \"/proc/kalibre-runs\"");
+        std::fs::write(&unwritable, toml).unwrap();
+        let o = run(&mut calibrate(&unwritable, &measurements, &out));
+        assert_input_error(&o, "`runs_root`: /proc/kalibre-runs takes no run directory");
+    }
     // A hall and a model of your own at once: clap says they conflict.
     let o = run(calibrate(&config, &measurements, &out)
         .arg("--hall")
@@ -135,11 +144,14 @@ fn a_scenario_that_always_fails_is_named_with_its_reason() {
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     let err = stderr(&o);
     assert!(
-        err.contains("snapshot `broken` failed at every design point")
+        err.contains("scenario `broken` failed at every design point")
+            && err.contains("leave that scenario out of the observations")
             && err.contains("m_hot must be positive"),
         "{err}"
     );
     assert!(!err.contains("surrogate, fitted"), "{err}");
+    // In the words of model.toml: its operating conditions are scenarios.
+    assert!(!err.contains("snapshot"), "{err}");
     // Where to look: a kept run directory of that scenario, with the program's own log,
     // and the journal.
     let kept = err

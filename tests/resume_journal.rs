@@ -99,6 +99,20 @@ fn a_journal_of_another_model_is_refused_naming_what_differs() {
     }
     let o = calibrate_output(&out, &["--iterations", "1", "--alpha", "per-server"]);
     assert_input_error(&o, "this calibration has parameters they lack: alpha/");
+    // One line of another model among this one's (copied in from another journal): the
+    // refusal says where it is.
+    let journal = out.join("runs.jsonl");
+    let mut lines: Vec<String> = std::fs::read_to_string(&journal)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect();
+    let mut run: serde_json::Value = serde_json::from_str(&lines[6]).unwrap();
+    run["fingerprint"] = "0123456789abcdef".into();
+    lines[6] = run.to_string();
+    std::fs::write(&journal, lines.join("\n") + "\n").unwrap();
+    let o = calibrate_output(&out, &["--iterations", "1"]);
+    assert_input_error(&o, "holds 1 runs of another model (the first on line 7): ");
 }
 
 /// A hall edited after its runs were made: `calibrate` and `diagnose` name the fields

@@ -32,6 +32,8 @@ pub struct Observations<S> {
     /// Each measurement's scale (its standard uncertainty), per snapshot and output;
     /// `None`: every residual counts in the outputs' own units.
     scales: Option<Vec<Vec<f64>>>,
+    /// What one snapshot is called in messages ([`Self::new_called`]).
+    noun: &'static str,
 }
 
 /// A name for a message: escaped (a control character is shown, not sent to the
@@ -64,6 +66,25 @@ impl<S> Observations<S> {
     /// assert!(Observations::new(outputs(), vec![snap("")]).is_err());
     /// ```
     pub fn new(outputs: Vec<OutputInfo>, snapshots: Vec<Snapshot<S>>) -> Result<Self> {
+        Self::new_called("snapshot", outputs, snapshots)
+    }
+
+    /// As [`Self::new`], for observations whose user calls an operating condition by
+    /// another name (`scenario`, `test case`): the loop's messages about one (its checks
+    /// here, a failed or mis-shaped run, none that ran everywhere) then use that name.
+    ///
+    /// ```
+    /// use kalibre_core::{Observations, OutputInfo, Snapshot};
+    /// let outputs = vec![OutputInfo { name: "t_out_c".into(), group: String::new() }];
+    /// let snap = Snapshot { label: "winter".into(), scenario: (), measured: vec![None] };
+    /// let e = Observations::new_called("scenario", outputs, vec![snap]).unwrap_err();
+    /// assert!(e.to_string().contains("scenario `winter` has no measurement"), "{e}");
+    /// ```
+    pub fn new_called(
+        noun: &'static str,
+        outputs: Vec<OutputInfo>,
+        snapshots: Vec<Snapshot<S>>,
+    ) -> Result<Self> {
         let mut seen = std::collections::HashSet::with_capacity(outputs.len());
         for (k, o) in outputs.iter().enumerate() {
             if o.name.is_empty() {
@@ -88,33 +109,33 @@ impl<S> Observations<S> {
             ));
         }
         if snapshots.is_empty() {
-            return Err(Error::Mismatch(
-                "observations need at least one snapshot".into(),
-            ));
+            return Err(Error::Mismatch(format!(
+                "observations need at least one {noun}"
+            )));
         }
         for (i, s) in snapshots.iter().enumerate() {
             // Labels key journaled runs and are printed in messages, reports and file
             // names: an empty one names nothing, and the rest must be printable.
             if s.label.is_empty() {
                 return Err(Error::Mismatch(format!(
-                    "snapshot {i} has an empty label; expected a name"
+                    "{noun} {i} has an empty label; expected a name"
                 )));
             }
             if let Some(why) = crate::unprintable_name(&s.label) {
                 return Err(Error::Mismatch(format!(
-                    "snapshot {i}: label {} {why}",
+                    "{noun} {i}: label {} {why}",
                     quoted(&s.label)
                 )));
             }
             if snapshots[..i].iter().any(|o| o.label == s.label) {
                 return Err(Error::Mismatch(format!(
-                    "duplicate snapshot label `{}`",
+                    "duplicate {noun} label `{}`",
                     s.label
                 )));
             }
             if s.measured.len() != outputs.len() {
                 return Err(Error::Mismatch(format!(
-                    "snapshot `{}` has {} measurements for {} outputs",
+                    "{noun} `{}` has {} measurements for {} outputs",
                     s.label,
                     s.measured.len(),
                     outputs.len()
@@ -127,13 +148,13 @@ impl<S> Observations<S> {
                 .find_map(|(k, m)| m.filter(|v| !v.is_finite()).map(|v| (k, v)))
             {
                 return Err(Error::Mismatch(format!(
-                    "snapshot `{}`, output `{}`: measured value {v} is not finite",
+                    "{noun} `{}`, output `{}`: measured value {v} is not finite",
                     s.label, outputs[k].name
                 )));
             }
             if s.measured.iter().all(Option::is_none) {
                 return Err(Error::Mismatch(format!(
-                    "snapshot `{}` has no measurement",
+                    "{noun} `{}` has no measurement",
                     s.label
                 )));
             }
@@ -142,6 +163,7 @@ impl<S> Observations<S> {
             outputs,
             snapshots,
             scales: None,
+            noun,
         })
     }
 
@@ -170,15 +192,17 @@ impl<S> Observations<S> {
     pub fn with_scales(mut self, scales: Vec<Vec<f64>>) -> Result<Self> {
         if scales.len() != self.snapshots.len() {
             return Err(Error::Mismatch(format!(
-                "{} rows of scales for {} snapshots",
+                "{} rows of scales for {} {}s",
                 scales.len(),
-                self.snapshots.len()
+                self.snapshots.len(),
+                self.noun
             )));
         }
         for (snap, row) in self.snapshots.iter().zip(&scales) {
             if row.len() != self.outputs.len() {
                 return Err(Error::Mismatch(format!(
-                    "snapshot `{}` has {} scales for {} outputs",
+                    "{} `{}` has {} scales for {} outputs",
+                    self.noun,
                     snap.label,
                     row.len(),
                     self.outputs.len()
@@ -187,16 +211,16 @@ impl<S> Observations<S> {
             for ((m, scale), info) in snap.measured.iter().zip(row).zip(&self.outputs) {
                 if !(scale.is_finite() && *scale > 0.0) {
                     return Err(Error::Mismatch(format!(
-                        "snapshot `{}`, output `{}`: scale {scale} is not a finite positive \
+                        "{} `{}`, output `{}`: scale {scale} is not a finite positive \
                          number",
-                        snap.label, info.name
+                        self.noun, snap.label, info.name
                     )));
                 }
                 if let Some(v) = m.filter(|v| !(v / scale).is_finite()) {
                     return Err(Error::Mismatch(format!(
-                        "snapshot `{}`, output `{}`: measured value {v} over its scale {scale:e} \
+                        "{} `{}`, output `{}`: measured value {v} over its scale {scale:e} \
                          is not finite",
-                        snap.label, info.name
+                        self.noun, snap.label, info.name
                     )));
                 }
             }
@@ -228,6 +252,7 @@ impl<S> Observations<S> {
             outputs: self.outputs.clone(),
             snapshots,
             scales: None,
+            noun: self.noun,
         }
     }
 
@@ -239,6 +264,12 @@ impl<S> Observations<S> {
     /// Output names in order.
     pub fn output_names(&self) -> Vec<String> {
         self.outputs.iter().map(|o| o.name.clone()).collect()
+    }
+
+    /// What one snapshot is called in messages: `snapshot` unless made with
+    /// [`Self::new_called`].
+    pub fn noun(&self) -> &'static str {
+        self.noun
     }
 
     /// The snapshots.

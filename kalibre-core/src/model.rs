@@ -50,8 +50,11 @@ pub enum ModelError {
         /// Outputs returned.
         got: usize,
     },
-    /// The model refused the parameters (e.g. out of its valid range).
+    /// The model refused the parameters (e.g. out of its valid range). Journaled as
+    /// `{"kind": "invalid_params", "reason": ...}`: a tagged string alone has no field
+    /// to go in.
     #[error("model refused the parameters: {0}")]
+    #[serde(with = "reason_field")]
     InvalidParams(String),
     /// An output is finite but physically impossible ([`Model::check_plausible`]): the
     /// run diverged, or the value did not come from the model.
@@ -331,9 +334,71 @@ pub(crate) fn non_finite_extra(extras: &BTreeMap<String, Vec<f64>>) -> Option<St
     })
 }
 
+/// A reason as the one field `reason` of its tagged object ([`ModelError::InvalidParams`]).
+mod reason_field {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize)]
+    struct Borrowed<'a> {
+        reason: &'a str,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Owned {
+        reason: String,
+    }
+
+    pub fn serialize<S: Serializer>(reason: &str, s: S) -> Result<S::Ok, S::Error> {
+        Borrowed { reason }.serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<String, D::Error> {
+        Ok(Owned::deserialize(d)?.reason)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every kind of failure is journaled and read back as it was.
+    #[test]
+    fn every_failure_round_trips_through_json() {
+        let failures = [
+            ModelError::Failed {
+                reason: "diverged".into(),
+                log_tail: Some("step 12".into()),
+            },
+            ModelError::Timeout {
+                seconds: 30.0,
+                log_tail: None,
+            },
+            ModelError::NonFinite {
+                index: 1,
+                name: "t_out".into(),
+                value: "NaN".into(),
+            },
+            ModelError::WrongOutputCount {
+                expected: 3,
+                got: 2,
+            },
+            ModelError::InvalidParams("alpha below 0".into()),
+            ModelError::Implausible {
+                index: 0,
+                name: "t_in".into(),
+                value: "1e9".into(),
+                reason: "hotter than the sun".into(),
+            },
+        ];
+        for e in failures {
+            let json = serde_json::to_string(&e).unwrap_or_else(|err| panic!("{e:?}: {err}"));
+            let back: ModelError = serde_json::from_str(&json).unwrap();
+            assert_eq!(back, e, "{json}");
+        }
+        let json = serde_json::to_string(&ModelError::InvalidParams("x".into())).unwrap();
+        assert_eq!(json, r#"{"kind":"invalid_params","reason":"x"}"#);
+    }
 
     #[test]
     fn outputs_beyond_what_a_fit_can_square_are_named() {

@@ -198,6 +198,10 @@ where
                 return Err(Error::OtherModelJournal {
                     path: path.display().to_string(),
                     runs: load.other_fingerprint,
+                    // Worth naming where the file mixes two models' runs.
+                    first_line: load
+                        .other_fingerprint_first_line
+                        .filter(|_| load.loaded > 0),
                 });
             }
             store

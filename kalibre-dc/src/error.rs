@@ -58,6 +58,9 @@ pub enum Error {
         path: String,
         /// How many of its runs are of another model.
         runs: usize,
+        /// The line of the first of them (1-based), when the journal also holds runs of
+        /// this model.
+        first_line: Option<usize>,
     },
     /// An error of the calibration core.
     #[error(transparent)]

@@ -41,9 +41,8 @@ impl HallCommand {
         path: &Path,
     ) -> CliResult<Self> {
         let bad = |what: String| CliError::Input(format!("{}: {what}", path.display()));
-        config
-            .command
-            .check_program()
+        (config.command.check_program())
+            .and_then(|()| config.command.check_runs_root())
             .map_err(|e| bad(e.to_string()))?;
         let effects = EffectRegistry::builtin().build_all(hall)?;
         let layout = ParamLayout::new(hall, &effects)?;

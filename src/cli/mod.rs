@@ -158,6 +158,14 @@ pub(crate) fn shell_word(path: &std::path::Path) -> String {
     }
 }
 
+/// `n` and `noun`, plural unless one: `1 snapshot`, `3 snapshots`.
+pub(crate) fn counted(n: usize, noun: &str) -> String {
+    match n {
+        1 => format!("1 {noun}"),
+        _ => format!("{n} {noun}s"),
+    }
+}
+
 /// `v` to `digits` significant figures, without an exponent (a flow of 0.00356 m3/s
 /// reads as such, not as 0.0035550000000000004) unless it would take many digits.
 pub(crate) fn significant(v: f64, digits: usize) -> String {

@@ -127,15 +127,29 @@ pub fn check_out_file(flag: &str, path: &Path) -> CliResult {
     }
     match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => {
-            match std::fs::create_dir_all(dir) {
-                Ok(()) => Ok(()),
-                Err(e) => refuse(&format!(
+            if let Err(e) = std::fs::create_dir_all(dir) {
+                return refuse(&format!(
                     "its directory {} cannot be made: {e}",
                     dir.display()
-                )),
+                ));
             }
         }
-        _ => Ok(()),
+        _ => {}
+    }
+    // Written beside itself and renamed (`write_atomic`), after the runs: a directory
+    // that takes no file must be found now, not once every slow run is done.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Ok(()); // a device or FIFO is written into, not renamed over
+    }
+    let resolved = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    let name = resolved.file_name().unwrap_or_default().to_string_lossy();
+    let probe = resolved.with_file_name(format!(".{name}.probe-{}", std::process::id()));
+    match std::fs::File::create(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => refuse(&format!("no file can be written in its directory ({e})")),
     }
 }
 

@@ -13,8 +13,8 @@ use super::{CliError, CliResult};
 /// `no_scenarios` completes the refusal's "no [[scenarios]]" with what they are for.
 pub(crate) fn load_config(path: &Path, no_scenarios: &str) -> CliResult<CommandModelConfig> {
     let cfg = CommandModelConfig::load(path).map_err(|e| CliError::Input(e.to_string()))?;
-    cfg.command
-        .check_program()
+    (cfg.command.check_program())
+        .and_then(|()| cfg.command.check_runs_root())
         .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))?;
     if cfg.scenarios.is_empty() {
         return Err(CliError::Input(format!(

@@ -554,9 +554,9 @@ pub fn run(args: SimulateArgs) -> CliResult {
     }
     print_under_read_note(&args, file.as_ref(), &hall, &labels, &headroom)?;
     say!(
-        "wrote {} ({} snapshots x {} sensors){}",
+        "wrote {} ({} x {} sensors){}",
         args.out.display(),
-        labels.len(),
+        super::counted(labels.len(), "snapshot"),
         hall.sensors.len(),
         args.vtk
             .as_ref()
@@ -589,9 +589,9 @@ pub(super) fn say_if_uncalibrated(args: &SimulateArgs) {
 pub(super) fn print_servers_written(args: &SimulateArgs, labels: &[String], hall: &Hall) {
     if let Some(path) = &args.servers {
         say!(
-            "wrote {} ({} snapshots x {} servers)",
+            "wrote {} ({} x {} servers)",
             path.display(),
-            labels.len(),
+            super::counted(labels.len(), "snapshot"),
             hall.servers().count()
         );
     }

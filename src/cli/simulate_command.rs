@@ -103,9 +103,9 @@ pub(super) fn run(
     kalibre_core::write_atomic(&args.out, csv).map_err(|e| io_err(&args.out, e))?;
     super::simulate::say_if_uncalibrated(args);
     say!(
-        "wrote {} ({} snapshots x {} sensors, from the command of {})",
+        "wrote {} ({} x {} sensors, from the command of {})",
         args.out.display(),
-        labels.len(),
+        super::counted(labels.len(), "snapshot"),
         hall.sensors.len(),
         path.display()
     );

@@ -134,9 +134,9 @@ pub(super) fn run(
     let headroom: Vec<Option<f64>> = checks.iter().map(setpoint_headroom_c).collect();
     print_under_read_note(args, file, &hall, &labels, &headroom)?;
     say!(
-        "wrote {} ({} snapshots x {} sensors; OpenFOAM case in {})",
+        "wrote {} ({} x {} sensors; OpenFOAM case in {})",
         args.out.display(),
-        labels.len(),
+        super::counted(labels.len(), "snapshot"),
         hall.sensors.len(),
         root.display()
     );

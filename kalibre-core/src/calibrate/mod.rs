@@ -170,7 +170,8 @@ where
             .flatten()
             .find_map(|r| r.result.as_ref().err().cloned());
         let labels: Vec<&str> = obs.snapshots().iter().map(|s| s.label.as_str()).collect();
-        let dead_snapshots = runner::snapshots_failed_throughout(&design_results, &labels, store);
+        let dead_snapshots =
+            runner::snapshots_failed_throughout(&design_results, &labels, obs.noun(), store);
         for (i, results) in design_results.into_iter().enumerate() {
             let eval = state.absorb(
                 &self.validator,
@@ -302,8 +303,9 @@ where
             contract::check_surrogate(&self.surrogate, obs, &start_params, iteration).map_err(
                 |e| match &dead_snapshots {
                     Some(dead) => Error::NoSuccessfulRun(format!(
-                        "{dead}: leave that snapshot out of the observations, or fix what \
-                         fails there"
+                        "{dead}: leave that {} out of the observations, or fix what fails \
+                         there",
+                        obs.noun()
                     )),
                     None => e,
                 },
@@ -552,7 +554,8 @@ where
         let best = state.best.ok_or_else(|| {
             let why = dead_snapshots.map_or_else(String::new, |d| format!(": {d}"));
             Error::NoSuccessfulRun(format!(
-                "no parameter point ran successfully at every snapshot{why}"
+                "no parameter point ran successfully at every {}{why}",
+                obs.noun()
             ))
         })?;
         let prior = state.prior.map(|_| best.rank - best.score);

@@ -121,7 +121,7 @@ pub(crate) fn run_variants<M: Model>(
                     .evaluate(&snap.scenario, params)
                     .and_then(|o| check_outputs(o, &names))
                     .map(|o| super::runner::scaled(o, scales.map(|sc| &sc[i][..])).values)
-                    .map_err(|e| format!("snapshot `{}`: {e}", snap.label))
+                    .map_err(|e| format!("{} `{}`: {e}", obs.noun(), snap.label))
             })
             .collect();
         match runs {

@@ -119,7 +119,10 @@ impl<M: Model> Runner<'_, M> {
                         .store
                         .path()
                         .map_or_else(|| "(in memory)".to_string(), |p| p.display().to_string()),
-                    reason: format!("line {line} (snapshot `{label}`, status ok): {e}; {cure}"),
+                    reason: format!(
+                        "line {line} ({} `{label}`, status ok): {e}; {cure}",
+                        self.observations.noun()
+                    ),
                 });
             }
             self.emit(Event::RunFinished {
@@ -158,6 +161,13 @@ impl<M: Model> Runner<'_, M> {
         });
         let result = evaluated.and_then(|o| self.checked(o));
         let wall_s = t0.elapsed().as_secs_f64();
+        // A run that failed once kalibre's stop began (Ctrl-C, `kill`) was killed or
+        // refused by the stop, not by the model: journaled as failed, it would be taken
+        // for the model's failure on the resume. This thread waits for the stop to end
+        // the process instead, so neither the run nor the loop goes on.
+        if result.is_err() && crate::external::stopping() {
+            crate::external::await_stop();
+        }
         self.store
             .record_keyed(label, inputs, self.param_names, params, &result, wall_s)?;
         self.emit(Event::RunFinished {
@@ -173,9 +183,10 @@ impl<M: Model> Runner<'_, M> {
         // the runs in flight beside it) rather than failing run after run.
         if let Err(ModelError::WrongOutputCount { expected, got }) = &result {
             return Err(Error::Mismatch(format!(
-                "snapshot `{label}`: the model returned {got} outputs where the observations \
+                "{} `{label}`: the model returned {got} outputs where the observations \
                  have {expected}, so the calibration stops at the first such run (the model \
-                 and the observations must list the same outputs, at every parameter value)"
+                 and the observations must list the same outputs, at every parameter value)",
+                self.observations.noun()
             )));
         }
         Ok(RunResult {
@@ -211,6 +222,7 @@ pub(crate) fn divide(values: &mut [f64], scales: &[f64]) {
 pub(crate) fn snapshots_failed_throughout(
     results: &[Vec<RunResult>],
     labels: &[&str],
+    noun: &str,
     store: &RunStore,
 ) -> Option<String> {
     let dead: Vec<String> = labels
@@ -227,7 +239,7 @@ pub(crate) fn snapshots_failed_throughout(
                     .run_dir()
                     .map_or_else(String::new, |d| format!("; its directory is kept: {d}"));
                 format!(
-                    "snapshot `{label}` failed at every design point (the first: \
+                    "{noun} `{label}` failed at every design point (the first: \
                      {first}{gist}{kept})"
                 )
             })

@@ -124,7 +124,8 @@ pub fn set_stop_message(message: StopMessage) {
 static STOPPING: AtomicBool = AtomicBool::new(false);
 
 /// Whether kalibre is ending (the handler of [`end_runs_with_kalibre`] ran): a run that
-/// ends killed now was ended by kalibre's own stop, not from outside, and is not retried.
+/// ends killed now was ended by kalibre's own stop, not from outside, and is neither
+/// retried nor journaled (the calibration loop waits for the end instead).
 pub fn stopping() -> bool {
     STOPPING.load(Ordering::Acquire)
 }

@@ -1,5 +1,6 @@
-//! Whether an external command's program is there at all, checked before any run: a
-//! missing one would otherwise fail every run of the design in turn.
+//! Whether an external command's program is there at all, and its runs root takes run
+//! directories, checked before any run: either missing would otherwise fail every run of
+//! the design in turn.
 
 use std::path::Path;
 
@@ -43,6 +44,21 @@ impl<S> ExternalCommand<S> {
                 program.display()
             ))),
         }
+    }
+}
+
+impl<S> ExternalCommand<S> {
+    /// Checks, before any run, that the runs root (`runs_root`) is or can be made a
+    /// directory that takes run directories; it is made when missing. Every run would
+    /// otherwise fail to set up, one after another, and be journaled as failed.
+    pub fn check_runs_root(&self) -> Result<(), ExternalError> {
+        let root = self.runs_root();
+        self.dirs
+            .check_writable()
+            .map_err(|e| ExternalError::Setting {
+                key: "runs_root".into(),
+                reason: format!("{} takes no run directory: {e}", root.display()),
+            })
     }
 }
 

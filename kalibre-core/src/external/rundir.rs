@@ -4,6 +4,7 @@ use std::fs::{File, OpenOptions, TryLockError};
 use std::io;
 use std::ops::Deref;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 /// Allocates run directories under a root: `<label>-<hash>-<n>`, where the label is the
 /// scenario's (reduced to `[A-Za-z0-9._-]`), the hash identifies the scenario and the
@@ -160,6 +161,18 @@ impl RunDirs {
         )))
     }
 
+    /// Makes the root when missing, and checks that a run directory can be made in it
+    /// (by making and removing one).
+    pub fn check_writable(&self) -> io::Result<()> {
+        std::fs::create_dir_all(&self.root)?;
+        let probe = self.root.join(format!(".probe-{}", std::process::id()));
+        std::fs::create_dir(&probe).or_else(|e| match e.kind() {
+            io::ErrorKind::AlreadyExists => Ok(()),
+            _ => Err(e),
+        })?;
+        std::fs::remove_dir(&probe)
+    }
+
     /// Removes the directories that runs killed mid-run left under the root (their markers
     /// unlocked), and returns them. Live runs, of this process or another, and directories
     /// kept on purpose are left alone. A missing root has none.
@@ -190,6 +203,11 @@ impl RunDirs {
             }
             let dir = self.root.join(name);
             let is_dir = std::fs::symlink_metadata(&dir).is_ok_and(|m| m.is_dir());
+            // A solver the killed run started may work on in there; removed from under
+            // it, it would hold its cores to its end for nothing.
+            if is_dir && !end_processes_in(&dir, ORPHAN_GRACE) {
+                continue;
+            }
             if is_dir {
                 std::fs::remove_dir_all(&dir)?;
                 removed.push(dir);
@@ -199,6 +217,69 @@ impl RunDirs {
         removed.sort();
         Ok(removed)
     }
+}
+
+/// How long a process left working in an interrupted run's directory may take to go
+/// after SIGTERM before it gets SIGKILL.
+const ORPHAN_GRACE: Duration = Duration::from_secs(5);
+
+/// Ends the processes still working in `dir` (their working directory inside it): what
+/// a run started that outlived its killed kalibre (`kill -9`, the out-of-memory killer),
+/// since the kernel's parent-death signal reaches only the run's first process. SIGTERM,
+/// then SIGKILL after `grace`. Whether none is left (one of another user's stays).
+#[cfg(target_os = "linux")]
+fn end_processes_in(dir: &Path, grace: Duration) -> bool {
+    let Ok(dir) = std::fs::canonicalize(dir) else {
+        return true;
+    };
+    let own = std::process::id();
+    // A zombie has no working directory to read: it counts as gone.
+    let inside = || -> Vec<libc::pid_t> {
+        let Ok(procs) = std::fs::read_dir("/proc") else {
+            return Vec::new();
+        };
+        (procs.flatten())
+            .filter_map(|e| {
+                let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+                let cwd = std::fs::read_link(e.path().join("cwd")).ok()?;
+                (pid != own && cwd.starts_with(&dir)).then_some(pid as libc::pid_t)
+            })
+            .collect()
+    };
+    let signal_all = |signal: libc::c_int| {
+        for pid in inside() {
+            // SAFETY: kill has no memory effects; a process already gone gives ESRCH.
+            unsafe {
+                libc::kill(pid, signal);
+            }
+        }
+    };
+    let gone_within = |wait: Duration| {
+        let until = Instant::now() + wait;
+        loop {
+            if inside().is_empty() {
+                return true;
+            }
+            if Instant::now() >= until {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    if inside().is_empty() {
+        return true;
+    }
+    signal_all(libc::SIGTERM);
+    if gone_within(grace) {
+        return true;
+    }
+    signal_all(libc::SIGKILL);
+    gone_within(Duration::from_secs(5))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn end_processes_in(_dir: &Path, _grace: Duration) -> bool {
+    true
 }
 
 #[cfg(test)]
@@ -238,6 +319,39 @@ mod tests {
         assert!(!marker.exists());
         assert!(dirs.remove_interrupted().unwrap().is_empty());
         assert!(path.is_dir());
+        std::fs::remove_dir_all(dirs.root()).unwrap();
+    }
+
+    /// A solver a killed run started, still at work in its directory, is ended before
+    /// the directory is removed, not left to run on in a deleted directory.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_process_left_in_a_killed_runs_directory_is_ended_first() {
+        use std::os::unix::process::{CommandExt, ExitStatusExt};
+        let dirs = RunDirs::new(root("orphan"));
+        let mut run = dirs.create("t0", 7).unwrap();
+        let mut solver = std::process::Command::new("sleep")
+            .arg("60")
+            .current_dir(run.path())
+            .process_group(0)
+            .spawn()
+            .unwrap();
+        let path = run.to_path_buf();
+        // The marker's lock went with the killed kalibre; the solver did not.
+        drop(run.marker.take());
+        // A test beside this one that forks holds a copy of the marker until its child
+        // execs, and the lock with it: the sweep then sees a live run and waits for the
+        // next one.
+        let t0 = Instant::now();
+        let mut removed = dirs.remove_interrupted().unwrap();
+        while removed.is_empty() && t0.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(20));
+            removed = dirs.remove_interrupted().unwrap();
+        }
+        assert_eq!(removed, vec![path.clone()]);
+        let status = solver.wait().unwrap();
+        assert_eq!(status.signal(), Some(libc::SIGTERM), "{status:?}");
+        assert!(!path.exists());
         std::fs::remove_dir_all(dirs.root()).unwrap();
     }
 

@@ -29,6 +29,10 @@ pub struct LoadReport {
     /// Runs of another model fingerprint (neither the store's nor one of its aliases),
     /// ignored.
     pub other_fingerprint: usize,
+    /// The line of the first of them (1-based), so that a journal mixing two models'
+    /// runs can be looked at where it starts to. Missing in older reports: `None`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub other_fingerprint_first_line: Option<usize>,
     /// Repeated keys (the first record is kept).
     pub duplicates: usize,
     /// The repeats among them whose result differs from the kept one (other outputs, or
@@ -119,6 +123,7 @@ pub(super) fn read(
         max_seq = Some(max_seq.map_or(rec.seq, |m: u64| m.max(rec.seq)));
         if rec.fingerprint != fingerprint && !aliases.contains(&rec.fingerprint) {
             load.other_fingerprint += 1;
+            load.other_fingerprint_first_line.get_or_insert(line);
             return;
         }
         let k = key(

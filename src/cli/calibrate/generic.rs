@@ -373,7 +373,7 @@ pub(in crate::cli) fn observations(
         .collect();
     let in_file =
         |e: kalibre_core::Error| CliError::Input(format!("{}: {e}", measurements.display()));
-    let observations = Observations::new(infos, snapshots).map_err(in_file)?;
+    let observations = Observations::new_called("scenario", infos, snapshots).map_err(in_file)?;
     match read.sd {
         None => {
             if let Some(note) = mixed_sizes_note(&observations) {

@@ -12,11 +12,12 @@ use kalibre_dc::ParamLayout;
 use super::super::calibrated_model::CalibratedModel;
 use super::super::{hall_changes, CliError};
 
-/// The refusal of a journal of `runs` runs of another model, with what differs between
-/// the calibration that wrote it and this one (`current`, over `hall`).
+/// The refusal of a journal of `runs` runs of another model (the first on `first_line`),
+/// with what differs between the calibration that wrote it and this one (`current`, over
+/// `hall`).
 pub(super) fn explain(
     journal: &Path,
-    runs: usize,
+    (runs, first_line): (usize, Option<usize>),
     current: &CalibratedModel,
     hall: &Hall,
     hall_file: &Path,
@@ -52,9 +53,10 @@ pub(super) fn explain(
                           changed since"
             .to_string(),
     };
+    let from = first_line.map_or_else(String::new, |l| format!(" (the first on line {l})"));
     CliError::Input(format!(
-        "{}: holds {runs} runs of another model: {why}. Calibrate into another --out (or \
-         move runs.jsonl away to start afresh)",
+        "{}: holds {runs} runs of another model{from}: {why}. Calibrate into another --out \
+         (or move runs.jsonl away to start afresh)",
         journal.display()
     ))
 }

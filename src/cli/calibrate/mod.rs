@@ -83,18 +83,20 @@ fn calibrate_with_model<'o>(
 ) -> CliResult<Calibrated> {
     let hall = calibrated_hall(hall, settings);
     let refused = |e: kalibre_dc::Error| match e {
-        kalibre_dc::Error::OtherModelJournal { path, runs } => {
-            match model_record(args, &hall, settings, String::new()) {
-                Ok(current) => journal_mismatch::explain(
-                    Path::new(&path),
-                    runs,
-                    &current,
-                    &hall,
-                    args.hall_path(),
-                ),
-                Err(e) => e,
-            }
-        }
+        kalibre_dc::Error::OtherModelJournal {
+            path,
+            runs,
+            first_line,
+        } => match model_record(args, &hall, settings, String::new()) {
+            Ok(current) => journal_mismatch::explain(
+                Path::new(&path),
+                (runs, first_line),
+                &current,
+                &hall,
+                args.hall_path(),
+            ),
+            Err(e) => e,
+        },
         e => flag_error(e.in_hall_file(&args.hall_path().display().to_string())),
     };
     match args.model {

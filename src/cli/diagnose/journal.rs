@@ -72,8 +72,20 @@ pub(super) fn scenario_keys(
 }
 
 /// Refuses a `report.json` or `runs.jsonl` in the calibration directory that is not a
-/// regular file: `calibrate` wrote files there, and a FIFO would block the read.
+/// regular file: `calibrate` wrote files there, and a FIFO would block the read. A
+/// calibration with runs but no report (running, stopped, or ended in an error) is named
+/// as such: its report is written at its end.
 pub(super) fn check_regular_files(calibration: &Path) -> CliResult {
+    let report = calibration.join("report.json");
+    if !report.exists() && calibration.join("runs.jsonl").is_file() {
+        return Err(CliError::Input(format!(
+            "{}: not there: the calibration in {} has runs but no report (it is running, \
+             was stopped, or ended in an error); run its calibrate command again, which \
+             resumes from its runs, then diagnose",
+            report.display(),
+            calibration.display()
+        )));
+    }
     for name in ["report.json", "runs.jsonl"] {
         let path = calibration.join(name);
         if std::fs::metadata(&path).is_ok_and(|m| !m.is_file()) {
