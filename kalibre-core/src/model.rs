@@ -41,6 +41,10 @@ pub enum ModelError {
         name: String,
         /// The value as text (`NaN`, `inf`).
         value: String,
+        /// The end of the run's log, when there is one (a `run dir:` line first, where
+        /// the run's directory was kept).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        log_tail: Option<String>,
     },
     /// The model returned the wrong number of outputs.
     #[error("model returned {got} outputs, expected {expected}")]
@@ -94,12 +98,7 @@ impl ModelError {
     /// assert_eq!(e.log_gist().as_deref(), Some("`End`"));
     /// ```
     pub fn run_dir(&self) -> Option<&str> {
-        let (ModelError::Failed { log_tail, .. } | ModelError::Timeout { log_tail, .. }) = self
-        else {
-            return None;
-        };
-        log_tail
-            .as_deref()?
+        self.log_tail()?
             .lines()
             .find_map(|l| l.strip_prefix(RUN_DIR_LINE))
             .map(str::trim)
@@ -118,17 +117,33 @@ impl ModelError {
                 None => line,
             })
         };
+        self.with_log_tail(named)
+    }
+
+    /// The end of the run's log, when the error has one.
+    pub fn log_tail(&self) -> Option<&str> {
         match self {
-            ModelError::Failed { reason, log_tail } => ModelError::Failed {
-                reason,
-                log_tail: named(log_tail),
-            },
-            ModelError::Timeout { seconds, log_tail } => ModelError::Timeout {
-                seconds,
-                log_tail: named(log_tail),
-            },
-            e => e,
+            ModelError::Failed { log_tail, .. }
+            | ModelError::Timeout { log_tail, .. }
+            | ModelError::NonFinite { log_tail, .. } => log_tail.as_deref(),
+            ModelError::WrongOutputCount { .. }
+            | ModelError::InvalidParams(_)
+            | ModelError::Implausible { .. } => None,
         }
+    }
+
+    /// The error with its log tail made by `tail` from the one it has, where its kind
+    /// keeps one.
+    pub fn with_log_tail(mut self, tail: impl FnOnce(Option<String>) -> Option<String>) -> Self {
+        match &mut self {
+            ModelError::Failed { log_tail, .. }
+            | ModelError::Timeout { log_tail, .. }
+            | ModelError::NonFinite { log_tail, .. } => *log_tail = tail(log_tail.take()),
+            ModelError::WrongOutputCount { .. }
+            | ModelError::InvalidParams(_)
+            | ModelError::Implausible { .. } => {}
+        }
+        self
     }
 
     /// The gist of the run's log for a one-line message: the first and last non-empty
@@ -144,11 +159,7 @@ impl ModelError {
     /// assert_eq!(e.log_gist().as_deref(), Some("`error: no mesh` ... `exiting`"));
     /// ```
     pub fn log_gist(&self) -> Option<String> {
-        let (ModelError::Failed { log_tail, .. } | ModelError::Timeout { log_tail, .. }) = self
-        else {
-            return None;
-        };
-        let section = log_tail.as_deref()?.rsplit("==> ").next()?;
+        let section = self.log_tail()?.rsplit("==> ").next()?;
         let mut lines = section
             .lines()
             .skip(usize::from(section.contains(" <==")))
@@ -301,6 +312,7 @@ pub fn check_outputs(
             index,
             name: names[index].clone(),
             value: v.to_string(),
+            log_tail: None,
         });
     }
     // Finite, but the fits square it: near f64::MAX that overflows into NaN, far from
@@ -378,6 +390,7 @@ mod tests {
                 index: 1,
                 name: "t_out".into(),
                 value: "NaN".into(),
+                log_tail: Some("run dir: /runs/t0-1\n".into()),
             },
             ModelError::WrongOutputCount {
                 expected: 3,

@@ -260,11 +260,20 @@ fn nan_output_is_non_finite() {
     let root = scratch("nan");
     let model: ExternalCommand = sh_model("nan.sh", &root, &["a", "b"]).build().unwrap();
     let report = model.run(&NamedScenario::new("n"), &[]);
-    match report.outcome.unwrap_err() {
-        ModelError::NonFinite { index, name, .. } => assert_eq!((index, name.as_str()), (1, "b")),
+    let e = report.outcome.unwrap_err();
+    match &e {
+        ModelError::NonFinite { index, name, .. } => assert_eq!((*index, name.as_str()), (1, "b")),
         e => panic!("expected NonFinite, got {e:?}"),
     }
     assert_eq!(report.attempts[0].failure, Some(FailureKind::NonFinite));
+    // Where the value came from: the kept directory, named as for any failed run.
+    let kept = report.attempts[0].run_dir.as_ref().unwrap();
+    assert_eq!(
+        e.run_dir(),
+        Some(kept.display().to_string().as_str()),
+        "{e:?}"
+    );
+    assert!(kept.is_dir());
 }
 
 #[test]

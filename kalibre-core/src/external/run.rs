@@ -330,7 +330,8 @@ impl<S: TemplateScenario> ExternalCommand<S> {
                 ModelError::NonFinite { .. } => FailureKind::NonFinite,
                 _ => FailureKind::Output,
             };
-            (kind, e)
+            // The kept directory and the log say where the value came from.
+            (kind, e.with_log_tail(|_| Some(tail())))
         });
         report.parse = t.elapsed();
         checked
