@@ -8,7 +8,7 @@ mod cli_support;
 
 use std::path::{Path, PathBuf};
 
-use cli_support::{assert_input_error, data, on_files, run, tmp};
+use cli_support::{assert_input_error, data, on_files, run, stderr, tmp};
 
 /// The clean development hall with `edit` applied, written to `dir/hall.json`.
 fn dev_hall_with(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) -> PathBuf {
@@ -42,6 +42,22 @@ fn a_rack_thinner_than_a_cell_and_too_coarse_cells_are_input_errors() {
             .arg(dir.join("coarse.csv")),
     );
     assert_input_error(&o, "use finer cells (`--grid-m`)");
+    // Cells wider than a rack that the simulator still builds: it solves a blur of the
+    // hall, and says so, naming the thinnest equipment and cells that would hold it.
+    let o = run(
+        on_files("simulate", &data("of-dev-clean/hall.json"), &snaps)
+            .args(["--grid-m", "0.8", "--out"])
+            .arg(dir.join("blur.csv")),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "/racks/0/size_m is 0.6 m across in x, less than the built-in simulator's cells \
+             of 0.8 m"
+        ) && stderr(&o).contains("(--grid-m 0.15)"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]

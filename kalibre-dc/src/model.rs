@@ -39,7 +39,8 @@ pub struct HallModel {
     layout: ParamLayout,
     fingerprint: String,
     /// The fingerprint earlier versions gave this model ([`legacy_fingerprint`]); none
-    /// for a hall with `front` CRACs, whose supply they released otherwise.
+    /// for a hall with `front` CRACs, whose supply they released otherwise, or with a
+    /// sensor beside a containment panel, which they read across it.
     legacy_fingerprint: Option<String>,
     sensor_names: Vec<String>,
 }
@@ -79,13 +80,25 @@ impl HallModel {
         if front_jet {
             parts.push(FRONT_SUPPLY_JET.as_bytes());
         }
+        let config_cell_m = config.cell_m;
+        let sim = Simulator::new(hall, config)?;
+        // A sensor within half a cell of a containment panel reads its own side's air
+        // since session 59, a blend with the other side's before: the same holds there.
+        let beside_panels = !sim.sensors_beside_panels().is_empty();
+        if beside_panels {
+            parts.push(SENSORS_BESIDE_PANELS.as_bytes());
+        }
+        // So is a containment side on a cell centre: outward since session 59.
+        let tied = crate::sim::containment_side_on_cell_centre(hall, config_cell_m);
+        if tied {
+            parts.push(CONTAINMENT_TIES_OUTWARD.as_bytes());
+        }
         let fingerprint = format!("{SIM_FINGERPRINT}:{:016x}", fnv1a(&parts));
-        let legacy_fingerprint = if front_jet {
+        let legacy_fingerprint = if front_jet || beside_panels || tied {
             None
         } else {
             Some(legacy_fingerprint(hall, &config_json, &effects)?)
         };
-        let sim = Simulator::new(hall, config)?;
         check_effect_placements(&sim, &effects)?;
         let sensor_names = hall.sensors.iter().map(|s| s.id.clone()).collect();
         Ok(HallModel {
@@ -256,6 +269,14 @@ const SIM_FINGERPRINT: &str = "kalibre-dc-sim/3";
 
 /// Hashed into the fingerprint of a hall with `front` CRACs: how their supply enters.
 const FRONT_SUPPLY_JET: &str = "front-supply: along the jet";
+
+/// Hashed into the fingerprint of a hall with a sensor beside a containment panel: it
+/// reads the air on its own side.
+const SENSORS_BESIDE_PANELS: &str = "sensors beside panels: their own side";
+
+/// Hashed into the fingerprint of a hall with a containment side on a cell centre: it
+/// goes outward, as a rack's cells do.
+const CONTAINMENT_TIES_OUTWARD: &str = "containment ties: outward";
 
 /// The fingerprint versions before bounds and initial values were left out gave the
 /// model of `hall` with `config` (as JSON) and `effects`: the hall's physics JSON, bounds

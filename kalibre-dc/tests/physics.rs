@@ -202,3 +202,166 @@ fn vtk_output_holds_every_field() {
     assert_eq!(text.lines().count(), 8 + 3 * (2 + n) + 1 + n);
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// A sensor within half a cell of a containment panel reads the air on its own side: its
+/// interpolation used to blend the cell centres on both sides, degrees apart (1 cm inside
+/// a cold aisle's door it read 6 C warmer than the aisle). Its model's fingerprint says
+/// so, and has no legacy one: runs journaled before read across the panel.
+#[test]
+fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
+    let rack = |i: usize, x: f64| {
+        format!(
+            r#"{{"id":"R{i}","position_m":[{x},2.4,0.0],"size_m":[0.6,1.2,2.0],"inlet":"-y","units":40,
+                "servers":[{{"id":"S{i}","type":"ta","u":1,"height_u":40}}]}}"#
+        )
+    };
+    let tile = |x: f64, f: f64| {
+        format!(r#"{{"position_m":[{x},1.6],"size_m":[0.6,0.6],"open_fraction":{f}}}"#)
+    };
+    let sensor = |id: &str, p: [f64; 3]| {
+        format!(
+            r#"{{"id":"{id}","position_m":[{},{},{}],"aisle":"cold"}}"#,
+            p[0], p[1], p[2]
+        )
+    };
+    // The cold aisle: x 1.6-4.0, y 1.4-2.4, up to 2 m; its -x door at x 1.6, its roof at
+    // z 2. Each pair: a cell centre and a point 1 cm from the panel, on one side.
+    let sensors = [
+        ("in", [1.7, 2.0, 1.0]),
+        ("in_door", [1.61, 2.0, 1.0]),
+        ("out_door", [1.59, 2.0, 1.0]),
+        ("out", [1.5, 2.0, 1.0]),
+        ("roof_in", [2.9, 2.0, 1.9]),
+        ("roof_in_door", [2.9, 2.0, 1.99]),
+        ("roof_out_door", [2.9, 2.0, 2.01]),
+        ("roof_out", [2.9, 2.0, 2.1]),
+    ];
+    let json = format!(
+        r#"{{"schema":"kalibre.hall/1","name":"panel","room":{{"size_m":[6.0,4.8,3.0]}},
+        "server_types":[{{"id":"ta","alpha_cfm_per_w":{{"initial":0.12,"min":0.01,"max":3.0}}}}],
+        "cracs":[{{"id":"cr1","position_m":[0.0,0.8,0.0],"size_m":[0.8,1.6,2.0],"rated_flow_m3_s":1.5,"supply":"floor"}}],
+        "racks":[{}],"tiles":[{}],
+        "returns":[{{"position_m":[2.0,3.8],"size_m":[1.6,0.4]}}],
+        "containment":[{{"kind":"cold_aisle","min_m":[1.6,1.4,0.0],"max_m":[4.0,2.4,2.0]}}],
+        "sensors":[{}]}}"#,
+        [1.6, 2.2, 2.8, 3.4]
+            .iter()
+            .enumerate()
+            .map(|(i, x)| rack(i + 1, *x))
+            .collect::<Vec<_>>()
+            .join(","),
+        [(1.6, 0.25), (2.2, 0.5), (2.8, 0.25), (3.4, 0.4)]
+            .iter()
+            .map(|(x, f)| tile(*x, *f))
+            .collect::<Vec<_>>()
+            .join(","),
+        sensors
+            .iter()
+            .map(|(id, p)| sensor(id, *p))
+            .collect::<Vec<_>>()
+            .join(","),
+    );
+    let hall = Hall::from_json_str(&json, "panel.json").unwrap();
+    let state = OperatingState {
+        label: "t0".into(),
+        setpoint_c: vec![18.0],
+        fan_speed: vec![0.8],
+        power_w: vec![5500.0, 6000.0, 5500.0, 5900.0],
+    };
+    let (sim, sol) = solve(&hall, SimConfig::default(), &state, 0.12);
+    assert_eq!(sim.sensors_beside_panels(), &[1, 2, 5, 6]);
+    let t = |id: &str| sol.sensor_c()[sensors.iter().position(|(s, _)| *s == id).unwrap()];
+    for (near, centre, other_side) in [
+        ("in_door", "in", "out"),
+        ("out_door", "out", "in"),
+        ("roof_in_door", "roof_in", "roof_out"),
+        ("roof_out_door", "roof_out", "roof_in"),
+    ] {
+        let across = (t(centre) - t(other_side)).abs();
+        assert!(across > 1.0, "{centre} / {other_side}: {across} C apart");
+        assert!(
+            (t(near) - t(centre)).abs() < 0.25 * across,
+            "{near} {:.2} C: its side's {centre} reads {:.2}, the other side's {other_side} {:.2}",
+            t(near),
+            t(centre),
+            t(other_side)
+        );
+    }
+    let model = kalibre_dc::HallModel::new(&hall, SimConfig::default()).unwrap();
+    assert!(kalibre_core::Model::legacy_fingerprints(&model).is_empty());
+}
+
+/// A hall symmetric about x = 3.1 m whose racks and cold-aisle containment have their x
+/// edges on the 0.2 m grid's cell centres (half-cell ties) reads symmetrically: the
+/// containment's planes go outward at a tie, as the racks' cells do. They used to snap one
+/// way only, and mirrored sensors read up to 0.65 C apart.
+#[test]
+fn a_symmetric_hall_at_half_cell_ties_reads_symmetrically() {
+    let rack = |i: usize, x: f64| {
+        format!(
+            r#"{{"id":"R{i}","position_m":[{x},2.4,0.0],"size_m":[0.6,1.2,2.0],"inlet":"-y","units":40,
+                "servers":[{{"id":"S{i}","type":"t","u":1,"height_u":40}}]}}"#
+        )
+    };
+    let tile = |x: f64, f: f64| {
+        format!(r#"{{"position_m":[{x},1.6],"size_m":[0.6,0.6],"open_fraction":{f}}}"#)
+    };
+    let pairs = [
+        ("door", [1.5, 2.0, 1.0]),
+        ("in", [2.0, 2.3, 1.5]),
+        ("room", [1.2, 1.1, 2.5]),
+        ("hot", [2.2, 3.7, 1.5]),
+    ];
+    let sensors: Vec<String> = pairs
+        .iter()
+        .flat_map(|(id, p)| {
+            [("L", p[0]), ("R", 6.2 - p[0])].map(|(side, x)| {
+                format!(
+                    r#"{{"id":"{side}-{id}","position_m":[{x},{},{}],"aisle":"cold"}}"#,
+                    p[1], p[2]
+                )
+            })
+        })
+        .collect();
+    let json = format!(
+        r#"{{"schema":"kalibre.hall/1","name":"tie","room":{{"size_m":[6.2,4.8,3.0]}},
+        "server_types":[{{"id":"t","alpha_cfm_per_w":{{"initial":0.12,"min":0.01,"max":3.0}}}}],
+        "cracs":[{{"id":"cr","position_m":[2.7,0.0,0.0],"size_m":[0.8,0.8,2.0],"rated_flow_m3_s":1.5,"supply":"floor"}}],
+        "tiles":[{}],"returns":[{{"position_m":[2.3,3.8],"size_m":[1.6,0.4]}}],"racks":[{}],
+        "containment":[{{"kind":"cold_aisle","min_m":[1.9,1.4,0.0],"max_m":[4.3,2.4,2.0]}}],
+        "sensors":[{}]}}"#,
+        [(1.9, 0.25), (2.5, 0.5), (3.1, 0.5), (3.7, 0.25)]
+            .iter()
+            .map(|(x, f)| tile(*x, *f))
+            .collect::<Vec<_>>()
+            .join(","),
+        [1.9, 2.5, 3.1, 3.7]
+            .iter()
+            .enumerate()
+            .map(|(i, x)| rack(i + 1, *x))
+            .collect::<Vec<_>>()
+            .join(","),
+        sensors.join(","),
+    );
+    let hall = Hall::from_json_str(&json, "tie.json").unwrap();
+    assert!(kalibre_dc::sim::containment_side_on_cell_centre(&hall, 0.2));
+    let state = OperatingState {
+        label: "t0".into(),
+        setpoint_c: vec![18.0],
+        fan_speed: vec![0.6],
+        power_w: vec![3000.0, 2800.0, 2800.0, 3000.0],
+    };
+    let (_, sol) = solve(&hall, SimConfig::default(), &state, 0.12);
+    let t = sol.sensor_c();
+    for (k, (id, _)) in pairs.iter().enumerate() {
+        let (l, r) = (t[2 * k], t[2 * k + 1]);
+        assert!((l - r).abs() < 1e-6, "{id}: L {l} C, R {r} C");
+    }
+    // The edge warning names where the cells put the edges: outward at a tie.
+    let moved = kalibre_dc::sim::off_grid_edges(&hall, 0.2);
+    let first = moved
+        .iter()
+        .find(|e| e.pointer == "/racks/0/position_m")
+        .unwrap();
+    assert_eq!((first.given_m, first.placed_m), (1.9, 1.8));
+}

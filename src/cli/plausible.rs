@@ -334,14 +334,42 @@ fn note_cells_per_side(hall_path: &Path, hall: &Hall, cell_m: f64) {
 /// word otherwise. Names the first such edge, how far the farthest moves, and a finer
 /// grid that places them all when one of up to 8 times finer does.
 fn warn_off_grid(hall_path: &Path, hall: &Hall, cell_m: f64) {
-    // Cells wider than the equipment cannot hold it at all: the simulator's own refusal
-    // (or its hint) says so, and edge by edge placement is beside the point.
-    let smallest_m = (hall.racks.iter().map(|r| [r.size_m[0], r.size_m[1]]))
-        .chain(hall.cracs.iter().map(|c| [c.size_m[0], c.size_m[1]]))
-        .chain(hall.tiles.iter().map(|t| t.size_m))
-        .flatten()
-        .fold(f64::INFINITY, f64::min);
-    if smallest_m < cell_m {
+    // Cells wider than the equipment cannot hold it: where the simulator does not refuse
+    // the hall, it solves a blur of it, and edge by edge placement is beside the point.
+    let across = (hall.racks.iter().enumerate())
+        .map(|(i, r)| (format!("/racks/{i}/size_m"), [r.size_m[0], r.size_m[1]]))
+        .chain(
+            (hall.cracs.iter().enumerate())
+                .map(|(i, c)| (format!("/cracs/{i}/size_m"), [c.size_m[0], c.size_m[1]])),
+        )
+        .chain(
+            (hall.tiles.iter().enumerate()).map(|(i, t)| (format!("/tiles/{i}/size_m"), t.size_m)),
+        )
+        .flat_map(|(at, size)| [(at.clone(), 0, size[0]), (at, 1, size[1])]);
+    let thinnest = across.min_by(|a, b| a.2.total_cmp(&b.2));
+    if let Some((at, axis, smallest_m)) = thinnest.filter(|t| t.2 < cell_m) {
+        // A hall the simulator refuses on these cells gets its refusal, not this too;
+        // built on cells this coarse, it costs next to nothing.
+        let config = kalibre_dc::sim::SimConfig {
+            cell_m,
+            ..Default::default()
+        };
+        if kalibre_dc::sim::Simulator::new(hall, config).is_err() {
+            return;
+        }
+        let n = snapshots::number;
+        eprintln!(
+            "kalibre: warning: {}: {at} is {} m across in {}, less than the built-in \
+             simulator's cells of {} m: cells that wide cannot hold the racks, CRACs and \
+             tiles, and what it solves is a blur of the hall; use cells of at most a third \
+             of that (--grid-m {})",
+            hall_path.display(),
+            n(smallest_m),
+            ["x", "y"][axis],
+            n(cell_m),
+            // In whole 5 cm, so that it prints as one: 3 * 0.05 is 0.15000000000000002.
+            n(((smallest_m / 3.0) / 0.05).floor().max(1.0) * 5.0 / 100.0),
+        );
         return;
     }
     note_cells_per_side(hall_path, hall, cell_m);

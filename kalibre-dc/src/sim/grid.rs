@@ -146,6 +146,9 @@ impl Grid {
     /// Faces of the side of the box `[min_m, max_m]` normal to axis `a` (its upper side
     /// with `at_max`), each as the index of the cell below it along `a`; none when the
     /// side lies on the domain's boundary. Face index `f` separates cells `f - 1` and `f`.
+    /// The side is the face of the cells [`Self::range_in`] puts in the box: a side on a
+    /// cell centre (a half-cell tie) goes outward at either end, as a rack's solid cells
+    /// do, so that mirrored geometry maps onto mirrored faces.
     pub fn box_side_faces(
         &self,
         a: usize,
@@ -153,8 +156,8 @@ impl Grid {
         min_m: [f64; 3],
         max_m: [f64; 3],
     ) -> Vec<usize> {
-        let x = if at_max { max_m[a] } else { min_m[a] };
-        let f = (x / self.d[a]).round() as usize;
+        let inside = self.range_in(a, min_m[a], max_m[a]);
+        let f = if at_max { inside.end } else { inside.start };
         if f == 0 || f >= self.n[a] {
             return Vec::new();
         }

@@ -11,7 +11,8 @@
 //! * **Heat** is steady first-order upwind advection-diffusion on those fluxes with an
 //!   effective turbulent diffusivity; supply enters at setpoint (+ effect offsets); each
 //!   server's exhaust is its flow-weighted mean intake plus `P / (rho cp Q)`, coupled
-//!   inside the linear operator. Sensors read trilinear interpolation of cell centres.
+//!   inside the linear operator. Sensors read trilinear interpolation of cell centres,
+//!   leaving out solid cells and those across a containment panel from the sensor.
 //! * The grid topology is built once in [`Simulator::new`]; each [`Simulator::solve`]
 //!   assembles sources and coefficients and runs CG (pressure) and BiCGSTAB (temperature),
 //!   matrix-free, preconditioned by geometric multigrid ([`Preconditioner`]), bit-identical
@@ -55,7 +56,9 @@ pub use inlets::{
 };
 pub use linalg::SolveStats;
 pub use mods::{AirLink, RackRecirculation, SimMods, SupplyOpening, WallOpening, WallSide};
-pub use snapping::{grid_placing_all, off_grid_edges, SnappedEdge};
+pub use snapping::{
+    containment_side_on_cell_centre, grid_placing_all, off_grid_edges, SnappedEdge,
+};
 pub use solution::Solution;
 pub use supply::tile_flows_m3_s;
 /// The face a `front` CRAC blows through: the OpenFOAM case puts its supply there too.
@@ -125,6 +128,13 @@ impl Simulator {
     /// Solid (rack, CRAC, enclosed) flag per cell.
     pub fn solid(&self) -> &[bool] {
         &self.topo.solid
+    }
+
+    /// The sensors (hall order) within half a cell of a containment panel: each reads the
+    /// air on its own side of the panel (the cell centres across it are left out of its
+    /// interpolation).
+    pub fn sensors_beside_panels(&self) -> &[usize] {
+        &self.topo.sensors_beside_panels
     }
 
     /// Number of fluid (active) cells.

@@ -48,8 +48,11 @@ pub fn off_grid_edges(hall: &Hall, cell_m: f64) -> Vec<SnappedEdge> {
     let mut out = Vec::new();
     let mut check = |pointer: String, axis: usize, edges: [f64; 2]| {
         let d = grid.d[axis];
-        for given_m in edges {
-            let placed_m = (given_m / d).round() * d;
+        // Where the cells the simulator puts in the box end ([`Grid::range_in`]): a tie
+        // on a cell centre goes outward at either end.
+        let inside = grid.range_in(axis, edges[0], edges[1]);
+        let placed = [inside.start as f64 * d, inside.end as f64 * d];
+        for (given_m, placed_m) in edges.into_iter().zip(placed) {
             if (given_m - placed_m).abs() > ON_FACE_SHARE * d {
                 out.push(SnappedEdge {
                     pointer: pointer.clone(),
@@ -89,6 +92,20 @@ pub fn off_grid_edges(hall: &Hall, cell_m: f64) -> Vec<SnappedEdge> {
         }
     }
     out
+}
+
+/// Whether a containment box of `hall` has a lower side on a cell centre of the grid of
+/// `cell_m` (a half-cell tie), which the simulator has put outward, as a rack's cells,
+/// since session 59 (inward before).
+pub fn containment_side_on_cell_centre(hall: &Hall, cell_m: f64) -> bool {
+    let grid = Grid::new(hall.room.size_m, cell_m);
+    hall.containment.iter().any(|c| {
+        (0..3).any(|a| {
+            let s = c.min_m[a] / grid.d[a];
+            c.min_m[a] > super::grid::GEOM_EPS
+                && (s - s.floor() - 0.5).abs() * grid.d[a] <= super::grid::GEOM_EPS
+        })
+    })
 }
 
 /// The coarsest cell of `cell_m / k` (k = 2..=8) whose grid moves no edge of `hall`, if

@@ -2,6 +2,8 @@
 //! faces and their conductances, containment walls, supply and return cells, server
 //! intake and exhaust cells with weights, and sensor interpolation stencils.
 
+use std::collections::HashSet;
+
 use super::grid::{metres_text, Grid, GEOM_EPS};
 use super::mods::WallSide;
 use super::panel::panel_face_g;
@@ -48,6 +50,9 @@ pub(crate) struct Topology {
     pub sensors: Vec<Stencil>,
     /// Per containment, per side (`WallSide::ALL` order): the wall faces between fluid cells.
     pub walls: Vec<[Vec<WallFace>; 5]>,
+    /// The sensors (hall order) within half a cell of a containment panel, whose
+    /// stencils leave out the cell centres across it.
+    pub sensors_beside_panels: Vec<usize>,
 }
 
 /// Full (open) conductance of a face normal to axis `a`: area over centre distance.
@@ -259,13 +264,21 @@ impl Topology {
             server_exhaust,
             sensors: Vec::new(),
             walls,
+            sensors_beside_panels: Vec::new(),
         };
         topo.deactivate_enclosed(hall)?;
-        for s in &hall.sensors {
-            let st = topo.sensor_stencil(s.position_m).ok_or_else(|| {
-                Error::Geometry(format!("sensor `{}`: no open cell around it", s.id))
-            })?;
+        let panels: HashSet<(usize, usize)> = (topo.walls.iter().flatten().flatten())
+            .map(|f| (f.axis, f.low))
+            .collect();
+        for (i, s) in hall.sensors.iter().enumerate() {
+            let (st, beside_panel) =
+                topo.sensor_stencil(s.position_m, &panels).ok_or_else(|| {
+                    Error::Geometry(format!("sensor `{}`: no open cell around it", s.id))
+                })?;
             topo.sensors.push(st);
+            if beside_panel {
+                topo.sensors_beside_panels.push(i);
+            }
         }
         Ok(topo)
     }
@@ -334,11 +347,42 @@ impl Topology {
         Ok(())
     }
 
-    /// Trilinear weights of the eight cell centres around `p`, solid ones dropped and the
-    /// rest renormalised; `None` when all eight are solid.
-    pub fn sensor_stencil(&self, p: [f64; 3]) -> Option<Stencil> {
+    /// Trilinear weights of the eight cell centres around `p`, solid ones and those
+    /// across a containment panel (a face of `panels`, `(axis, low cell)`) from the cell
+    /// holding `p` dropped and the rest renormalised; `None` when all eight are solid. The
+    /// flag says whether a panel dropped any: a sensor beside a panel reads its own side's
+    /// air, not a blend with the other side's, degrees apart.
+    pub fn sensor_stencil(
+        &self,
+        p: [f64; 3],
+        panels: &HashSet<(usize, usize)>,
+    ) -> Option<(Stencil, bool)> {
         let g = &self.grid;
-        let corners = g.trilinear_corners(p);
+        let own = [0, 1, 2].map(|a| g.cell_of(a, p[a]));
+        // Across a panel: a step on some axis from the sensor's cell to the corner's slab
+        // goes through a panel face, at the sensor's or at the corner's place.
+        let across = |c: usize| {
+            let ijk = g.ijk(c);
+            (0..3).any(|a| {
+                if ijk[a] == own[a] {
+                    return false;
+                }
+                let low_slab = ijk[a].min(own[a]);
+                [own, ijk].iter().any(|at| {
+                    let mut face = *at;
+                    face[a] = low_slab;
+                    panels.contains(&(a, g.idx(face[0], face[1], face[2])))
+                })
+            })
+        };
+        let all = g.trilinear_corners(p);
+        let beside_panel = all.iter().any(|&(c, w)| w > 1e-12 && across(c));
+        let corners: Vec<(usize, f64)> = all.into_iter().filter(|&(c, _)| !across(c)).collect();
+        let corners = if corners.is_empty() {
+            all.to_vec()
+        } else {
+            corners
+        };
         let st: Vec<(usize, f64)> = corners
             .iter()
             .copied()
@@ -356,9 +400,12 @@ impl Topology {
                     }
                 }
             }
-            return best.map(|(c, _)| vec![(c, 1.0)]);
+            return best.map(|(c, _)| (vec![(c, 1.0)], beside_panel));
         }
-        Some(st.into_iter().map(|(c, w)| (c, w / total)).collect())
+        Some((
+            st.into_iter().map(|(c, w)| (c, w / total)).collect(),
+            beside_panel,
+        ))
     }
 
     /// Intake or exhaust cells of a rack (whole face, or a height band), for effects.
