@@ -23,6 +23,11 @@ fn point(p: &[f64; 3]) -> String {
 /// larger values are a unit error (alpha is about 0.1 for real servers).
 pub const MAX_ALPHA_CFM_PER_W: f64 = 100.0;
 
+/// The smallest alpha bound taken (cfm/W): a server's air would warm by 1.8 million K.
+/// Below it the surrogate's features overflow (a fit at 1e-200 went NaN); a value in
+/// another unit (m3/s per W, about 5e-5) is still taken, and warned of.
+pub const MIN_ALPHA_CFM_PER_W: f64 = 1e-6;
+
 /// The largest CRAC flow taken (m3/s): ten times the largest units built.
 pub const MAX_CRAC_FLOW_M3_S: f64 = 300.0;
 
@@ -105,6 +110,16 @@ impl Hall {
                     format!("{p}/min"),
                     format!(
                         "expected 0 < min <= initial <= max, found min {}",
+                        number(a.min)
+                    ),
+                ));
+            }
+            if a.min < MIN_ALPHA_CFM_PER_W {
+                return Err(c.err(
+                    format!("{p}/min"),
+                    format!(
+                        "expected min >= {} cfm/W (a server air rise of 1.8 million K), found {}",
+                        number(MIN_ALPHA_CFM_PER_W),
                         number(a.min)
                     ),
                 ));

@@ -349,7 +349,8 @@ impl TemperatureRisePenalty {
             let rise = self.rise_c(a);
             let (v, _) = self.violation(rise);
             rep.value += w * v;
-            if v == 0.0 {
+            // A server that draws no power in any snapshot has no rise to bind.
+            if v == 0.0 || w == 0.0 {
                 continue;
             }
             let bound = if rise < self.settings.lower_c {

@@ -310,6 +310,12 @@ pub fn hall_cases() -> Vec<HallCase> {
             |v| set(v, "/cracs/0/rated_flow_m3_s", json!(1e308)),
         ),
         hall_case(
+            "alpha bound below any server",
+            "/server_types/0/alpha_cfm_per_w/min",
+            "expected min >= 1e-6 cfm/W",
+            |v| set(v, "/server_types/0/alpha_cfm_per_w/min", json!(1e-200)),
+        ),
+        hall_case(
             "alpha bound beyond any server",
             "/server_types/0/alpha_cfm_per_w/max",
             "expected max <= 100 cfm/W",

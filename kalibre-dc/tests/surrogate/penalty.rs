@@ -41,3 +41,30 @@ fn penalty_reports_where_it_binds() {
         .check()
         .is_err());
 }
+
+/// Servers that draw no power in any snapshot have no rise: an alpha that would give them
+/// one outside the range is not reported as binding (it said "gives 1 server(s) a rise of
+/// 175.7 K" of a server at 0 W, with the penalty at 0).
+#[test]
+fn servers_at_zero_power_are_not_reported_as_binding() {
+    let mode = AlphaMode::PerType;
+    let h = hall(SMALL, mode);
+    let layout = ParamLayout::with_mode(&h, mode, &[]).unwrap();
+    let mut scen = vec![state(&h, "t0", 1)];
+    let type1: Vec<usize> = (h.servers().enumerate())
+        .filter(|(_, s)| s.server.server_type == h.server_types[1].id)
+        .map(|(j, _)| j)
+        .collect();
+    assert!(!type1.is_empty());
+    for &j in &type1 {
+        scen[0].power_w[j] = 0.0;
+    }
+    let pen = TemperatureRisePenalty::new(&h, &layout, &scen, PenaltySettings::default()).unwrap();
+    let mut p = vec![0.2; layout.space().dim()];
+    p[1] = 0.01;
+    let rep = pen.report(&p);
+    assert!(
+        !rep.binds && rep.value == 0.0 && rep.violations.is_empty(),
+        "{rep:?}"
+    );
+}

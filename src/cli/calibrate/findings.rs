@@ -146,8 +146,18 @@ impl Fluctuation {
 pub(super) struct BuiltinFindings {
     /// Every server's intake per snapshot against the recommended limit.
     pub intakes: Vec<(String, InletCheck)>,
-    /// Which racks warm each sensor in the first snapshot's air flow (rows with no cut).
+    /// Which racks warm each sensor in the busiest snapshot's air flow ([`busiest`];
+    /// rows with no cut).
     pub warming: Vec<RackHeat>,
+}
+
+/// The snapshot whose servers draw the most power (the first of equals): where the
+/// racks' part in each sensor's warming shows best. An idle one shows none.
+pub(crate) fn busiest(snaps: &[HallSnapshot]) -> Option<&HallSnapshot> {
+    let power = |s: &HallSnapshot| s.state.power_w.iter().sum::<f64>();
+    snaps
+        .iter()
+        .reduce(|best, s| if power(s) > power(best) { s } else { best })
 }
 
 /// The calibrated built-in model's [`BuiltinFindings`] (one adjoint solve per sensor for
@@ -161,12 +171,13 @@ pub(super) fn builtin_findings(
     let hall = calibrated_hall(hall, settings);
     let model = HallModel::new(&hall, settings.sim.clone())?;
     let params = report.best.params.values();
-    // The first snapshot's run comes with the adjoint solves, so it is solved once.
+    // The busiest snapshot's run comes with the adjoint solves, so it is solved once.
+    let busiest = busiest(snaps).map(|s| s.state.label.as_str());
     let mut warming = Vec::new();
     let mut intakes = Vec::with_capacity(snaps.len());
-    for (k, snap) in snaps.iter().enumerate() {
+    for snap in snaps {
         let label = &snap.state.label;
-        let solution = if k == 0 {
+        let solution = if Some(label.as_str()) == busiest {
             let (solution, rows) = model
                 .rack_heat(&snap.state, &params)
                 .map_err(|e| CliError::Run(format!("snapshot `{label}`: {e}")))?;
@@ -182,4 +193,34 @@ pub(super) fn builtin_findings(
         ));
     }
     Ok(BuiltinFindings { intakes, warming })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kalibre_dc::snapshots::OperatingState;
+
+    /// An idle first snapshot warms no sensor: the racks' part shows in the busiest one.
+    #[test]
+    fn the_busiest_snapshot_is_the_one_drawing_most_power_first_of_equals() {
+        let snap = |label: &str, power_w: Vec<f64>| HallSnapshot {
+            state: OperatingState {
+                label: label.into(),
+                setpoint_c: vec![18.0],
+                fan_speed: vec![0.8],
+                power_w,
+            },
+            sensor_c: vec![Some(20.0)],
+        };
+        let snaps = [
+            snap("idle", vec![1e-9, 0.0]),
+            snap("busy", vec![500.0, 200.0]),
+            snap("as-busy", vec![200.0, 500.0]),
+        ];
+        assert_eq!(
+            busiest(&snaps).map(|s| s.state.label.as_str()),
+            Some("busy")
+        );
+        assert!(busiest(&[]).is_none());
+    }
 }

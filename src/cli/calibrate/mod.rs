@@ -27,6 +27,7 @@ use super::hall_command::{self, HallCommand};
 use super::openfoam_args::of_err;
 use super::{io_err, with_threads, CliError, CliResult};
 pub use args::{AlphaArg, CalibrateArgs, ModelArg};
+pub(crate) use findings::busiest;
 use findings::{builtin_findings, openfoam_findings};
 use progress::Progress;
 pub(super) use settings::{check_finer_grids, check_grid_factors};

@@ -405,9 +405,9 @@ pub fn run(args: DiagnoseArgs) -> CliResult {
         None => None,
     };
     // Which racks warm the worst sensors in the calibrated built-in model's air flow (the
-    // first snapshot): whose alphas they inform, and where a missing effect would act.
+    // busiest snapshot): whose alphas they inform, and where a missing effect would act.
     // An OpenFOAM calibration's flow is OpenFOAM's, which the built-in model does not have.
-    let heat = match (args.model, snaps.first()) {
+    let heat = match (args.model, super::calibrate::busiest(&snaps)) {
         (DiagnoseModel::Builtin, Some(first)) => {
             let (_, rows) = model
                 .rack_heat(&first.state, &params)
