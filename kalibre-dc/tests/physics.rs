@@ -203,21 +203,27 @@ fn vtk_output_holds_every_field() {
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
+/// Rack `R{i}` of one server `S{i}` of `server_type`, at `x` in a row at y 2.4-3.6 m
+/// drawing from -y, as hall JSON.
+fn row_rack_json(i: usize, x: f64, server_type: &str) -> String {
+    format!(
+        r#"{{"id":"R{i}","position_m":[{x},2.4,0.0],"size_m":[0.6,1.2,2.0],"inlet":"-y","units":40,
+            "servers":[{{"id":"S{i}","type":"{server_type}","u":1,"height_u":40}}]}}"#
+    )
+}
+
+/// A 0.6 m tile at `x` in front of that row, open by `open_fraction`, as hall JSON.
+fn row_tile_json(x: f64, open_fraction: f64) -> String {
+    format!(r#"{{"position_m":[{x},1.6],"size_m":[0.6,0.6],"open_fraction":{open_fraction}}}"#)
+}
+
 /// A sensor within half a cell of a containment panel reads the air on its own side: its
 /// interpolation used to blend the cell centres on both sides, degrees apart (1 cm inside
 /// a cold aisle's door it read 6 C warmer than the aisle). Its model's fingerprint says
 /// so, and has no legacy one: runs journaled before read across the panel.
 #[test]
 fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
-    let rack = |i: usize, x: f64| {
-        format!(
-            r#"{{"id":"R{i}","position_m":[{x},2.4,0.0],"size_m":[0.6,1.2,2.0],"inlet":"-y","units":40,
-                "servers":[{{"id":"S{i}","type":"ta","u":1,"height_u":40}}]}}"#
-        )
-    };
-    let tile = |x: f64, f: f64| {
-        format!(r#"{{"position_m":[{x},1.6],"size_m":[0.6,0.6],"open_fraction":{f}}}"#)
-    };
+    let rack = |i: usize, x: f64| row_rack_json(i, x, "ta");
     let sensor = |id: &str, p: [f64; 3]| {
         format!(
             r#"{{"id":"{id}","position_m":[{},{},{}],"aisle":"cold"}}"#,
@@ -252,7 +258,7 @@ fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
             .join(","),
         [(1.6, 0.25), (2.2, 0.5), (2.8, 0.25), (3.4, 0.4)]
             .iter()
-            .map(|(x, f)| tile(*x, *f))
+            .map(|(x, f)| row_tile_json(*x, *f))
             .collect::<Vec<_>>()
             .join(","),
         sensors
@@ -297,15 +303,7 @@ fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
 /// way only, and mirrored sensors read up to 0.65 C apart.
 #[test]
 fn a_symmetric_hall_at_half_cell_ties_reads_symmetrically() {
-    let rack = |i: usize, x: f64| {
-        format!(
-            r#"{{"id":"R{i}","position_m":[{x},2.4,0.0],"size_m":[0.6,1.2,2.0],"inlet":"-y","units":40,
-                "servers":[{{"id":"S{i}","type":"t","u":1,"height_u":40}}]}}"#
-        )
-    };
-    let tile = |x: f64, f: f64| {
-        format!(r#"{{"position_m":[{x},1.6],"size_m":[0.6,0.6],"open_fraction":{f}}}"#)
-    };
+    let rack = |i: usize, x: f64| row_rack_json(i, x, "t");
     let pairs = [
         ("door", [1.5, 2.0, 1.0]),
         ("in", [2.0, 2.3, 1.5]),
@@ -332,7 +330,7 @@ fn a_symmetric_hall_at_half_cell_ties_reads_symmetrically() {
         "sensors":[{}]}}"#,
         [(1.9, 0.25), (2.5, 0.5), (3.1, 0.5), (3.7, 0.25)]
             .iter()
-            .map(|(x, f)| tile(*x, *f))
+            .map(|(x, f)| row_tile_json(*x, *f))
             .collect::<Vec<_>>()
             .join(","),
         [1.9, 2.5, 3.1, 3.7]
