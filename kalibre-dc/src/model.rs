@@ -80,7 +80,6 @@ impl HallModel {
         if front_jet {
             parts.push(FRONT_SUPPLY_JET.as_bytes());
         }
-        let config_cell_m = config.cell_m;
         let sim = Simulator::new(hall, config)?;
         // A sensor within half a cell of a containment panel reads its own side's air
         // since session 59, a blend with the other side's before: the same holds there.
@@ -89,7 +88,7 @@ impl HallModel {
             parts.push(SENSORS_BESIDE_PANELS.as_bytes());
         }
         // So is a containment side on a cell centre: outward since session 59.
-        let tied = crate::sim::containment_side_on_cell_centre(hall, config_cell_m);
+        let tied = crate::sim::containment_side_on_cell_centre(hall, sim.grid());
         if tied {
             parts.push(CONTAINMENT_TIES_OUTWARD.as_bytes());
         }

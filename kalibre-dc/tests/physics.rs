@@ -203,18 +203,61 @@ fn vtk_output_holds_every_field() {
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
-/// Rack `R{i}` of one server `S{i}` of `server_type`, at `x` in a row at y 2.4-3.6 m
-/// drawing from -y, as hall JSON.
-fn row_rack_json(i: usize, x: f64, server_type: &str) -> String {
-    format!(
-        r#"{{"id":"R{i}","position_m":[{x},2.4,0.0],"size_m":[0.6,1.2,2.0],"inlet":"-y","units":40,
-            "servers":[{{"id":"S{i}","type":"{server_type}","u":1,"height_u":40}}]}}"#
-    )
+/// A hall of one row of four racks (one server each, drawing from -y at y 2.4-3.6 m), a
+/// tile in front of each, one floor CRAC, a ceiling return behind the row and a cold
+/// aisle contained at y 1.4-2.4 m up to 2 m; every sensor a cold-aisle one.
+struct RowHall<'a> {
+    room_x_m: f64,
+    crac_position_m: [f64; 3],
+    crac_size_m: [f64; 3],
+    rack_x_m: [f64; 4],
+    /// Each tile's x and open fraction.
+    tiles: [(f64, f64); 4],
+    return_x_m: f64,
+    aisle_x_m: [f64; 2],
+    sensors: &'a [(String, [f64; 3])],
 }
 
-/// A 0.6 m tile at `x` in front of that row, open by `open_fraction`, as hall JSON.
-fn row_tile_json(x: f64, open_fraction: f64) -> String {
-    format!(r#"{{"position_m":[{x},1.6],"size_m":[0.6,0.6],"open_fraction":{open_fraction}}}"#)
+impl RowHall<'_> {
+    fn hall(&self) -> Hall {
+        let list = |items: Vec<String>| items.join(",");
+        let v = |p: [f64; 3]| format!("[{},{},{}]", p[0], p[1], p[2]);
+        let racks = (self.rack_x_m.iter().enumerate())
+            .map(|(i, x)| {
+                format!(
+                    r#"{{"id":"R{i}","position_m":[{x},2.4,0.0],"size_m":[0.6,1.2,2.0],"inlet":"-y",
+                    "units":40,"servers":[{{"id":"S{i}","type":"t","u":1,"height_u":40}}]}}"#
+                )
+            })
+            .collect();
+        let tiles = (self.tiles.iter())
+            .map(|(x, f)| {
+                format!(r#"{{"position_m":[{x},1.6],"size_m":[0.6,0.6],"open_fraction":{f}}}"#)
+            })
+            .collect();
+        let sensors = (self.sensors.iter())
+            .map(|(id, p)| format!(r#"{{"id":"{id}","position_m":{},"aisle":"cold"}}"#, v(*p)))
+            .collect();
+        let json = format!(
+            r#"{{"schema":"kalibre.hall/1","name":"row","room":{{"size_m":[{},4.8,3.0]}},
+            "server_types":[{{"id":"t","alpha_cfm_per_w":{{"initial":0.12,"min":0.01,"max":3.0}}}}],
+            "cracs":[{{"id":"cr","position_m":{},"size_m":{},"rated_flow_m3_s":1.5,"supply":"floor"}}],
+            "racks":[{}],"tiles":[{}],
+            "returns":[{{"position_m":[{},3.8],"size_m":[1.6,0.4]}}],
+            "containment":[{{"kind":"cold_aisle","min_m":[{},1.4,0.0],"max_m":[{},2.4,2.0]}}],
+            "sensors":[{}]}}"#,
+            self.room_x_m,
+            v(self.crac_position_m),
+            v(self.crac_size_m),
+            list(racks),
+            list(tiles),
+            self.return_x_m,
+            self.aisle_x_m[0],
+            self.aisle_x_m[1],
+            list(sensors),
+        );
+        Hall::from_json_str(&json, "row.json").unwrap()
+    }
 }
 
 /// A sensor within half a cell of a containment panel reads the air on its own side: its
@@ -223,13 +266,6 @@ fn row_tile_json(x: f64, open_fraction: f64) -> String {
 /// so, and has no legacy one: runs journaled before read across the panel.
 #[test]
 fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
-    let rack = |i: usize, x: f64| row_rack_json(i, x, "ta");
-    let sensor = |id: &str, p: [f64; 3]| {
-        format!(
-            r#"{{"id":"{id}","position_m":[{},{},{}],"aisle":"cold"}}"#,
-            p[0], p[1], p[2]
-        )
-    };
     // The cold aisle: x 1.6-4.0, y 1.4-2.4, up to 2 m; its -x door at x 1.6, its roof at
     // z 2. Each pair: a cell centre and a point 1 cm from the panel, on one side.
     let sensors = [
@@ -241,33 +277,19 @@ fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
         ("roof_in_door", [2.9, 2.0, 1.99]),
         ("roof_out_door", [2.9, 2.0, 2.01]),
         ("roof_out", [2.9, 2.0, 2.1]),
-    ];
-    let json = format!(
-        r#"{{"schema":"kalibre.hall/1","name":"panel","room":{{"size_m":[6.0,4.8,3.0]}},
-        "server_types":[{{"id":"ta","alpha_cfm_per_w":{{"initial":0.12,"min":0.01,"max":3.0}}}}],
-        "cracs":[{{"id":"cr1","position_m":[0.0,0.8,0.0],"size_m":[0.8,1.6,2.0],"rated_flow_m3_s":1.5,"supply":"floor"}}],
-        "racks":[{}],"tiles":[{}],
-        "returns":[{{"position_m":[2.0,3.8],"size_m":[1.6,0.4]}}],
-        "containment":[{{"kind":"cold_aisle","min_m":[1.6,1.4,0.0],"max_m":[4.0,2.4,2.0]}}],
-        "sensors":[{}]}}"#,
-        [1.6, 2.2, 2.8, 3.4]
-            .iter()
-            .enumerate()
-            .map(|(i, x)| rack(i + 1, *x))
-            .collect::<Vec<_>>()
-            .join(","),
-        [(1.6, 0.25), (2.2, 0.5), (2.8, 0.25), (3.4, 0.4)]
-            .iter()
-            .map(|(x, f)| row_tile_json(*x, *f))
-            .collect::<Vec<_>>()
-            .join(","),
-        sensors
-            .iter()
-            .map(|(id, p)| sensor(id, *p))
-            .collect::<Vec<_>>()
-            .join(","),
-    );
-    let hall = Hall::from_json_str(&json, "panel.json").unwrap();
+    ]
+    .map(|(id, p)| (id.to_string(), p));
+    let hall = RowHall {
+        room_x_m: 6.0,
+        crac_position_m: [0.0, 0.8, 0.0],
+        crac_size_m: [0.8, 1.6, 2.0],
+        rack_x_m: [1.6, 2.2, 2.8, 3.4],
+        tiles: [(1.6, 0.25), (2.2, 0.5), (2.8, 0.25), (3.4, 0.4)],
+        return_x_m: 2.0,
+        aisle_x_m: [1.6, 4.0],
+        sensors: &sensors,
+    }
+    .hall();
     let state = OperatingState {
         label: "t0".into(),
         setpoint_c: vec![18.0],
@@ -276,7 +298,7 @@ fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
     };
     let (sim, sol) = solve(&hall, SimConfig::default(), &state, 0.12);
     assert_eq!(sim.sensors_beside_panels(), &[1, 2, 5, 6]);
-    let t = |id: &str| sol.sensor_c()[sensors.iter().position(|(s, _)| *s == id).unwrap()];
+    let t = |id: &str| sol.sensor_c()[sensors.iter().position(|(s, _)| s == id).unwrap()];
     for (near, centre, other_side) in [
         ("in_door", "in", "out"),
         ("out_door", "out", "in"),
@@ -303,46 +325,34 @@ fn a_sensor_beside_a_containment_panel_reads_its_own_side() {
 /// way only, and mirrored sensors read up to 0.65 C apart.
 #[test]
 fn a_symmetric_hall_at_half_cell_ties_reads_symmetrically() {
-    let rack = |i: usize, x: f64| row_rack_json(i, x, "t");
     let pairs = [
         ("door", [1.5, 2.0, 1.0]),
         ("in", [2.0, 2.3, 1.5]),
         ("room", [1.2, 1.1, 2.5]),
         ("hot", [2.2, 3.7, 1.5]),
     ];
-    let sensors: Vec<String> = pairs
+    let sensors: Vec<(String, [f64; 3])> = pairs
         .iter()
         .flat_map(|(id, p)| {
-            [("L", p[0]), ("R", 6.2 - p[0])].map(|(side, x)| {
-                format!(
-                    r#"{{"id":"{side}-{id}","position_m":[{x},{},{}],"aisle":"cold"}}"#,
-                    p[1], p[2]
-                )
-            })
+            [("L", p[0]), ("R", 6.2 - p[0])]
+                .map(|(side, x)| (format!("{side}-{id}"), [x, p[1], p[2]]))
         })
         .collect();
-    let json = format!(
-        r#"{{"schema":"kalibre.hall/1","name":"tie","room":{{"size_m":[6.2,4.8,3.0]}},
-        "server_types":[{{"id":"t","alpha_cfm_per_w":{{"initial":0.12,"min":0.01,"max":3.0}}}}],
-        "cracs":[{{"id":"cr","position_m":[2.7,0.0,0.0],"size_m":[0.8,0.8,2.0],"rated_flow_m3_s":1.5,"supply":"floor"}}],
-        "tiles":[{}],"returns":[{{"position_m":[2.3,3.8],"size_m":[1.6,0.4]}}],"racks":[{}],
-        "containment":[{{"kind":"cold_aisle","min_m":[1.9,1.4,0.0],"max_m":[4.3,2.4,2.0]}}],
-        "sensors":[{}]}}"#,
-        [(1.9, 0.25), (2.5, 0.5), (3.1, 0.5), (3.7, 0.25)]
-            .iter()
-            .map(|(x, f)| row_tile_json(*x, *f))
-            .collect::<Vec<_>>()
-            .join(","),
-        [1.9, 2.5, 3.1, 3.7]
-            .iter()
-            .enumerate()
-            .map(|(i, x)| rack(i + 1, *x))
-            .collect::<Vec<_>>()
-            .join(","),
-        sensors.join(","),
-    );
-    let hall = Hall::from_json_str(&json, "tie.json").unwrap();
-    assert!(kalibre_dc::sim::containment_side_on_cell_centre(&hall, 0.2));
+    let hall = RowHall {
+        room_x_m: 6.2,
+        crac_position_m: [2.7, 0.0, 0.0],
+        crac_size_m: [0.8, 0.8, 2.0],
+        rack_x_m: [1.9, 2.5, 3.1, 3.7],
+        tiles: [(1.9, 0.25), (2.5, 0.5), (3.1, 0.5), (3.7, 0.25)],
+        return_x_m: 2.3,
+        aisle_x_m: [1.9, 4.3],
+        sensors: &sensors,
+    }
+    .hall();
+    let grid = kalibre_dc::sim::Grid::new(hall.room.size_m, 0.2);
+    assert!(kalibre_dc::sim::containment_side_on_cell_centre(
+        &hall, &grid
+    ));
     let state = OperatingState {
         label: "t0".into(),
         setpoint_c: vec![18.0],

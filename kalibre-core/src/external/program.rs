@@ -45,9 +45,7 @@ impl<S> ExternalCommand<S> {
             ))),
         }
     }
-}
 
-impl<S> ExternalCommand<S> {
     /// Checks, before any run, that the runs root (`runs_root`) is or can be made a
     /// directory that takes run directories; it is made when missing. Every run would
     /// otherwise fail to set up, one after another, and be journaled as failed.

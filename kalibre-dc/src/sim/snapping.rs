@@ -94,16 +94,15 @@ pub fn off_grid_edges(hall: &Hall, cell_m: f64) -> Vec<SnappedEdge> {
     out
 }
 
-/// Whether a containment box of `hall` has a lower side on a cell centre of the grid of
-/// `cell_m` (a half-cell tie), which the simulator has put outward, as a rack's cells,
-/// since session 59 (inward before).
-pub fn containment_side_on_cell_centre(hall: &Hall, cell_m: f64) -> bool {
-    let grid = Grid::new(hall.room.size_m, cell_m);
+/// Whether `grid` puts a side of a containment box of `hall` on another face than the
+/// nearest one, which it took before session 59: a side on a cell centre (a half-cell
+/// tie) now goes outward, as a rack's cells do ([`Grid::box_side_faces`]).
+pub fn containment_side_on_cell_centre(hall: &Hall, grid: &Grid) -> bool {
     hall.containment.iter().any(|c| {
         (0..3).any(|a| {
-            let s = c.min_m[a] / grid.d[a];
-            c.min_m[a] > super::grid::GEOM_EPS
-                && (s - s.floor() - 0.5).abs() * grid.d[a] <= super::grid::GEOM_EPS
+            let inside = grid.range_in(a, c.min_m[a], c.max_m[a]);
+            let nearest = |x: f64| (x / grid.d[a]).round() as usize;
+            inside.start != nearest(c.min_m[a]) || inside.end != nearest(c.max_m[a])
         })
     })
 }

@@ -376,8 +376,9 @@ impl Topology {
             })
         };
         let all = g.trilinear_corners(p);
-        let beside_panel = all.iter().any(|&(c, w)| w > 1e-12 && across(c));
-        let corners: Vec<(usize, f64)> = all.into_iter().filter(|&(c, _)| !across(c)).collect();
+        let (corners, dropped): (Stencil, Stencil) =
+            all.into_iter().partition(|&(c, _)| !across(c));
+        let beside_panel = dropped.iter().any(|&(_, w)| w > 1e-12);
         let corners = if corners.is_empty() {
             all.to_vec()
         } else {
